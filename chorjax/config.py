@@ -1,0 +1,299 @@
+"""Run configuration: TOML files -> frozen dataclasses; the schema below IS the documentation.
+
+An unknown key, a wrong type or a value outside its allowed set is a ``UserError`` naming the file,
+the line and the key, and suggesting the closest valid key. Dotted overrides such as
+``model.cell=gru`` are parsed as TOML values (falling back to a bare string) and checked the same way.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import json
+import re
+import tomllib
+import typing
+from pathlib import Path
+from typing import Any, Sequence
+
+from chorjax.errors import UserError
+
+
+def _field(default, help: str, choices: Sequence | None = None, minimum: float | None = None):
+  meta = {"help": help, "choices": tuple(choices) if choices else None, "minimum": minimum}
+  if isinstance(default, (list, tuple)):
+    return dataclasses.field(default_factory=lambda: tuple(default), metadata=meta)
+  return dataclasses.field(default=default, metadata=meta)
+
+
+@dataclasses.dataclass(frozen=True)
+class DataConfig:
+  dataset: str = _field("cmu94", "a bundled dataset name (cmu94), a folder of takes, or one file")
+  skeleton: str = _field("mpii16", "joint layout of CSV takes", choices=("mpii16",))
+  fps: float = _field(30.0, "frame rate of CSV takes (CSV files do not record it)", minimum=1e-3)
+  up_axis: str = _field("-y", "signed up axis of the files (cmu94: -y, y points down)",
+                        choices=("y", "-y", "z", "-z", "x", "-x"))
+  scale: float = _field(0.01, "multiplies lengths before training (cmu94 units: thigh ~94)", minimum=1e-12)
+  representation: str = _field("bone_relative", "features the model sees",
+                               choices=("absolute", "bone_relative", "root_relative"))
+  seq_length: int = _field(100, "frames per training window (inputs; targets are shifted by one)", minimum=1)
+  val_takes: tuple = _field(("auto",), "held-out take names; 'auto' = the last take by name; [] = none")
+  augment: tuple = _field((), "training augmentations: 'reverse' (time) and/or 'mirror' (left/right)")
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelConfig:
+  cell: str = _field("lnlstm", "recurrent cell", choices=("lstm", "lnlstm", "gru"))
+  head: str = _field("mdn", "output head", choices=("mse", "mdn"))
+  num_layers: int = _field(3, "stacked recurrent layers", minimum=1)
+  hidden_size: int = _field(256, "units per layer", minimum=1)
+  num_mixtures: int = _field(8, "MDN mixture components", minimum=1)
+  mdn_scale: str = _field("diagonal", "MDN scales: one per dim, or one per component (chor-rnn)",
+                          choices=("diagonal", "isotropic"))
+  min_scale: float = _field(1e-3, "floor of MDN scales (normalized units)", minimum=0.0)
+  dropout: float = _field(0.0, "dropout rate between layers (same mask at every time step)", minimum=0.0)
+  forget_bias: float = _field(1.0, "initial forget-gate bias of (LN-)LSTM cells (notebook: 5.0)")
+  initial_state: str = _field("motion", "initial (c, h): projected motion-id weights, or zeros",
+                              choices=("motion", "zero"))
+
+
+@dataclasses.dataclass(frozen=True)
+class OptimConfig:
+  name: str = _field("adam", "optimizer", choices=("adam", "adamw", "amsgrad"))
+  lr: float = _field(1e-3, "peak learning rate", minimum=0.0)
+  b1: float = _field(0.9, "Adam beta1", minimum=0.0)
+  b2: float = _field(0.999, "Adam beta2", minimum=0.0)
+  weight_decay: float = _field(0.0, "decoupled weight decay (adamw)", minimum=0.0)
+  clip_norm: float = _field(10.0, "clip gradients by global norm (0 = off)", minimum=0.0)
+  schedule: str = _field("constant", "learning-rate schedule", choices=("constant", "warmup_cosine"))
+  warmup_steps: int = _field(0, "linear warm-up steps (warmup_cosine)", minimum=0)
+  final_lr_ratio: float = _field(0.1, "final lr / peak lr (warmup_cosine)", minimum=0.0)
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig:
+  batch_size: int = _field(50, "windows per step (global, over all devices)", minimum=1)
+  num_steps: int = _field(1000, "total optimizer steps", minimum=0)
+  seed: int = _field(0, "seed of parameters, batches, dropout and noise")
+  checkpoint_every: int = _field(500, "steps between checkpoints", minimum=1)
+  keep_checkpoints: int = _field(3, "latest checkpoints kept (the best by val loss is kept too)", minimum=1)
+  eval_every: int = _field(250, "steps between validation passes (0 = only at the end)", minimum=0)
+  log_every: int = _field(50, "steps between log lines / metrics.jsonl rows", minimum=1)
+  figure_every: int = _field(0, "steps between sample figures in TensorBoard (0 = off)", minimum=0)
+  input_noise: float = _field(0.0, "std of Gaussian noise on inputs (normalized units), against exposure bias",
+                              minimum=0.0)
+  val_windows: int = _field(64, "most validation windows evaluated", minimum=1)
+
+
+@dataclasses.dataclass(frozen=True)
+class SampleConfig:
+  frames: int = _field(600, "frames written by the sample at the end of training", minimum=1)
+  num: int = _field(1, "dancers sampled in parallel", minimum=1)
+  motion: int = _field(0, "motion id that conditions the sample")
+  pi_temperature: float = _field(1.0, "MDN mixture-weight temperature (0 = most likely component)", minimum=0.0)
+  sigma_temperature: float = _field(1.0, "MDN scale multiplier", minimum=0.0)
+  greedy: bool = _field(False, "take the mean of the most likely component (no noise)")
+  seed: int = _field(0, "sampling seed")
+
+
+@dataclasses.dataclass(frozen=True)
+class LogConfig:
+  tensorboard: bool = _field(True, "write tensorboardX event files into the workdir")
+  progress: str = _field("auto", "progress display", choices=("auto", "bar", "lines", "none"))
+
+
+@dataclasses.dataclass(frozen=True)
+class Config:
+  data: DataConfig = dataclasses.field(default_factory=DataConfig)
+  model: ModelConfig = dataclasses.field(default_factory=ModelConfig)
+  optim: OptimConfig = dataclasses.field(default_factory=OptimConfig)
+  train: TrainConfig = dataclasses.field(default_factory=TrainConfig)
+  sample: SampleConfig = dataclasses.field(default_factory=SampleConfig)
+  log: LogConfig = dataclasses.field(default_factory=LogConfig)
+  name: str = "default"
+
+  def to_dict(self) -> dict:
+    d = dataclasses.asdict(self)
+    return json.loads(json.dumps(d))  # tuples -> lists, a plain JSON tree
+
+  def replace(self, **sections) -> "Config":
+    return dataclasses.replace(self, **sections)
+
+
+SECTIONS = {f.name: f.type for f in dataclasses.fields(Config) if f.name != "name"}
+_SECTION_CLASSES = {"data": DataConfig, "model": ModelConfig, "optim": OptimConfig, "train": TrainConfig,
+                    "sample": SampleConfig, "log": LogConfig}
+
+
+def valid_keys() -> list[str]:
+  return [f"{s}.{f.name}" for s, cls in _SECTION_CLASSES.items() for f in dataclasses.fields(cls)]
+
+
+def _suggest(key: str, options: Sequence[str]) -> str:
+  close = difflib.get_close_matches(key, options, n=1, cutoff=0.5)
+  return f"; did you mean {close[0]!r}?" if close else ""
+
+
+def _check_value(where: str, key: str, field: dataclasses.Field, value: Any):
+  """Returns ``value`` converted to the field's type, or raises a UserError naming ``key``."""
+  hint = typing.get_type_hints(_SECTION_CLASSES[key.split(".")[0]])[field.name]
+  meta = field.metadata
+  if hint is bool:
+    ok = isinstance(value, bool)
+  elif hint is int:
+    ok = isinstance(value, int) and not isinstance(value, bool)
+  elif hint is float:
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+    value = float(value) if ok else value
+  elif hint is str:
+    ok = isinstance(value, str)
+  elif hint is tuple:
+    ok = isinstance(value, (list, tuple)) and all(isinstance(v, (str, int)) and not isinstance(v, bool)
+                                                  for v in value)
+    value = tuple(value) if ok else value
+  else:  # pragma: no cover - schema error
+    raise TypeError(hint)
+  if not ok:
+    tname = {tuple: "list"}.get(hint, hint.__name__)
+    raise UserError(f"{where}: key {key!r}: expected {tname}, got {type(value).__name__} {value!r}")
+  if meta.get("choices") and value not in meta["choices"]:
+    raise UserError(f"{where}: key {key!r}: {value!r} is not one of {', '.join(map(repr, meta['choices']))}"
+                    + _suggest(str(value), [str(c) for c in meta["choices"]]))
+  if meta.get("minimum") is not None and value < meta["minimum"]:
+    raise UserError(f"{where}: key {key!r}: {value!r} is below the minimum {meta['minimum']}")
+  if key == "data.augment":
+    bad = [a for a in value if a not in ("reverse", "mirror")]
+    if bad:
+      raise UserError(f"{where}: key {key!r}: unknown augmentation {bad[0]!r}; use 'reverse' and/or 'mirror'")
+  return value
+
+
+def _line_of(text: str, section: str, key: str) -> int | None:
+  """The line of ``key`` inside ``[section]`` (tomllib does not report positions)."""
+  current = None
+  for i, line in enumerate(text.splitlines(), start=1):
+    m = re.match(r"\s*\[([^\]]+)\]\s*(#.*)?$", line)
+    if m:
+      current = m.group(1).strip()
+      continue
+    if re.match(rf"\s*{re.escape(key)}\s*=", line) and current == section:
+      return i
+    if re.match(rf"\s*{re.escape(section)}\.{re.escape(key)}\s*=", line) and current is None:
+      return i
+  return None
+
+
+def _apply(sections: dict[str, dict], tree: dict, where_of) -> None:
+  """Checks a ``{section: {key: value}}`` tree and merges it into ``sections``."""
+  for section, body in tree.items():
+    if section == "name":
+      continue
+    if section not in _SECTION_CLASSES:
+      raise UserError(f"{where_of(section, None)}: unknown section {section!r}"
+                      + _suggest(section, list(_SECTION_CLASSES)))
+    if not isinstance(body, dict):
+      raise UserError(f"{where_of(section, None)}: {section!r} must be a table ([{section}])")
+    fields = {f.name: f for f in dataclasses.fields(_SECTION_CLASSES[section])}
+    for key, value in body.items():
+      dotted = f"{section}.{key}"
+      if key not in fields:
+        raise UserError(f"{where_of(section, key)}: unknown key {dotted!r}" + _suggest(dotted, valid_keys()))
+      sections[section][key] = _check_value(where_of(section, key), dotted, fields[key], value)
+
+
+def parse_override(text: str) -> tuple[str, Any]:
+  """``'optim.lr=3e-4'`` -> ``('optim.lr', 0.0003)``; values are TOML, else bare strings."""
+  if "=" not in text:
+    raise UserError(f"override {text!r}: expected KEY=VALUE, e.g. model.cell=gru")
+  key, raw = (s.strip() for s in text.split("=", 1))
+  try:
+    value = tomllib.loads(f"v = {raw}")["v"]
+  except tomllib.TOMLDecodeError:
+    value = raw
+  return key, value
+
+
+def load_config(path: str | Path | None = None, overrides: Sequence[str] = ()) -> Config:
+  """Loads a TOML config file (or the defaults) and applies dotted ``KEY=VALUE`` overrides.
+
+  Raises:
+    UserError: for a missing or malformed file, an unknown section or key, a wrong type, or a
+      value out of range; the message names the file (and line) or the override.
+  """
+  sections: dict[str, dict] = {s: {} for s in _SECTION_CLASSES}
+  name = "default"
+  if path is not None:
+    path = Path(path)
+    try:
+      text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+      raise UserError(f"{path}: no such config file") from None
+    except (OSError, UnicodeDecodeError) as e:
+      raise UserError(f"{path}: cannot read ({type(e).__name__})") from None
+    try:
+      tree = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+      raise UserError(f"{path}: invalid TOML: {e}") from None
+
+    def where_of(section, key):
+      line = _line_of(text, section, key) if key else _line_of_section(text, section)
+      return f"{path}:{line}" if line else str(path)
+
+    _apply(sections, tree, where_of)
+    name = tree.get("name", path.stem)
+    if not isinstance(name, str):
+      raise UserError(f"{path}: key 'name': expected str")
+  for item in overrides:
+    key, value = parse_override(item)
+    if key == "name":
+      name = str(value)
+      continue
+    if "." not in key:
+      raise UserError(f"override {item!r}: expected SECTION.KEY=VALUE" + _suggest(key, valid_keys()))
+    section, sub = key.split(".", 1)
+    _apply(sections, {section: {sub: value}}, lambda s, k, item=item: f"override {item!r}")
+  return Config(**{s: cls(**sections[s]) for s, cls in _SECTION_CLASSES.items()}, name=name)
+
+
+def _line_of_section(text: str, section: str) -> int | None:
+  for i, line in enumerate(text.splitlines(), start=1):
+    if re.match(rf"\s*\[{re.escape(section)}\]", line) or re.match(rf"\s*{re.escape(section)}\s*=", line):
+      return i
+  return None
+
+
+def config_from_dict(d: dict) -> Config:
+  """Rebuilds a Config saved with ``to_dict`` (checked like a file)."""
+  sections: dict[str, dict] = {s: {} for s in _SECTION_CLASSES}
+  _apply(sections, {k: v for k, v in d.items() if k != "name"}, lambda s, k: "saved config")
+  return Config(**{s: cls(**sections[s]) for s, cls in _SECTION_CLASSES.items()}, name=d.get("name", "default"))
+
+
+def config_diff(a: Config, b: Config, ignore: Sequence[str] = ()) -> list[str]:
+  """Dotted keys whose values differ between two configs."""
+  da, db = a.to_dict(), b.to_dict()
+  out = []
+  for s in _SECTION_CLASSES:
+    for k in da[s]:
+      if da[s][k] != db[s][k] and f"{s}.{k}" not in ignore:
+        out.append(f"{s}.{k}: {da[s][k]!r} -> {db[s][k]!r}")
+  return out
+
+
+def to_toml(cfg: Config) -> str:
+  """The resolved config as TOML text (what ``chorjax config show`` prints)."""
+  def fmt(v):
+    if isinstance(v, bool):
+      return "true" if v else "false"
+    if isinstance(v, str):
+      return json.dumps(v)
+    if isinstance(v, (list, tuple)):
+      return "[" + ", ".join(fmt(x) for x in v) + "]"
+    return repr(v)
+  lines = [f"name = {fmt(cfg.name)}"]
+  for s, body in cfg.to_dict().items():
+    if s == "name":
+      continue
+    lines.append(f"\n[{s}]")
+    lines += [f"{k} = {fmt(v)}" for k, v in body.items()]
+  return "\n".join(lines) + "\n"

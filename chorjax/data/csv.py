@@ -1,0 +1,82 @@
+"""CSV motion files: one row per frame, ``3 * J`` comma-separated numbers ``x1,y1,z1,...``, no header.
+
+This is the layout of the bundled CMU subject 94 takes (16 joints, 48 columns, y pointing down).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from chorjax.data.motion import Motion, Skeleton
+from chorjax.data.skeletons import MPII16
+from chorjax.errors import UserError, atomic_write
+
+
+def read_csv(path, skeleton: Skeleton = MPII16, fps: float = 30.0, up_axis: str = "-y",
+             units: str = "arbitrary") -> Motion:
+  """Reads a CSV motion file.
+
+  Args:
+    path: the file.
+    skeleton: the joint layout; the file must have ``3 * skeleton.num_joints`` columns.
+    fps: the frame rate (CSV files do not record it).
+    up_axis: the signed up axis of the file's coordinates (cmu94: ``-y``, y points down).
+    units: the length unit.
+
+  Returns:
+    The Motion.
+
+  Raises:
+    UserError: naming the file and line, for an empty file, a wrong or ragged column count, a
+      non-numeric cell, or a NaN/Inf value.
+  """
+  path = Path(path)
+  try:
+    text = path.read_text(encoding="utf-8", errors="strict")
+  except FileNotFoundError:
+    raise UserError(f"{path}: no such file") from None
+  except (UnicodeDecodeError, IsADirectoryError, PermissionError) as e:
+    raise UserError(f"{path}: cannot read as a CSV text file ({type(e).__name__})") from None
+  want = 3 * skeleton.num_joints
+  rows = []
+  for lineno, line in enumerate(text.splitlines(), start=1):
+    line = line.strip()
+    if not line:
+      continue
+    cells = line.split(",")
+    if len(cells) != want:
+      raise UserError(f"{path}:{lineno}: expected {want} columns ({skeleton.num_joints} joints x 3 "
+                      f"for skeleton {skeleton.name}), found {len(cells)}")
+    try:
+      values = [float(c) for c in cells]
+    except ValueError:
+      col = next(i for i, c in enumerate(cells) if not _is_float(c))
+      raise UserError(f"{path}:{lineno}: column {col + 1}: not a number: {cells[col].strip()[:40]!r}") from None
+    bad = [i for i, v in enumerate(values) if not math.isfinite(v)]
+    if bad:
+      raise UserError(f"{path}:{lineno}: column {bad[0] + 1}: non-finite value {cells[bad[0]].strip()!r}")
+    rows.append(values)
+  if not rows:
+    raise UserError(f"{path}: empty file (no frames)")
+  positions = np.asarray(rows, dtype=np.float32).reshape(len(rows), skeleton.num_joints, 3)
+  return Motion(positions, fps=fps, skeleton=skeleton, up_axis=up_axis, units=units,
+                name=path.stem, source=str(path))
+
+
+def _is_float(s: str) -> bool:
+  try:
+    float(s)
+    return True
+  except ValueError:
+    return False
+
+
+def write_csv(motion_or_positions, path, *, overwrite: bool = True) -> Path:
+  """Writes ``[T, J, 3]`` positions (or a Motion) in the CSV layout, atomically."""
+  pos = getattr(motion_or_positions, "positions", motion_or_positions)
+  pos = np.asarray(pos, dtype=np.float32)
+  flat = pos.reshape(pos.shape[0], -1)
+  return atomic_write(path, lambda tmp: np.savetxt(tmp, flat, delimiter=",", fmt="%.7g"), overwrite=overwrite)

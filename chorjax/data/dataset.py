@@ -1,0 +1,193 @@
+"""Takes -> ids, train/validation split, fitted features and deterministic window batches.
+
+A dataset is a bundled name (``cmu94``), a folder of takes, or a single file. Each take gets a stable
+integer id from the sorted order of the file names; the id map travels with every run.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from importlib import resources
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from chorjax.data import transforms as tf
+from chorjax.data.csv import read_csv
+from chorjax.data.features import Features
+from chorjax.data.motion import Motion
+from chorjax.data.skeletons import get_skeleton
+from chorjax.errors import UserError
+
+BUNDLED = ("cmu94",)
+READABLE_SUFFIXES = (".csv",)
+
+
+def bundled_path(name: str) -> Path:
+  """The folder of a bundled dataset inside the installed package."""
+  return Path(str(resources.files("chorjax.data") / "bundled" / name))
+
+
+def resolve_files(spec: str) -> list[Path]:
+  """A bundled name, a folder or a file -> the sorted list of take files."""
+  path = bundled_path(spec) if spec in BUNDLED else Path(spec)
+  if path.is_dir():
+    files = sorted(p for p in path.iterdir() if p.suffix.lower() in READABLE_SUFFIXES)
+    if not files:
+      raise UserError(f"{path}: no motion files ({', '.join(READABLE_SUFFIXES)}) in this folder")
+    return files
+  if path.is_file():
+    return [path]
+  hint = f" (bundled datasets: {', '.join(BUNDLED)})"
+  raise UserError(f"{spec}: no such file, folder or bundled dataset{hint}")
+
+
+def read_take(path: Path, *, skeleton: str = "mpii16", fps: float = 30.0, up_axis: str = "-y") -> Motion:
+  """Reads one take of any supported format."""
+  suffix = path.suffix.lower()
+  if suffix == ".csv":
+    return read_csv(path, skeleton=get_skeleton(skeleton), fps=fps, up_axis=up_axis)
+  raise UserError(f"{path}: unsupported motion format {suffix!r} (supported: {', '.join(READABLE_SUFFIXES)})")
+
+
+def read_takes(specs: Sequence[str], data_cfg=None) -> list[Motion]:
+  """Reads every take named by ``specs`` (bundled names, folders or files)."""
+  kw = {} if data_cfg is None else dict(skeleton=data_cfg.skeleton, fps=data_cfg.fps, up_axis=data_cfg.up_axis)
+  return [read_take(f, **kw) for spec in specs for f in resolve_files(spec)]
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Dataset:
+  """The takes of a run, split and encoded.
+
+  Attributes:
+    id_map: take name -> integer id (sorted names; saved with every run).
+    motions: the raw takes, in id order.
+    train_names, val_names: the split.
+    features: the feature pipeline fitted on the training split.
+    train: ``(motion_id, features [T, D])`` per training sequence, augmentations included.
+    val: the same for the held-out takes (no augmentation).
+  """
+
+  id_map: dict
+  motions: tuple
+  train_names: tuple
+  val_names: tuple
+  features: Features
+  train: tuple
+  val: tuple
+
+  @property
+  def num_motions(self) -> int:
+    return len(self.id_map)
+
+
+def _val_names(names: list[str], val_takes: Sequence) -> list[str]:
+  if tuple(val_takes) == ("auto",):
+    return names[-1:] if len(names) > 1 else []
+  out = []
+  for v in val_takes:
+    if isinstance(v, int):
+      if not 0 <= v < len(names):
+        raise UserError(f"data.val_takes: id {v} out of range (0..{len(names) - 1})")
+      out.append(names[v])
+    elif v in names:
+      out.append(v)
+    else:
+      raise UserError(f"data.val_takes: no take named {v!r}; takes: {', '.join(names)}")
+  if len(out) == len(names):
+    raise UserError("data.val_takes: holds out every take; nothing is left to train on")
+  return out
+
+
+def load_dataset(data_cfg) -> Dataset:
+  """Reads, splits, fits normalization on the training split, and encodes every take.
+
+  Raises:
+    UserError: for unreadable files, an empty selection, or a take shorter than one window.
+  """
+  motions = read_takes([data_cfg.dataset], data_cfg)
+  names = [m.name for m in motions]
+  if len(set(names)) != len(names):
+    raise UserError(f"{data_cfg.dataset}: two takes share a name; ids come from file names")
+  need = data_cfg.seq_length + 1
+  for m in motions:
+    if m.num_frames < need:
+      raise UserError(f"{m.source}: {m.num_frames} frames, shorter than one window "
+                      f"(data.seq_length + 1 = {need})")
+  id_map = {n: i for i, n in enumerate(names)}
+  val_names = _val_names(names, data_cfg.val_takes)
+  train_names = [n for n in names if n not in val_names]
+  by_name = dict(zip(names, motions))
+
+  skeleton = motions[0].skeleton
+  proto = Features(skeleton, data_cfg.representation, data_cfg.up_axis, data_cfg.scale,
+                   np.zeros(3 * skeleton.num_joints, np.float32), np.ones(3 * skeleton.num_joints, np.float32))
+
+  def canon_versions(m: Motion) -> list[np.ndarray]:
+    canon = np.asarray(proto.canonical(m.positions))
+    out = [canon]
+    if "mirror" in data_cfg.augment:
+      out.append(np.asarray(tf.mirror(canon, skeleton.twins, lateral_axis=0)))
+    if "reverse" in data_cfg.augment:
+      out += [np.asarray(tf.reverse_time(c)) for c in out]
+    return out
+
+  train_raw = [(id_map[n], np.asarray(proto.represent(c))) for n in train_names for c in canon_versions(by_name[n])]
+  val_raw = [(id_map[n], np.asarray(proto.represent(proto.canonical(by_name[n].positions)))) for n in val_names]
+  stats = tf.merged_stats([x for _, x in train_raw])
+  features = dataclasses.replace(proto, mean=stats.mean.astype(np.float32), std=stats.std(ddof=1).astype(np.float32))
+  enc = lambda x: ((x - features.mean) / features.std).astype(np.float32)
+  return Dataset(id_map, tuple(motions), tuple(train_names), tuple(val_names), features,
+                 tuple((i, enc(x)) for i, x in train_raw), tuple((i, enc(x)) for i, x in val_raw))
+
+
+class WindowSampler:
+  """Deterministic random windows: batch ``step`` depends only on (seed, step).
+
+  A batch holds ``batch_size`` windows of ``seq_length + 1`` frames; the sequence is chosen with
+  probability proportional to its length, the start uniformly. Inputs are frames t..t+L-1, targets
+  t+1..t+L. Because nothing is carried between steps, the "sampler position" is the step number,
+  and resuming at step s reproduces the uninterrupted run exactly.
+  """
+
+  def __init__(self, sequences: Sequence[tuple[int, np.ndarray]], seq_length: int, batch_size: int, seed: int):
+    if not sequences:
+      raise UserError("no training sequences")
+    self.seq_length, self.batch_size, self.seed = seq_length, batch_size, seed
+    self.ids = np.array([i for i, _ in sequences], np.int32)
+    lengths = np.array([x.shape[0] for _, x in sequences])
+    self.data = np.concatenate([x for _, x in sequences]).astype(np.float32)
+    self.offsets = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+    self.max_start = lengths - (seq_length + 1)
+    self.probs = lengths / lengths.sum()
+
+  def indices(self, step: int) -> tuple[np.ndarray, np.ndarray]:
+    """(sequence index [B], start frame [B]) of batch ``step``."""
+    rng = np.random.default_rng((self.seed, step))
+    seq = rng.choice(len(self.ids), size=self.batch_size, p=self.probs)
+    start = (rng.random(self.batch_size) * (self.max_start[seq] + 1)).astype(np.int64)
+    return seq, start
+
+  def batch(self, step: int, rows: slice = slice(None)) -> dict[str, np.ndarray]:
+    """Batch ``step`` (optionally only some rows: one process's share of a global batch)."""
+    seq, start = self.indices(step)
+    seq, start = seq[rows], start[rows]
+    frames = self.data[(self.offsets[seq] + start)[:, None] + np.arange(self.seq_length + 1)]
+    return {"inputs": frames[:, :-1], "targets": frames[:, 1:], "motion_ids": self.ids[seq]}
+
+
+def eval_windows(sequences: Sequence[tuple[int, np.ndarray]], seq_length: int, max_windows: int) -> dict:
+  """Fixed validation windows: non-overlapping, in order, at most ``max_windows``."""
+  frames, ids = [], []
+  for i, x in sequences:
+    for s in range(0, x.shape[0] - seq_length, seq_length):
+      frames.append(x[s:s + seq_length + 1])
+      ids.append(i)
+  if not frames:
+    return {}
+  # Spread the kept windows evenly over all takes instead of taking the first ones.
+  keep = np.unique(np.linspace(0, len(frames) - 1, min(max_windows, len(frames))).astype(int))
+  frames = np.stack([frames[k] for k in keep])
+  return {"inputs": frames[:, :-1], "targets": frames[:, 1:], "motion_ids": np.array([ids[k] for k in keep], np.int32)}

@@ -1,0 +1,129 @@
+"""The two records every reader produces and every writer consumes: ``Skeleton`` and ``Motion``."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Optional
+
+import numpy as np
+
+
+@dataclasses.dataclass(frozen=True)
+class Skeleton:
+  """A joint tree.
+
+  Attributes:
+    name: a short name (e.g. ``mpii16``).
+    joint_names: one name per joint.
+    parents: parent index per joint, -1 for the root (exactly one root).
+    twins: the left/right twin of each joint (itself for joints on the midline); used by mirroring.
+    end_joints: joints plotted as trajectories (feet, head top, hands).
+    feet: the foot joints (for foot-contact metrics).
+  """
+
+  name: str
+  joint_names: tuple[str, ...]
+  parents: tuple[int, ...]
+  twins: tuple[int, ...]
+  end_joints: tuple[int, ...] = ()
+  feet: tuple[int, ...] = ()
+
+  def __post_init__(self):
+    j = len(self.joint_names)
+    if len(self.parents) != j or len(self.twins) != j:
+      raise ValueError(f"skeleton {self.name}: joint_names, parents and twins must have equal length")
+    roots = [i for i, p in enumerate(self.parents) if p < 0]
+    if len(roots) != 1:
+      raise ValueError(f"skeleton {self.name}: needs exactly one root, found {roots}")
+    for i, t in enumerate(self.twins):
+      if self.twins[t] != i:
+        raise ValueError(f"skeleton {self.name}: twins must be symmetric (joint {i} <-> {t})")
+    self.topological_order  # raises on cycles
+
+  @property
+  def num_joints(self) -> int:
+    return len(self.joint_names)
+
+  @property
+  def root(self) -> int:
+    return self.parents.index(-1)
+
+  @property
+  def bones(self) -> tuple[tuple[int, int], ...]:
+    """(parent, child) pairs in topological order."""
+    return tuple((self.parents[c], c) for c in self.topological_order if self.parents[c] >= 0)
+
+  @property
+  def topological_order(self) -> tuple[int, ...]:
+    """Joints ordered so that every parent comes before its children."""
+    order, seen = [], set()
+    frontier = [self.root]
+    while frontier:
+      j = frontier.pop(0)
+      order.append(j)
+      seen.add(j)
+      frontier.extend(c for c, p in enumerate(self.parents) if p == j)
+    if len(order) != self.num_joints:
+      raise ValueError(f"skeleton {self.name}: parents do not form a tree")
+    return tuple(order)
+
+  def to_dict(self) -> dict:
+    return dataclasses.asdict(self)
+
+  @classmethod
+  def from_dict(cls, d: dict) -> "Skeleton":
+    return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Motion:
+  """One take of motion capture as joint positions.
+
+  Attributes:
+    positions: ``[T, J, 3]`` float32 joint positions.
+    fps: frames per second.
+    skeleton: the joint tree.
+    up_axis: which axis points up, as a signed axis name: ``y``, ``-y`` (y points down), ``z``.
+    units: the length unit of ``positions`` (``m``, ``cm``, ``mm``, ``arbitrary``, ...).
+    name: the take's name (file stem by default).
+    source: where it was read from (empty if made in memory).
+  """
+
+  positions: np.ndarray
+  fps: float
+  skeleton: Skeleton
+  up_axis: str = "y"
+  units: str = "arbitrary"
+  name: str = ""
+  source: str = ""
+
+  def __post_init__(self):
+    pos = np.asarray(self.positions, dtype=np.float32)
+    if pos.ndim != 3 or pos.shape[1:] != (self.skeleton.num_joints, 3):
+      raise ValueError(
+          f"{self.source or self.name}: positions must be [T, {self.skeleton.num_joints}, 3], got {pos.shape}")
+    pos.setflags(write=False)
+    object.__setattr__(self, "positions", pos)
+
+  @property
+  def num_frames(self) -> int:
+    return self.positions.shape[0]
+
+  def replace(self, **changes) -> "Motion":
+    return dataclasses.replace(self, **changes)
+
+  def bone_lengths(self) -> np.ndarray:
+    """``[T, num_bones]`` lengths of the skeleton's bones."""
+    p, c = np.array(self.skeleton.bones).T
+    return np.linalg.norm(self.positions[:, c] - self.positions[:, p], axis=-1)
+
+
+def bone_length_cv(positions: np.ndarray, skeleton: Skeleton, eps: Optional[float] = 1e-9) -> np.ndarray:
+  """Per-bone coefficient of variation (std / mean, ddof=0) of bone lengths over time, ``[num_bones]``.
+
+  The one-number summary chorjax reports ("bone CV") is the MEDIAN over bones of this vector, a
+  typical bone; its maximum is reported beside it (marker-based elbows and shoulders wobble most).
+  """
+  p, c = np.array(skeleton.bones).T
+  lengths = np.linalg.norm(positions[:, c] - positions[:, p], axis=-1)
+  return lengths.std(axis=0) / np.maximum(lengths.mean(axis=0), eps)

@@ -1,0 +1,45 @@
+"""User-facing errors and safe file writing.
+
+A ``UserError`` is bad input from the user (a malformed file, an unknown config key, a missing
+checkpoint). The CLI prints its message as one line and exits with code 2, without a traceback.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+from typing import Callable
+
+
+class UserError(Exception):
+  """Bad input from the user; its message is one line that names the file/line or key."""
+
+
+def atomic_write(path: str | os.PathLike, write: Callable[[Path], None], *, overwrite: bool = True) -> Path:
+  """Writes a file through a temporary sibling and renames it into place.
+
+  Nothing is half written: if ``write`` fails, the target is untouched and the temporary is removed.
+
+  Args:
+    path: the final file path.
+    write: called with the temporary path; must create the file there.
+    overwrite: if False and ``path`` exists, raise ``UserError`` instead of replacing it.
+
+  Returns:
+    The final path.
+  """
+  path = Path(path)
+  if not overwrite and path.exists():
+    raise UserError(f"{path}: already exists (refusing to overwrite; remove it or choose another name)")
+  path.parent.mkdir(parents=True, exist_ok=True)
+  fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix or ".tmp", dir=path.parent)
+  os.close(fd)
+  tmp_path = Path(tmp)
+  try:
+    write(tmp_path)
+    os.replace(tmp_path, path)
+  finally:
+    if tmp_path.exists():
+      tmp_path.unlink()
+  return path

@@ -1,0 +1,1 @@
+"""Looking at motion: trajectory plots, GIF/MP4 stick figures, and a self-contained HTML player."""

@@ -1,0 +1,71 @@
+"""Dataset: ids from file names, split by take, train-only statistics, deterministic batches."""
+
+import numpy as np
+import pytest
+
+from chorjax.config import load_config
+from chorjax.data.dataset import WindowSampler, eval_windows, load_dataset
+from chorjax.errors import UserError
+
+
+@pytest.fixture(scope="module")
+def ds():
+  return load_dataset(load_config(None, ["data.seq_length=20"]).data)
+
+
+def test_ids_split_and_train_only_statistics(ds):
+  assert list(ds.id_map) == sorted(ds.id_map) and list(ds.id_map.values()) == list(range(10))
+  assert ds.val_names == ("94_10_skeleton_3d",) and len(ds.train_names) == 9
+  train = np.concatenate([x for _, x in ds.train])
+  np.testing.assert_allclose(train.mean(0), 0, atol=1e-4)
+  np.testing.assert_allclose(train.std(0, ddof=1), 1, atol=1e-4)
+  val = np.concatenate([x for _, x in ds.val])
+  assert np.abs(val.mean(0)).max() > 1e-3  # the held-out take was not used for the statistics
+
+
+def test_val_takes_by_name_and_id_and_errors():
+  cfg = load_config(None, ["data.val_takes=[0, '94_05_skeleton_3d']"])
+  assert load_dataset(cfg.data).val_names == ("94_01_skeleton_3d", "94_05_skeleton_3d")
+  with pytest.raises(UserError, match="no take named 'nope'"):
+    load_dataset(load_config(None, ["data.val_takes=['nope']"]).data)
+
+
+def test_augmentations_add_sequences():
+  cfg = load_config(None, ["data.augment=['reverse', 'mirror']"])
+  ds = load_dataset(cfg.data)
+  assert len(ds.train) == 4 * 9
+  (i0, a), (i1, b), (i2, c), (i3, d) = ds.train[:4]
+  assert i0 == i1 == i2 == i3 == 0
+  np.testing.assert_allclose(c, a[::-1], atol=1e-5)  # reversed copy of the original
+
+
+def test_batches_are_deterministic_real_windows(ds):
+  s = WindowSampler(ds.train, seq_length=20, batch_size=16, seed=3)
+  b1, b2, b3 = s.batch(7), WindowSampler(ds.train, 20, 16, 3).batch(7), s.batch(8)
+  for k in b1:
+    np.testing.assert_array_equal(b1[k], b2[k])
+  assert not np.array_equal(b1["inputs"], b3["inputs"])
+  assert b1["inputs"].shape == (16, 20, 48) and b1["motion_ids"].shape == (16,)
+  np.testing.assert_array_equal(b1["inputs"][:, 1:], b1["targets"][:, :-1])
+  seq, start = s.indices(7)
+  for r in range(16):
+    mid, x = ds.train[seq[r]]
+    assert b1["motion_ids"][r] == mid
+    np.testing.assert_array_equal(b1["inputs"][r], x[start[r]:start[r] + 20])
+  # process shares: rows of the global batch
+  np.testing.assert_array_equal(s.batch(7, slice(4, 8))["inputs"], b1["inputs"][4:8])
+
+
+def test_takes_are_drawn_in_proportion_to_length(ds):
+  s = WindowSampler(ds.train, seq_length=20, batch_size=1000, seed=0)
+  counts = np.bincount(np.concatenate([s.indices(k)[0] for k in range(20)]), minlength=9)
+  expected = s.probs * counts.sum()
+  chi2 = ((counts - expected) ** 2 / expected).sum()
+  assert chi2 < 30  # 8 degrees of freedom: p < 0.001 above ~26
+
+
+def test_eval_windows_cover_the_held_out_take(ds):
+  w = eval_windows(ds.val, 20, max_windows=1000)
+  assert w["inputs"].shape == ((740 - 1) // 20, 20, 48)
+  assert (w["motion_ids"] == 9).all()
+  assert eval_windows(ds.val, 20, max_windows=5)["inputs"].shape[0] == 5

@@ -1,0 +1,96 @@
+"""Pure transforms: exact inverses on every bundled take, mirroring, statistics, jit/vmap."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from chorjax.data import transforms as tf
+from chorjax.data.csv import read_csv
+from chorjax.data.dataset import resolve_files
+from chorjax.data.features import REPRESENTATIONS, Features
+from chorjax.data.motion import bone_length_cv
+
+TAKES = [read_csv(f) for f in resolve_files("cmu94")]
+SK = TAKES[0].skeleton
+
+
+def rel_err(a, b):
+  a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+  return np.abs(a - b).max() / np.abs(b).max()
+
+
+@pytest.mark.parametrize("take", TAKES, ids=lambda m: m.name)
+def test_round_trips_on_every_take(take):
+  pos = jnp.asarray(take.positions)
+  assert rel_err(tf.from_bone_relative(tf.to_bone_relative(pos, SK.parents), SK.parents), pos) < 1e-4
+  assert rel_err(tf.from_root_relative(tf.to_root_relative(pos, SK.root), SK.root), pos) < 1e-4
+  for up in ("y", "-y", "z", "-z", "x", "-x"):
+    m = tf.up_axis_matrix(up)
+    assert np.isclose(np.linalg.det(m), 1.0)  # a rotation, never a reflection
+    assert rel_err(tf.rotate(tf.rotate(pos, m), m.T), pos) < 1e-6
+  assert rel_err(tf.scale_units(tf.scale_units(pos, 0.0254), 1 / 0.0254), pos) < 1e-6
+  mean, std = pos.reshape(-1, 48).mean(0), pos.reshape(-1, 48).std(0)
+  flat = pos.reshape(-1, 48)
+  assert rel_err(tf.denormalize(tf.normalize(flat, mean, std), mean, std), flat) < 1e-4
+  assert rel_err(tf.reverse_time(tf.reverse_time(pos)), pos) == 0
+
+
+@pytest.mark.parametrize("take", TAKES, ids=lambda m: m.name)
+def test_mirror_is_an_involution_that_keeps_bone_lengths(take):
+  pos = take.positions
+  once = np.asarray(tf.mirror(pos, SK.twins))
+  np.testing.assert_array_equal(np.asarray(tf.mirror(once, SK.twins)), pos)
+  # each bone of the mirror is as long as its twin bone in the original
+  for p, c in SK.bones:
+    np.testing.assert_allclose(np.linalg.norm(once[:, c] - once[:, p], axis=-1),
+                               np.linalg.norm(pos[:, SK.twins[c]] - pos[:, SK.twins[p]], axis=-1), rtol=1e-6)
+  # left and right really swapped: the right foot of the mirror sits where the left one was, x negated
+  np.testing.assert_array_equal(once[:, 0, 0], -pos[:, 5, 0])
+
+
+def test_y_down_becomes_y_up():
+  up = np.asarray(tf.rotate(TAKES[0].positions, tf.up_axis_matrix("-y")))
+  assert up[:, 9, 1].mean() > up[:, [0, 5], 1].mean()  # head above the feet
+
+
+def test_merged_statistics_equal_the_pooled_ones():
+  arrays = [t.positions.reshape(t.num_frames, -1) for t in TAKES]
+  s = tf.merged_stats(arrays)
+  pooled = np.concatenate(arrays).astype(np.float64)
+  np.testing.assert_allclose(s.mean, pooled.mean(0), rtol=1e-10)
+  np.testing.assert_allclose(s.std(ddof=1), pooled.std(0, ddof=1), rtol=1e-10)
+  assert s.count == pooled.shape[0]
+
+
+def test_resample_keeps_samples_on_shared_instants():
+  pos = TAKES[6].positions
+  up = np.asarray(tf.resample(pos, 30, 60))
+  assert up.shape[0] == 2 * pos.shape[0] - 1
+  np.testing.assert_allclose(up[::2], pos, rtol=1e-6)
+  np.testing.assert_allclose(np.asarray(tf.resample(up, 60, 30)), pos, rtol=1e-6)
+
+
+def test_transforms_jit_and_vmap():
+  batch = jnp.stack([TAKES[i].positions[:500] for i in range(3)])
+  f = jax.jit(jax.vmap(lambda p: tf.from_bone_relative(tf.to_bone_relative(p, SK.parents), SK.parents)))
+  assert rel_err(f(batch), batch) < 1e-4
+  g = jax.jit(jax.vmap(lambda p: tf.mirror(p, SK.twins)))
+  np.testing.assert_array_equal(np.asarray(g(batch)), np.asarray(tf.mirror(batch, SK.twins)))
+
+
+@pytest.mark.parametrize("rep", REPRESENTATIONS)
+def test_features_encode_decode_round_trip(rep):
+  feats = Features(SK, rep, "-y", 0.01, np.zeros(48, np.float32), np.ones(48, np.float32))
+  flat = np.concatenate([np.asarray(feats.represent(feats.canonical(t.positions))) for t in TAKES])
+  feats = Features(SK, rep, "-y", 0.01, flat.mean(0), flat.std(0, ddof=1))
+  for t in TAKES:
+    z = feats.encode(t.positions)
+    assert z.shape == (t.num_frames, 48)
+    assert rel_err(feats.decode(z), t.positions) < 1e-4
+  assert Features.from_dict(feats.to_dict()).to_dict() == feats.to_dict()
+
+
+def test_bundled_takes_have_rigid_bones():
+  for t in TAKES:
+    assert np.median(bone_length_cv(t.positions, SK)) <= 0.03
