@@ -1,0 +1,117 @@
+"""Output heads: MSE (a point estimate) and MDN (a mixture of Gaussians over the whole frame).
+
+Both heads have the same interface: ``head(h_...xH) -> raw_...xP`` (the raw numbers),
+``head.loss(raw, target) -> (loss, aux)`` and ``head.sample(raw, key, ...) -> frame``. For the MDN,
+one pure function (``mdn_params``) turns raw numbers into (mixture log-weights, means, scales):
+scales pass through softplus and are floored at ``min_scale`` so the likelihood stays finite.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+from flax import nnx
+
+
+class MSEHead(nnx.Module):
+  """Dense layer to the frame; loss = mean squared error over every coordinate."""
+
+  def __init__(self, hidden: int, dim: int, *, rngs: nnx.Rngs):
+    self.dim = dim
+    self.out = nnx.Linear(hidden, dim, rngs=rngs)
+
+  @property
+  def num_outputs(self) -> int:
+    return self.dim
+
+  def __call__(self, h):
+    return self.out(h)
+
+  def loss(self, raw_xD, target_xD):
+    mse = jnp.mean(jnp.square(raw_xD - target_xD))
+    return mse, {"mse": mse}
+
+  def sample(self, raw_BxD, key, pi_temperature=1.0, sigma_temperature=1.0, greedy=False):
+    del key, pi_temperature, sigma_temperature, greedy  # a point estimate has nothing to draw
+    return raw_BxD
+
+
+def mdn_params(raw_xP, num_mixtures: int, dim: int, isotropic: bool, min_scale: float):
+  """Raw head outputs -> ``(logpi_xK, mu_xKxD, scale_xKxS)`` with S = 1 (isotropic) or D."""
+  k, s = num_mixtures, 1 if isotropic else dim
+  assert raw_xP.shape[-1] == k + k * dim + k * s, (raw_xP.shape, k, dim, s)
+  lead = raw_xP.shape[:-1]
+  logits, mu, scale = jnp.split(raw_xP, [k, k + k * dim], axis=-1)
+  logpi = jax.nn.log_softmax(logits, axis=-1)
+  mu = mu.reshape(lead + (k, dim))
+  scale = jnp.maximum(jax.nn.softplus(scale.reshape(lead + (k, s))), min_scale)
+  return logpi, mu, scale
+
+
+def mdn_log_prob(logpi_xK, mu_xKxD, scale_xKxS, x_xD):
+  """``log p(x)`` of every frame under the mixture, by logsumexp (finite for tiny scales)."""
+  dim = mu_xKxD.shape[-1]
+  z = (x_xD[..., None, :] - mu_xKxD) / scale_xKxS
+  log_scale = jnp.broadcast_to(jnp.log(scale_xKxS), mu_xKxD.shape).sum(-1)
+  comp_xK = -0.5 * jnp.sum(z * z, axis=-1) - log_scale - 0.5 * dim * math.log(2 * math.pi)
+  return jax.nn.logsumexp(logpi_xK + comp_xK, axis=-1)
+
+
+def mdn_sample(key, logpi_BxK, mu_BxKxD, scale_BxKxS, pi_temperature=1.0, sigma_temperature=1.0,
+               greedy: bool = False):
+  """Draws one frame per row.
+
+  Args:
+    key: PRNG key.
+    logpi_BxK, mu_BxKxD, scale_BxKxS: the mixture.
+    pi_temperature: divides the mixture logits (< 1 sharpens, 0 = the most likely component).
+    sigma_temperature: multiplies the scales (0 = the component mean).
+    greedy: the mean of the most likely component (no randomness at all).
+  """
+  best = jnp.argmax(logpi_BxK, axis=-1)
+  if greedy:
+    return jnp.take_along_axis(mu_BxKxD, best[:, None, None], axis=1)[:, 0]
+  k_key, n_key = jax.random.split(key)
+  t = jnp.asarray(pi_temperature, jnp.float32)
+  drawn = jax.random.categorical(k_key, logpi_BxK / jnp.maximum(t, 1e-6), axis=-1)
+  comp = jnp.where(t > 0, drawn, best)
+  mu = jnp.take_along_axis(mu_BxKxD, comp[:, None, None], axis=1)[:, 0]
+  scale = jnp.take_along_axis(scale_BxKxS, comp[:, None, None], axis=1)[:, 0]
+  return mu + scale * sigma_temperature * jax.random.normal(n_key, mu.shape, mu.dtype)
+
+
+class MDNHead(nnx.Module):
+  """Mixture density network over the whole D-dim frame (Graves 2013; chor-rnn).
+
+  Loss = negative log-likelihood per frame (summed over the D coordinates, averaged over frames).
+  """
+
+  def __init__(self, hidden: int, dim: int, *, num_mixtures: int = 8, isotropic: bool = False,
+               min_scale: float = 1e-3, rngs: nnx.Rngs):
+    self.dim, self.num_mixtures, self.isotropic, self.min_scale = dim, num_mixtures, isotropic, min_scale
+    self.out = nnx.Linear(hidden, self.num_outputs, rngs=rngs)
+
+  @property
+  def num_outputs(self) -> int:
+    k = self.num_mixtures
+    return k + k * self.dim + k * (1 if self.isotropic else self.dim)
+
+  def __call__(self, h):
+    return self.out(h)
+
+  def params(self, raw):
+    return mdn_params(raw, self.num_mixtures, self.dim, self.isotropic, self.min_scale)
+
+  def loss(self, raw_xP, target_xD):
+    logpi, mu, scale = self.params(raw_xP)
+    nll = -jnp.mean(mdn_log_prob(logpi, mu, scale, target_xD))
+    # The MSE of the mixture mean: comparable with the MSE head.
+    mean = jnp.sum(jnp.exp(logpi)[..., None] * mu, axis=-2)
+    return nll, {"nll": nll, "mse": jnp.mean(jnp.square(mean - target_xD)),
+                 "min_scale": jnp.min(scale)}
+
+  def sample(self, raw_BxP, key, pi_temperature=1.0, sigma_temperature=1.0, greedy=False):
+    logpi, mu, scale = self.params(raw_BxP)
+    return mdn_sample(key, logpi, mu, scale, pi_temperature, sigma_temperature, greedy)

@@ -1,0 +1,201 @@
+"""Models: shapes, jit equality, causality, MDN likelihood and sampling, step == scan, golden losses."""
+
+import math
+
+import chex
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.special import logsumexp
+from scipy.stats import norm
+
+from chorjax.config import load_config
+from chorjax.models import create_model, motion_weights
+from chorjax.models.heads import mdn_log_prob, mdn_params, mdn_sample
+from chorjax.models.rnn import RecurrentCore, dropout_mask
+from helpers import tiny_config
+
+CELLS, HEADS = ("lstm", "lnlstm", "gru"), ("mse", "mdn")
+GRID = [(c, h) for c in CELLS for h in HEADS]
+
+
+def make(cell, head, **kw):
+  cfg = tiny_config(f"model.cell={cell}", f"model.head={head}", *[f"model.{k}={v}" for k, v in kw.items()])
+  return create_model(cfg.model, dim=48, num_motions=10, seed=0)
+
+
+def inputs(b=3, t=7, seed=0):
+  x = jax.random.normal(jax.random.key(seed), (b, t, 48))
+  return x, motion_weights(jnp.arange(b) % 10, 10)
+
+
+@pytest.mark.parametrize("cell, head", GRID)
+def test_shapes_finite_and_jit_equal(cell, head):
+  m = make(cell, head)
+  x, w = inputs()
+  raw = m(x, w)
+  p = 48 if head == "mse" else 3 + 3 * 48 + 3 * 48
+  chex.assert_shape(raw, (3, 7, p))
+  chex.assert_tree_all_finite(raw)
+  from flax import nnx
+  jitted = nnx.jit(lambda m, x, w: m(x, w))(m, x, w)
+  np.testing.assert_allclose(jitted, raw, atol=1e-5)
+  loss, aux = m.loss(raw, x)
+  assert np.isfinite(float(loss)) and "mse" in aux
+
+
+@pytest.mark.parametrize("cell, head", GRID)
+def test_causality(cell, head):
+  m = make(cell, head)
+  x, w = inputs(b=1, t=6)
+  t = 2
+  jac = jax.jacrev(lambda x: m(x, w)[0, t].sum())(x)
+  assert np.all(np.asarray(jac[0, t + 1:]) == 0.0)
+  assert np.abs(np.asarray(jac[0, : t + 1])).sum() > 0
+
+
+@pytest.mark.parametrize("cell, head", GRID)
+def test_step_reproduces_the_scan(cell, head):
+  m = make(cell, head)
+  x, w = inputs(t=9)
+  raw = m(x, w)
+  carry, outs = m.initial_carry(w), []
+  for t in range(9):
+    carry, r = m.step(carry, x[:, t])
+    outs.append(r)
+  np.testing.assert_allclose(jnp.stack(outs, 1), raw, atol=1e-6)
+
+
+def test_motion_weights_choose_the_initial_state_and_blends_interpolate():
+  m = make("lstm", "mse")
+  x, _ = inputs(b=1)
+  w4, w5 = motion_weights(jnp.array([4]), 10), motion_weights(jnp.array([5]), 10)
+  assert not np.allclose(m(x, w4), m(x, w5))
+  blend = 0.5 * w4 + 0.5 * w5
+  c4, c5, cb = m.initial_carry(w4), m.initial_carry(w5), m.initial_carry(blend)
+  np.testing.assert_allclose(cb[0][1], (c4[0][1] + c5[0][1]) / 2, atol=1e-6)  # dense layer is affine
+  zero = make("lstm", "mse", initial_state="'zero'")
+  np.testing.assert_allclose(zero(x, w4), zero(x, w5))
+
+
+def test_dropout_uses_one_mask_for_all_time_steps():
+  mask = dropout_mask(jax.random.key(0), (4, 1, 32), 0.5)
+  assert set(np.unique(np.asarray(mask))) == {0.0, 2.0}
+  core = RecurrentCore("lstm", 8, 32, 2, 3, dropout=0.5, rngs=__import__("flax").nnx.Rngs(0))
+  x = jnp.ones((4, 5, 8))
+  carry = core.initial_carry(jnp.ones((4, 3)) / 3)
+  out, _ = core(x, carry, jax.random.key(1))
+  zeros = np.asarray(out) == 0.0
+  assert zeros.any() and (zeros == zeros[:, :1]).all()  # the same units are dropped at every step
+  np.testing.assert_array_equal(core(x, carry, jax.random.key(1))[0], out)
+
+
+# ---------------------------------------------------------------- MDN maths
+
+
+def raw_mdn(key, lead, k, d, s):
+  return jax.random.normal(key, lead + (k + k * d + k * s,)) * 2.0
+
+
+@pytest.mark.parametrize("isotropic", [False, True])
+def test_mdn_nll_equals_an_independent_scipy_computation(isotropic):
+  k, d = 4, 48
+  s = 1 if isotropic else d
+  raw = raw_mdn(jax.random.key(0), (5,), k, d, s)
+  x = jax.random.normal(jax.random.key(1), (5, d))
+  logpi, mu, scale = mdn_params(raw, k, d, isotropic, 1e-3)
+  got = np.asarray(mdn_log_prob(logpi, mu, scale, x))
+  r = np.asarray(raw, np.float64)
+  logits, mu_np, sc = r[:, :k], r[:, k:k + k * d].reshape(5, k, d), r[:, k + k * d:].reshape(5, k, s)
+  sc = np.maximum(np.log1p(np.exp(sc)), 1e-3)
+  logw = logits - logsumexp(logits, axis=-1, keepdims=True)
+  comp = norm.logpdf(np.asarray(x, np.float64)[:, None, :], mu_np, np.broadcast_to(sc, mu_np.shape)).sum(-1)
+  want = logsumexp(logw + comp, axis=-1)
+  np.testing.assert_allclose(got, want, rtol=1e-5)
+
+
+def test_mdn_nll_is_finite_for_tiny_scales_in_48_dims():
+  k, d = 8, 48
+  raw = jnp.full((2, k + 2 * k * d), -50.0)  # softplus(-50) ~ 2e-22 -> floored
+  x = jnp.ones((2, d)) * 3.0
+  logpi, mu, scale = mdn_params(raw, k, d, False, 1e-3)
+  lp = mdn_log_prob(logpi, mu, scale, x)
+  assert np.all(np.isfinite(np.asarray(lp))) and float(scale.min()) == pytest.approx(1e-3)
+  g = jax.grad(lambda r: -mdn_log_prob(*mdn_params(r, k, d, False, 1e-3), x).sum())(raw)
+  assert np.all(np.isfinite(np.asarray(g)))
+
+
+def test_mdn_with_one_component_and_fixed_scale_is_scaled_mse_plus_constant():
+  d, s = 48, 0.7
+  x = jax.random.normal(jax.random.key(2), (6, d))
+  mu = jax.random.normal(jax.random.key(3), (6, d))
+  raw_scale = math.log(math.expm1(s))  # softplus^-1
+  raw = jnp.concatenate([jnp.zeros((6, 1)), mu, jnp.full((6, d), raw_scale)], axis=-1)
+  nll = -mdn_log_prob(*mdn_params(raw, 1, d, False, 1e-3), x)
+  mse = jnp.mean(jnp.square(x - mu), axis=-1)
+  const = d * math.log(s) + 0.5 * d * math.log(2 * math.pi)
+  np.testing.assert_allclose(nll, d / (2 * s**2) * mse + const, rtol=1e-5)
+
+
+def test_mdn_gradients_match_finite_differences():
+  k, d = 2, 3
+  raw = raw_mdn(jax.random.key(4), (), k, d, d) * 0.5
+  x = jax.random.normal(jax.random.key(5), (d,))
+  f = lambda r: -mdn_log_prob(*mdn_params(r, k, d, False, 1e-3), x)
+  g = np.asarray(jax.grad(f)(raw))
+  eps = 1e-2
+  for i in range(raw.shape[0]):
+    e = jnp.zeros_like(raw).at[i].set(eps)
+    fd = (float(f(raw + e)) - float(f(raw - e))) / (2 * eps)
+    assert fd == pytest.approx(g[i], rel=2e-2, abs=2e-3), i
+
+
+def test_mdn_sampling_reproduces_a_known_mixture():
+  n = 40_000
+  logpi = jnp.log(jnp.array([[0.2, 0.8]]))
+  mu = jnp.array([[[-3.0, 1.0], [4.0, 0.0]]])  # 7 sigma apart on x: no overlap
+  scale = jnp.array([[[0.5, 0.5], [1.0, 2.0]]])
+  rep = lambda a: jnp.repeat(a, n, axis=0)
+  x = np.asarray(mdn_sample(jax.random.key(0), rep(logpi), rep(mu), rep(scale)))
+  first = x[:, 0] < 0.5
+  assert first.mean() == pytest.approx(0.2, abs=0.01)
+  np.testing.assert_allclose(x[first].mean(0), [-3.0, 1.0], atol=0.05)
+  np.testing.assert_allclose(x[first].std(0), [0.5, 0.5], rtol=0.05)
+  np.testing.assert_allclose(x[~first].std(0), [1.0, 2.0], rtol=0.05)
+  # pi temperature sharpens; sigma temperature shrinks
+  sharp = np.asarray(mdn_sample(jax.random.key(1), rep(logpi), rep(mu), rep(scale), pi_temperature=0.5))
+  assert (sharp[:, 0] < 0.5).mean() == pytest.approx(1 / 17, abs=0.01)  # 0.2^2 / (0.2^2 + 0.8^2)
+  cold = np.asarray(mdn_sample(jax.random.key(2), rep(logpi), rep(mu), rep(scale), sigma_temperature=0.1))
+  np.testing.assert_allclose(cold[cold[:, 0] > 0.5].std(0), [0.1, 0.2], rtol=0.05)
+
+
+def test_zero_temperature_and_greedy_are_deterministic():
+  raw = raw_mdn(jax.random.key(6), (4,), 3, 5, 5)
+  p = mdn_params(raw, 3, 5, False, 1e-3)
+  g1 = mdn_sample(jax.random.key(0), *p, greedy=True)
+  g2 = mdn_sample(jax.random.key(9), *p, greedy=True)
+  np.testing.assert_array_equal(g1, g2)
+  best = np.asarray(jnp.argmax(p[0], -1))
+  np.testing.assert_allclose(g1, np.asarray(p[1])[np.arange(4), best])
+  t1 = mdn_sample(jax.random.key(0), *p, pi_temperature=0.0, sigma_temperature=0.0)
+  t2 = mdn_sample(jax.random.key(5), *p, pi_temperature=0.0, sigma_temperature=0.0)
+  np.testing.assert_array_equal(t1, t2)
+  np.testing.assert_array_equal(t1, g1)
+
+
+# ---------------------------------------------------------------- golden one-step losses
+
+# Update a number only when a change to the model or data pipeline is intended.
+GOLDEN = {"mse": 0.87391311, "mdn": 65.211639}
+
+
+@pytest.mark.parametrize("head", HEADS)
+def test_golden_one_step_loss(head):
+  from chorjax.data.dataset import WindowSampler, load_dataset
+  cfg = tiny_config(f"model.head={head}", "model.cell=lnlstm")
+  ds = load_dataset(cfg.data)
+  batch = WindowSampler(ds.train, cfg.data.seq_length, cfg.train.batch_size, seed=0).batch(0)
+  m = create_model(cfg.model, 48, ds.num_motions, seed=0)
+  loss, _ = m.loss(m(jnp.asarray(batch["inputs"]), motion_weights(batch["motion_ids"], 10)), batch["targets"])
+  assert float(loss) == pytest.approx(GOLDEN[head], rel=1e-5)
