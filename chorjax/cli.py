@@ -46,6 +46,116 @@ def _data_plot(args) -> int:
   return 0
 
 
+def _config_show(args) -> int:
+  from chorjax.config import load_config, to_toml
+  print(to_toml(load_config(args.config, args.overrides)), end="")
+  return 0
+
+
+def _train(args) -> int:
+  from chorjax.config import load_config
+  from chorjax.train import default_workdir, train_and_evaluate
+
+  cfg = load_config(args.config, args.overrides)
+  workdir = Path(args.workdir) if args.workdir else default_workdir(cfg)
+  summary = train_and_evaluate(cfg, workdir, force=args.force)
+  print(f"trained {cfg.name}: steps {summary['start_step']}->{summary['final_step']}"
+          + (f", train loss {summary['final_train_loss']:.4g}" if "final_train_loss" in summary else "")
+          + (f", val loss {summary['final_val_loss']:.4g}" if "final_val_loss" in summary else "")
+          + f", {summary['seconds']:.0f} s; workdir {workdir}")
+  if "samples" in summary:
+    print(f"sample: {summary['samples']['csv']}\nwatch it: {summary['samples']['html']}")
+  return 0
+
+
+def _sample(args) -> int:
+  import jax
+  import jax.numpy as jnp
+  import numpy as np
+  from chorjax.data.features import Features
+  from chorjax.data.motion import Motion
+  from chorjax.sample import generate, load_run, motion_weight_vector, read_prime
+
+  out = Path(args.output)
+  suffix = out.suffix.lower()
+  if suffix not in (".csv", ".npz", ".html", ".bvh"):
+    raise UserError(f"{out}: output must end in .csv, .npz or .html")
+  if suffix == ".bvh":
+    raise UserError(f"{out}: BVH export is not implemented yet (see the formats issue); use .csv or .npz")
+  _refuse_existing([out], args.force)
+  graphdef, params, meta = load_run(args.workdir, args.checkpoint)
+  features = Features.from_dict(meta["features"])
+  num_motions = len(meta["id_map"])
+  w = jnp.tile(jnp.asarray(motion_weight_vector(num_motions, args.motion, args.mix))[None], (args.num, 1))
+  prime = None
+  if args.prime:
+    prime = jnp.tile(jnp.asarray(read_prime(args.prime, features, meta["config"]["data"]))[None], (args.num, 1, 1))
+  z = generate(graphdef, params, w, jax.random.key(args.seed), num_frames=args.frames, prime_BxPxD=prime,
+               pi_temperature=args.pi_temperature, sigma_temperature=args.sigma_temperature, greedy=args.greedy)
+  pos = np.asarray(features.decode(z))
+  if prime is not None:  # the phrase the dancer gave, then the machine's continuation
+    pos = np.concatenate([np.tile(np.asarray(features.decode(prime))[:1], (args.num, 1, 1, 1)), pos], axis=1)
+  fps = meta["config"]["data"]["fps"]
+  settings = {"workdir": str(args.workdir), "checkpoint_step": meta["step"], "frames": args.frames,
+              "motion": args.motion, "mix": args.mix, "prime": args.prime, "seed": args.seed,
+              "pi_temperature": args.pi_temperature, "sigma_temperature": args.sigma_temperature,
+              "greedy": args.greedy}
+  sk, up = features.skeleton, features.up_axis
+  written = _write_sample(out, pos, fps, sk, up, settings)
+  print("wrote " + ", ".join(map(str, written)))
+  return 0
+
+
+def _refuse_existing(paths, force: bool):
+  for p in paths:
+    if Path(p).exists() and not force:
+      raise UserError(f"{p}: already exists (use --force to overwrite)")
+
+
+def _write_sample(out: Path, pos, fps, sk, up, settings) -> list:
+  from chorjax.data.csv import write_csv
+  from chorjax.data.motion import Motion
+  from chorjax.data.npz import write_npz
+  from chorjax.render.html import write_player
+
+  suffix = out.suffix.lower()
+  if suffix == ".npz":
+    return [write_npz(out, pos, fps=fps, skeleton=sk, up_axis=up, units="data", settings=settings)]
+  if suffix == ".html":
+    ms = [Motion(p, fps, sk, up, name=f"dancer {k}") for k, p in enumerate(pos)]
+    return [write_player(ms, out, title=f"chorjax sample ({settings['workdir']})")]
+  if len(pos) == 1:
+    return [write_csv(pos[0], out)]
+  return [write_csv(p, out.with_name(f"{out.stem}_{k}{out.suffix}")) for k, p in enumerate(pos)]
+
+
+def _render(args) -> int:
+  from chorjax.data.dataset import read_motions, resolve_files
+
+  out = Path(args.output)
+  suffix = out.suffix.lower()
+  if suffix not in (".png", ".gif", ".mp4", ".html"):
+    raise UserError(f"{out}: output must end in .png, .gif, .mp4 or .html")
+  _refuse_existing([out], args.force)
+  motions = [m for spec in args.inputs for f in resolve_files(spec) for m in read_motions(f, fps=args.fps)]
+  if args.frames:
+    motions = [m.replace(positions=m.positions[: args.frames]) for m in motions]
+  if suffix == ".html":
+    from chorjax.render.html import write_player
+    written = write_player(motions, out, title=args.title or out.stem, columns=args.columns)
+  else:
+    if len(motions) > 1:
+      print(f"note: {suffix} shows one motion; rendering {motions[0].name}", file=sys.stderr)
+    if suffix == ".png":
+      from chorjax.render.plot import plot_trajectories
+      written = plot_trajectories(motions[0], out)
+    else:
+      from chorjax.render.video import write_animation
+      written = write_animation(motions[0], out)
+  print(f"wrote {written}")
+  return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
   parser = argparse.ArgumentParser(prog="chorjax", description=(
       "Learn a dancer's movement language from motion capture and write new dance in it."))
@@ -62,12 +172,61 @@ def build_parser() -> argparse.ArgumentParser:
   plot.add_argument("-o", "--output", required=True, metavar="FILE.png")
   plot.add_argument("--split", type=int, default=200, help="frames in the first row (default 200)")
   plot.set_defaults(func=_data_plot)
+
+  config = sub.add_parser("config", help="inspect run configs")
+  csub = config.add_subparsers(dest="config_command", required=True, metavar="CONFIG_COMMAND")
+  show = csub.add_parser("show", help="print the resolved config (file + overrides) as TOML")
+  show.add_argument("config", nargs="?", metavar="CONFIG", help="a TOML config (default: the built-in defaults)")
+  show.add_argument("overrides", nargs="*", metavar="KEY=VALUE", help="dotted overrides, e.g. model.cell=gru")
+  show.set_defaults(func=_config_show)
+
+  train = sub.add_parser("train", help="train a model from a config; resumes from the workdir's latest checkpoint")
+  train.add_argument("config", metavar="CONFIG", help="a TOML config, e.g. configs/quickstart.toml")
+  train.add_argument("overrides", nargs="*", metavar="KEY=VALUE", help="dotted overrides, e.g. optim.lr=3e-4")
+  train.add_argument("--workdir", help="run directory (default: runs/<config name>)")
+  train.add_argument("--force", action="store_true",
+                     help="continue a workdir whose saved config differs (the old config is kept beside it)")
+  train.set_defaults(func=_train)
+
+  sample = sub.add_parser("sample", help="generate new dance from a trained run")
+  sample.add_argument("workdir", metavar="WORKDIR", help="a run directory with checkpoints")
+  sample.add_argument("-o", "--output", required=True, metavar="OUT",
+                      help="OUT.csv (data layout; K>1 writes OUT_k.csv), OUT.npz (all dancers + settings) or OUT.html")
+  sample.add_argument("--frames", type=int, default=1000, help="frames to generate (default 1000)")
+  sample.add_argument("--num", type=int, default=1, help="dancers generated in parallel (default 1)")
+  ids = sample.add_mutually_exclusive_group()
+  ids.add_argument("--motion", type=int, help="motion id that conditions the dance (default 0)")
+  ids.add_argument("--mix", metavar="ID:W,ID:W", help="blend motion ids, e.g. 4:0.5,5:0.5")
+  sample.add_argument("--prime", metavar="FILE[:START:LEN]", help="continue a real phrase (chor-rnn's collaboration mode)")
+  sample.add_argument("--pi-temperature", type=float, default=1.0, help="mixture-weight temperature (0 = most likely)")
+  sample.add_argument("--sigma-temperature", type=float, default=1.0, help="scale multiplier of the MDN")
+  sample.add_argument("--greedy", action="store_true", help="mean of the most likely component (no noise)")
+  sample.add_argument("--seed", type=int, default=0)
+  sample.add_argument("--checkpoint", default="latest", metavar="STEP|best|latest")
+  sample.add_argument("--force", action="store_true", help="overwrite OUT if it exists")
+  sample.set_defaults(func=_sample)
+
+  render = sub.add_parser("render", help="draw motion files or samples as PNG, GIF, MP4 or an HTML player")
+  render.add_argument("inputs", nargs="+", metavar="INPUT", help="motion files (.csv, .npz), folders or cmu94")
+  render.add_argument("-o", "--output", required=True, metavar="OUT.(png|gif|mp4|html)")
+  render.add_argument("--frames", type=int, help="render only the first N frames")
+  render.add_argument("--fps", type=float, default=30.0, help="frame rate of CSV inputs (default 30)")
+  render.add_argument("--columns", type=int, help="HTML grid columns (default: up to 4)")
+  render.add_argument("--title", help="HTML page title")
+  render.add_argument("--force", action="store_true", help="overwrite OUT if it exists")
+  render.set_defaults(func=_render)
   return parser
 
 
 def main(argv=None) -> int:
   parser = build_parser()
-  args = parser.parse_args(argv)
+  args, extra = parser.parse_known_args(argv)
+  # KEY=VALUE overrides may also follow options (`train c.toml --workdir w model.cell=gru`).
+  if extra:
+    if hasattr(args, "overrides") and all("=" in e and not e.startswith("-") for e in extra):
+      args.overrides = [*args.overrides, *extra]
+    else:
+      parser.error(f"unrecognized arguments: {' '.join(extra)}")
   try:
     return args.func(args)
   except UserError as e:

@@ -38,6 +38,9 @@ def atomic_write(path: str | os.PathLike, write: Callable[[Path], None], *, over
   tmp_path = Path(tmp)
   try:
     write(tmp_path)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp_path, 0o666 & ~umask)  # mkstemp creates 0600; give the file ordinary permissions
     os.replace(tmp_path, path)
   finally:
     if tmp_path.exists():

@@ -21,7 +21,7 @@ from chorjax.data.skeletons import get_skeleton
 from chorjax.errors import UserError
 
 BUNDLED = ("cmu94",)
-READABLE_SUFFIXES = (".csv",)
+READABLE_SUFFIXES = (".csv", ".npz")
 
 
 def bundled_path(name: str) -> Path:
@@ -44,17 +44,26 @@ def resolve_files(spec: str) -> list[Path]:
 
 
 def read_take(path: Path, *, skeleton: str = "mpii16", fps: float = 30.0, up_axis: str = "-y") -> Motion:
-  """Reads one take of any supported format."""
+  """Reads one take of any supported format (a multi-dancer ``.npz`` sample: the first dancer)."""
+  return read_motions(path, skeleton=skeleton, fps=fps, up_axis=up_axis)[0]
+
+
+def read_motions(path: Path, *, skeleton: str = "mpii16", fps: float = 30.0, up_axis: str = "-y") -> list[Motion]:
+  """Reads every motion in a file: one for a take, K for a sample ``.npz`` of K dancers."""
+  path = Path(path)
   suffix = path.suffix.lower()
   if suffix == ".csv":
-    return read_csv(path, skeleton=get_skeleton(skeleton), fps=fps, up_axis=up_axis)
+    return [read_csv(path, skeleton=get_skeleton(skeleton), fps=fps, up_axis=up_axis)]
+  if suffix == ".npz":
+    from chorjax.data.npz import read_npz
+    return read_npz(path)
   raise UserError(f"{path}: unsupported motion format {suffix!r} (supported: {', '.join(READABLE_SUFFIXES)})")
 
 
 def read_takes(specs: Sequence[str], data_cfg=None) -> list[Motion]:
   """Reads every take named by ``specs`` (bundled names, folders or files)."""
   kw = {} if data_cfg is None else dict(skeleton=data_cfg.skeleton, fps=data_cfg.fps, up_axis=data_cfg.up_axis)
-  return [read_take(f, **kw) for spec in specs for f in resolve_files(spec)]
+  return [m for spec in specs for f in resolve_files(spec) for m in read_motions(f, **kw)]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

@@ -1,0 +1,98 @@
+"""Orbax checkpoints that hold everything a run needs to resume and to sample.
+
+Each checkpoint step has two items:
+  ``state``: the pytree ``{params, opt_state, step}`` (arrays);
+  ``meta``: JSON with the resolved config, the feature pipeline (normalization statistics,
+  representation, skeleton), the motion-id map, the RNG seed and the data-sampler position.
+The manager keeps the latest ``keep`` steps plus the best one by validation loss.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import jax
+import orbax.checkpoint as ocp
+from orbax.checkpoint.checkpoint_managers import preservation_policy as pp
+
+from chorjax.errors import UserError
+
+
+def checkpoint_dir(workdir) -> Path:
+  return Path(workdir).absolute() / "checkpoints"
+
+
+def create_manager(workdir, keep: int = 3, read_only: bool = False) -> ocp.CheckpointManager:
+  policy = pp.AnyPreservationPolicy([
+      pp.LatestN(keep),
+      pp.BestN(get_metric_fn=lambda m: m["val_loss"], reverse=True, n=1, keep_checkpoints_without_metrics=False),
+  ])
+  options = ocp.CheckpointManagerOptions(preservation_policy=policy, cleanup_tmp_directories=not read_only,
+                                         create=not read_only, read_only=read_only)
+  return ocp.CheckpointManager(checkpoint_dir(workdir), options=options)
+
+
+def save(manager: ocp.CheckpointManager, step: int, state, meta: dict, val_loss: float | None) -> None:
+  """Saves asynchronously; ``manager.wait_until_finished()`` must run before the process exits."""
+  metrics = {"val_loss": float(val_loss)} if val_loss is not None else None
+  meta = {**meta, "val_loss": metrics and metrics["val_loss"]}
+  manager.save(step, args=ocp.args.Composite(state=ocp.args.StandardSave(state), meta=ocp.args.JsonSave(meta)),
+               metrics=metrics)
+
+
+def _meta(manager, step) -> dict:
+  return dict(manager.restore(step, args=ocp.args.Composite(meta=ocp.args.JsonRestore()))["meta"])
+
+
+def best_step(manager) -> int | None:
+  """The kept step with the lowest validation loss (None if no checkpoint has one)."""
+  losses = {s: _meta(manager, s).get("val_loss") for s in manager.all_steps()}
+  losses = {s: v for s, v in losses.items() if v is not None}
+  return min(losses, key=losses.get) if losses else None
+
+
+def restore(manager: ocp.CheckpointManager, step: int, template):
+  """Restores ``(state, meta)`` of ``step`` into the structure of ``template``."""
+  abstract = jax.tree.map(ocp.utils.to_shape_dtype_struct, template)
+  try:
+    r = manager.restore(step, args=ocp.args.Composite(state=ocp.args.StandardRestore(abstract),
+                                                      meta=ocp.args.JsonRestore()))
+  except (ValueError, KeyError, TypeError) as e:
+    raise UserError(f"{manager.directory}/{step}: checkpoint does not match this model config "
+                    f"({str(e).splitlines()[0][:160]})") from None
+  # Re-impose the template's tree (optax states are namedtuples; keep their types exactly).
+  state = jax.tree.unflatten(jax.tree.structure(template), jax.tree.leaves(r["state"]))
+  return state, dict(r["meta"])
+
+
+def read_meta(workdir, which: str | int = "latest") -> tuple[int, dict]:
+  """``(step, meta)`` of a checkpoint chosen by step number, ``latest`` or ``best``."""
+  d = checkpoint_dir(workdir)
+  if not d.is_dir():
+    raise UserError(f"{workdir}: no checkpoints (expected {d}); train first with `chorjax train`")
+  manager = create_manager(workdir, read_only=True)
+  try:
+    step = resolve_step(manager, which, workdir)
+    return step, _meta(manager, step)
+  finally:
+    manager.close()
+
+
+def resolve_step(manager, which, workdir) -> int:
+  steps = manager.all_steps()
+  if not steps:
+    raise UserError(f"{workdir}: no finished checkpoints in {checkpoint_dir(workdir)}")
+  if which == "latest":
+    return manager.latest_step()
+  if which == "best":
+    best = best_step(manager)
+    if best is None:
+      raise UserError(f"{workdir}: no checkpoint has a validation loss (no held-out takes?); use latest")
+    return best
+  try:
+    step = int(which)
+  except ValueError:
+    raise UserError(f"--checkpoint {which!r}: expected a step number, 'latest' or 'best'") from None
+  if step not in steps:
+    raise UserError(f"{workdir}: no checkpoint at step {step}; available: {', '.join(map(str, sorted(steps)))}")
+  return step

@@ -1,0 +1,175 @@
+"""One self-contained, offline HTML file: a 3D stick-figure player for one or many motions.
+
+No network and no CDN: the motions are embedded as base64 float32 arrays and drawn with a small
+perspective projection on 2D canvases. Controls: play/pause, scrub bar, speed, mouse drag to orbit,
+wheel to zoom; several motions side by side in a grid with titles (originals above, generated
+below, like the reference notebook's catalog page).
+
+Opening the file with ``#selftest`` appended plays it briefly and writes a JSON report into the
+``<pre id="selftest">`` element (JavaScript errors, non-blank pixels, whether playing changed the
+picture); the browser test reads it.
+"""
+
+from __future__ import annotations
+
+import base64
+import html as html_lib
+import json
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from chorjax.data import transforms as tf
+from chorjax.data.motion import Motion
+from chorjax.errors import atomic_write
+
+
+def _payload(m: Motion) -> dict:
+  pos = np.asarray(tf.rotate(m.positions, tf.up_axis_matrix(m.up_axis)), np.float32)  # y-up for the viewer
+  height = float(np.ptp(pos[..., 1])) or 1.0
+  return {
+      "title": m.name, "fps": m.fps, "frames": int(pos.shape[0]), "joints": int(pos.shape[1]),
+      "bones": [list(b) for b in m.skeleton.bones], "scale": 2.0 / height,
+      "data": base64.b64encode(np.ascontiguousarray(pos).tobytes()).decode("ascii"),
+  }
+
+
+def player_html(motions: Sequence[Motion], title: str = "chorjax", columns: int | None = None) -> str:
+  """The player page as a string."""
+  cols = columns or min(len(motions), 4)
+  data = json.dumps([_payload(m) for m in motions])
+  return _TEMPLATE.replace("__TITLE__", html_lib.escape(title)).replace("__COLUMNS__", str(cols)).replace(
+      "__DATA__", data)
+
+
+def write_player(motions: Sequence[Motion], path, title: str = "chorjax", columns: int | None = None) -> Path:
+  """Writes the player page atomically."""
+  text = player_html(motions, title, columns)
+  return atomic_write(path, lambda p: p.write_text(text, encoding="utf-8"))
+
+
+_TEMPLATE = r"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>__TITLE__</title>
+<script>window.__errors = []; window.addEventListener('error', function (e) { window.__errors.push(String(e.message)); });</script>
+<style>
+body { font-family: system-ui, sans-serif; margin: 12px; background: #fafafa; color: #222; }
+#controls { display: flex; gap: 10px; align-items: center; margin-bottom: 10px; }
+#scrub { flex: 1; }
+#grid { display: grid; grid-template-columns: repeat(__COLUMNS__, 1fr); gap: 8px; }
+figure { margin: 0; background: #fff; border: 1px solid #ddd; }
+figcaption { font-size: 13px; padding: 4px 8px; border-bottom: 1px solid #eee; }
+canvas { width: 100%; height: auto; display: block; cursor: grab; }
+</style></head><body>
+<h3>__TITLE__</h3>
+<div id="controls">
+  <button id="play">Play</button>
+  <input id="scrub" type="range" min="0" max="0" value="0">
+  <span id="frame">0</span>
+  <label>speed <select id="speed"><option>0.25</option><option>0.5</option><option selected>1</option><option>2</option><option>4</option></select></label>
+  <span style="font-size:12px;color:#777">drag: orbit, wheel: zoom</span>
+</div>
+<div id="grid"></div>
+<pre id="selftest"></pre>
+<script>
+(function () {
+  var MOTIONS = __DATA__;
+  function decode(b64) {
+    var s = atob(b64), bytes = new Uint8Array(s.length);
+    for (var i = 0; i < s.length; i++) bytes[i] = s.charCodeAt(i);
+    return new Float32Array(bytes.buffer);
+  }
+  var view = { yaw: 0.6, pitch: 0.25, zoom: 1.0 };
+  var players = MOTIONS.map(function (m) {
+    var fig = document.createElement('figure');
+    var cap = document.createElement('figcaption'); cap.textContent = m.title + ' (' + m.frames + ' frames, ' + m.fps + ' fps)';
+    var cv = document.createElement('canvas'); cv.width = 480; cv.height = 400;
+    fig.appendChild(cap); fig.appendChild(cv); document.getElementById('grid').appendChild(fig);
+    var pos = decode(m.data), J = m.joints, cx = 0, cz = 0, ymin = Infinity;
+    for (var t = 0; t < m.frames; t++) {  // fixed camera: centre of the whole take on the floor
+      cx += pos[(t * J) * 3]; cz += pos[(t * J) * 3 + 2];
+      for (var j = 0; j < J; j++) ymin = Math.min(ymin, pos[(t * J + j) * 3 + 1]);
+    }
+    return { m: m, cv: cv, ctx: cv.getContext('2d'), pos: pos, cx: cx / m.frames, cz: cz / m.frames, y0: ymin };
+  });
+  var maxFrames = Math.max.apply(null, MOTIONS.map(function (m) { return m.frames; }));
+  var fps = MOTIONS.length ? MOTIONS[0].fps : 30;
+  var scrub = document.getElementById('scrub'); scrub.max = Math.max(0, maxFrames - 1);
+  var state = { frame: 0, playing: false, last: 0 };
+
+  function project(p, x, y, z) {
+    var s = p.m.scale; x = (x - p.cx) * s; y = (y - p.y0) * s - 1.0; z = (z - p.cz) * s;
+    var cy = Math.cos(view.yaw), sy = Math.sin(view.yaw), cp = Math.cos(view.pitch), sp = Math.sin(view.pitch);
+    var x1 = cy * x + sy * z, z1 = -sy * x + cy * z;
+    var y2 = cp * y - sp * z1, z2 = sp * y + cp * z1;
+    var d = 6.0 / view.zoom, f = p.cv.height * 1.1 / (d - z2);
+    return [p.cv.width / 2 + x1 * f, p.cv.height / 2 - y2 * f];
+  }
+  function draw(p) {
+    var ctx = p.ctx, W = p.cv.width, H = p.cv.height, J = p.m.joints;
+    ctx.fillStyle = '#ffffff'; ctx.fillRect(0, 0, W, H);
+    ctx.strokeStyle = '#e4e4e4'; ctx.lineWidth = 1;  // floor grid
+    for (var g = -4; g <= 4; g++) {
+      var a = proj3(p, g, 0, -4), b = proj3(p, g, 0, 4), c = proj3(p, -4, 0, g), d = proj3(p, 4, 0, g);
+      line(ctx, a, b); line(ctx, c, d);
+    }
+    var t = Math.min(state.frame, p.m.frames - 1), base = t * J * 3, pts = [];
+    for (var j = 0; j < J; j++) pts.push(project(p, p.pos[base + 3 * j], p.pos[base + 3 * j + 1], p.pos[base + 3 * j + 2]));
+    ctx.strokeStyle = '#1f5fa8'; ctx.lineWidth = 3;
+    p.m.bones.forEach(function (bn) { line(ctx, pts[bn[0]], pts[bn[1]]); });
+    ctx.fillStyle = '#c0392b';
+    pts.forEach(function (q) { ctx.beginPath(); ctx.arc(q[0], q[1], 3, 0, 2 * Math.PI); ctx.fill(); });
+  }
+  function proj3(p, gx, gy, gz) {  // grid points are in viewer units around the take's centre
+    return project(p, p.cx + gx / (p.m.scale * 2), p.y0, p.cz + gz / (p.m.scale * 2));
+  }
+  function line(ctx, a, b) { ctx.beginPath(); ctx.moveTo(a[0], a[1]); ctx.lineTo(b[0], b[1]); ctx.stroke(); }
+  function render() { players.forEach(draw); scrub.value = state.frame; document.getElementById('frame').textContent = state.frame; }
+  function setPlaying(on) { state.playing = on; state.last = performance.now(); document.getElementById('play').textContent = on ? 'Pause' : 'Play'; }
+  document.getElementById('play').onclick = function () { setPlaying(!state.playing); };
+  scrub.oninput = function () { state.frame = parseInt(scrub.value, 10); render(); };
+  var acc = 0;
+  setInterval(function () {
+    if (!state.playing) return;
+    var now = performance.now(), speed = parseFloat(document.getElementById('speed').value);
+    acc += (now - state.last) / 1000 * fps * speed; state.last = now;
+    var step = Math.floor(acc);
+    if (step > 0) { acc -= step; state.frame = (state.frame + step) % maxFrames; render(); }
+  }, 15);
+  players.forEach(function (p) {
+    var drag = null;
+    p.cv.addEventListener('mousedown', function (e) { drag = [e.clientX, e.clientY]; });
+    window.addEventListener('mouseup', function () { drag = null; });
+    window.addEventListener('mousemove', function (e) {
+      if (!drag) return;
+      view.yaw += (e.clientX - drag[0]) * 0.01; view.pitch = Math.max(-1.4, Math.min(1.4, view.pitch + (e.clientY - drag[1]) * 0.01));
+      drag = [e.clientX, e.clientY]; render();
+    });
+    p.cv.addEventListener('wheel', function (e) { e.preventDefault(); view.zoom = Math.max(0.3, Math.min(5, view.zoom * (e.deltaY > 0 ? 0.9 : 1.1))); render(); }, { passive: false });
+  });
+  render();
+
+  if (location.hash === '#selftest') {
+    var signature = function () {
+      var sig = 0, nonblank = 0;
+      players.forEach(function (p) {
+        var d = p.ctx.getImageData(0, 0, p.cv.width, p.cv.height).data;
+        for (var i = 0; i < d.length; i += 4) {
+          if (d[i] < 200 || d[i + 1] < 200) { nonblank++; sig = (sig * 31 + i) % 1000000007; }
+        }
+      });
+      return [sig, nonblank];
+    };
+    var before = signature(), f0 = state.frame;
+    setPlaying(true);
+    setTimeout(function () {
+      setPlaying(false);
+      var after = signature();
+      document.getElementById('selftest').textContent = JSON.stringify({
+        errors: window.__errors, nonblank: before[1], changed: before[0] !== after[0], frames: [f0, state.frame]
+      });
+    }, 700);
+  }
+})();
+</script></body></html>
+"""

@@ -1,0 +1,202 @@
+"""Training: config errors and overrides, learning, one compile, NaN stop, TensorBoard, checkpoints,
+locking, and kill -9 + resume == uninterrupted (bit for bit)."""
+
+import json
+import os
+import signal
+import struct
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import jax
+import numpy as np
+import pytest
+
+from chorjax import checkpoint as ckpt
+from chorjax import cli
+from chorjax.config import load_config, to_toml
+from chorjax.data.dataset import WindowSampler, eval_windows, load_dataset
+from chorjax.errors import UserError
+from chorjax.train import init_state, make_eval_step, make_train_step, train_and_evaluate, workdir_lock
+from helpers import TINY, tiny_config
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def write_config(path: Path, *overrides) -> Path:
+  path.write_text(to_toml(tiny_config(*overrides)))
+  return path
+
+
+# ---------------------------------------------------------------- config files
+
+
+@pytest.mark.parametrize("body, fragment", [
+    ("[model]\ncel = 'gru'\n", ":2: unknown key 'model.cel'; did you mean 'model.cell'?"),
+    ("[model]\n\ncell = 'grux'\n", ":3: key 'model.cell': 'grux' is not one of"),
+    ("[optim]\nlr = 'fast'\n", ":2: key 'optim.lr': expected float, got str"),
+    ("[train]\nbatch_size = 2.5\n", "key 'train.batch_size': expected int"),
+    ("[modle]\ncell = 'gru'\n", "unknown section 'modle'; did you mean 'model'?"),
+    ("[train]\nnum_steps = -3\n", "below the minimum"),
+    ("[model\n", "invalid TOML"),
+])
+def test_config_errors_name_file_line_and_key(tmp_path, capsys, body, fragment):
+  path = tmp_path / "bad.toml"
+  path.write_text(body)
+  with pytest.raises(UserError) as e:
+    load_config(path)
+  assert str(e.value).startswith(str(path)) and fragment in str(e.value)
+  assert cli.main(["config", "show", str(path)]) == 2
+  err = capsys.readouterr().err
+  assert err.count("\n") == 1 and fragment in err
+
+
+def test_shipped_configs_load_and_overrides_apply(capsys):
+  for name in ("quickstart", "notebook", "chor_rnn"):
+    cfg = load_config(ROOT / "configs" / f"{name}.toml")
+    assert cfg.name == name
+  nb = load_config(ROOT / "configs" / "notebook.toml")
+  assert (nb.model.cell, nb.model.head, nb.model.num_layers, nb.model.hidden_size) == ("lstm", "mse", 3, 256)
+  assert (nb.train.batch_size, nb.data.seq_length, nb.optim.lr, nb.optim.clip_norm) == (50, 100, 1e-3, 10.0)
+  assert cli.main(["config", "show", str(ROOT / "configs" / "quickstart.toml"), "model.cell=gru", "optim.lr=3e-4"]) == 0
+  out = capsys.readouterr().out
+  assert 'cell = "gru"' in out and "lr = 0.0003" in out
+  assert load_config(None, ["model.cell=gru"]).model.cell == "gru"
+
+
+# ---------------------------------------------------------------- the step
+
+
+@pytest.fixture(scope="module")
+def tiny_setup():
+  cfg = tiny_config("optim.lr=3e-3")
+  ds = load_dataset(cfg.data)
+  return cfg, ds
+
+
+@pytest.mark.parametrize("head", ["mse", "mdn"])
+def test_a_few_steps_lower_the_loss_and_the_step_compiles_once(tiny_setup, head):
+  cfg, ds = tiny_setup
+  cfg = load_config(None, [*TINY, "optim.lr=3e-3", f"model.head={head}"])
+  graphdef, state, tx, schedule = init_state(cfg, 48, ds.num_motions)
+  step = make_train_step(graphdef, tx, schedule, cfg, ds.num_motions)
+  evaluate = make_eval_step(graphdef, ds.num_motions)
+  sampler = WindowSampler(ds.train, cfg.data.seq_length, 16, seed=0)
+  held = sampler.batch(10_000)
+  before = float(evaluate(state["params"], held))
+  key = jax.random.key(0)
+  for s in range(40):
+    state, metrics = step(state, sampler.batch(s), key)
+  after = float(evaluate(state["params"], held))
+  assert after < 0.9 * before if head == "mse" else after < before - 5.0
+  assert step._cache_size() == 1  # no silent recompiles
+  assert set(metrics) >= {"loss", "grad_norm", "param_norm", "update_norm", "lr"}
+  assert int(state["step"]) == 40
+
+
+def test_non_finite_loss_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path, capsys):
+  cfg = write_config(tmp_path / "nan.toml", "optim.lr=1e30", "optim.clip_norm=0.0", "train.num_steps=40",
+                     "train.checkpoint_every=1")
+  assert cli.main(["train", str(cfg), "--workdir", str(tmp_path / "w"), "log.tensorboard=false"]) == 2
+  err = capsys.readouterr().err
+  assert "non-finite loss" in err and "at step" in err and err.count("\n") == 1
+  m = ckpt.create_manager(tmp_path / "w", read_only=True)
+  steps = m.all_steps()
+  m.close()
+  bad_step = int(err.split("at step ")[1].split(";")[0])
+  assert steps and max(steps) < bad_step  # nothing was saved at or after the bad step
+
+
+# ---------------------------------------------------------------- the run directory
+
+
+def read_scalars(event_file: Path) -> dict:
+  """Reads a TensorBoard event file with tensorboardX's bundled protobufs."""
+  from tensorboardX.proto import event_pb2
+  data, out, i = event_file.read_bytes(), {}, 0
+  while i < len(data):
+    (n,) = struct.unpack("<Q", data[i:i + 8])
+    ev = event_pb2.Event.FromString(data[i + 12:i + 12 + n])
+    i += 12 + n + 4
+    for v in ev.summary.value:
+      out.setdefault(v.tag, []).append((ev.step, v.simple_value))
+  return out
+
+
+def test_run_directory_holds_config_metrics_events_checkpoints_and_sample(tmp_path):
+  cfg = tiny_config("train.num_steps=6", "train.checkpoint_every=3", "train.eval_every=3", "train.log_every=2")
+  summary = train_and_evaluate(cfg, tmp_path)
+  assert json.loads((tmp_path / "config.json").read_text())["model"] == cfg.to_dict()["model"]
+  rows = [json.loads(l) for l in (tmp_path / "metrics.jsonl").read_text().splitlines()]
+  assert [r["step"] for r in rows] == [2, 3, 4, 6] and all("train_loss" in r for r in rows)
+  assert "val_loss" in rows[1] and "val_loss" in rows[-1]
+  scalars = read_scalars(next(tmp_path.glob("events.out.tfevents.*")))
+  assert [s for s, _ in scalars["train/loss"]] == [2, 3, 4, 6]
+  assert scalars["val/val_loss"][-1][1] == pytest.approx(rows[-1]["val_loss"])
+  step, meta = ckpt.read_meta(tmp_path, "latest")
+  assert step == 6
+  assert set(meta) >= {"config", "features", "id_map", "rng", "sampler", "step"}
+  assert len(meta["features"]["mean"]) == 48 and meta["sampler"]["position"] == 6
+  assert Path(summary["samples"]["csv"]).exists() and Path(summary["samples"]["html"]).exists()
+  # resume: continue the same run to 8 steps
+  cfg2 = tiny_config("train.num_steps=8", "train.checkpoint_every=3", "train.eval_every=3", "train.log_every=2")
+  assert train_and_evaluate(cfg2, tmp_path)["start_step"] == 6
+
+
+def test_best_checkpoint_is_kept_beside_the_latest(tmp_path):
+  m = ckpt.create_manager(tmp_path, keep=1)
+  state = {"x": np.zeros(3, np.float32)}
+  for step, val in [(1, 0.5), (2, 0.1), (3, 0.9), (4, 0.7)]:
+    ckpt.save(m, step, state, {"step": step}, val)
+  m.wait_until_finished()
+  assert sorted(m.all_steps()) == [2, 4] and ckpt.best_step(m) == 2
+  m.close()
+
+
+def test_a_workdir_in_use_or_with_another_config_is_refused(tmp_path, capsys):
+  cfg = write_config(tmp_path / "c.toml")
+  w = tmp_path / "w"
+  with workdir_lock(w):
+    assert cli.main(["train", str(cfg), "--workdir", str(w)]) == 2
+  assert "in use by another" in capsys.readouterr().err
+  assert cli.main(["train", str(cfg), "--workdir", str(w), "log.tensorboard=false"]) == 0
+  assert cli.main(["train", str(cfg), "--workdir", str(w), "model.hidden_size=8"]) == 2
+  assert "different config" in capsys.readouterr().err
+  # --force continues; the old config is kept beside the new one, and a changed shape is a clean error
+  assert cli.main(["train", str(cfg), "--workdir", str(w), "optim.lr=5e-4", "--force"]) == 0
+  assert len(list(w.glob("config.*.json"))) == 1
+
+
+def test_missing_checkpoint_is_a_clean_error(tmp_path, capsys):
+  assert cli.main(["sample", str(tmp_path), "-o", str(tmp_path / "s.csv")]) == 2
+  assert "no checkpoints" in capsys.readouterr().err
+  assert not (tmp_path / "s.csv").exists()
+
+
+@pytest.mark.slow
+def test_resume_after_sigkill_is_bit_identical(tmp_path):
+  cfg = write_config(tmp_path / "c.toml", "train.num_steps=400", "train.checkpoint_every=10",
+                     "log.tensorboard=false", "sample.frames=1")
+  cmd = [sys.executable, "-m", "chorjax.cli", "train", str(cfg), "--workdir"]
+  env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+  killed = tmp_path / "killed"
+  proc = subprocess.Popen(cmd + [str(killed)], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+  deadline = time.time() + 120
+  while not (killed / "checkpoints" / "30").is_dir():
+    assert proc.poll() is None and time.time() < deadline, "training ended before it could be killed"
+    time.sleep(0.005)
+  proc.send_signal(signal.SIGKILL)
+  proc.wait()
+  assert not (killed / "checkpoints" / "400").exists(), "the run finished before the kill"
+  assert subprocess.run(cmd + [str(killed)], env=env, capture_output=True).returncode == 0
+  straight = tmp_path / "straight"
+  assert subprocess.run(cmd + [str(straight)], env=env, capture_output=True).returncode == 0
+
+  def final_params(w):
+    from chorjax.sample import load_run
+    return load_run(w, 400)[1]
+  a, b = final_params(killed), final_params(straight)
+  for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)):
+    np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
