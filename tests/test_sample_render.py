@@ -1,0 +1,180 @@
+"""Sampling (shapes, seeds, greedy, priming, back to data space), the sample/render CLI, GIF/MP4 files,
+and the HTML player in headless Chromium."""
+
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import imageio.v3 as iio
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from flax import nnx
+
+from chorjax import cli
+from chorjax.data.csv import read_csv
+from chorjax.data.dataset import bundled_path, load_dataset
+from chorjax.data.features import Features
+from chorjax.data.npz import read_npz
+from chorjax.models import motion_weights
+from chorjax.sample import generate, load_run, parse_mix, prime_state
+from chorjax.train import train_and_evaluate
+from helpers import tiny_config
+
+ROOT = Path(__file__).resolve().parents[1]
+TAKE = bundled_path("cmu94") / "94_07_skeleton_3d.csv"
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+  w = tmp_path_factory.mktemp("run")
+  train_and_evaluate(tiny_config("train.num_steps=3", "log.tensorboard=false"), w)
+  return w
+
+
+@pytest.fixture(scope="module")
+def loaded(run_dir):
+  return load_run(run_dir)
+
+
+def test_shapes_seeds_and_greedy(loaded):
+  graphdef, params, meta = loaded
+  w = jnp.tile(motion_weights(jnp.array([3]), 10), (4, 1))
+  gen = lambda seed, **kw: np.asarray(generate(graphdef, params, w, jax.random.key(seed), num_frames=50, **kw))
+  a, b, c = gen(0), gen(0), gen(1)
+  assert a.shape == (4, 50, 48) and np.isfinite(a).all()
+  np.testing.assert_array_equal(a, b)
+  assert not np.allclose(a, c)
+  assert not np.allclose(a[0], a[1])  # the K dancers are independent draws
+  g1, g2 = gen(0, greedy=True), gen(7, greedy=True)
+  np.testing.assert_array_equal(g1, g2)
+
+
+def test_long_generation_works(loaded):
+  graphdef, params, _ = loaded
+  z = generate(graphdef, params, motion_weights(jnp.array([0]), 10), jax.random.key(0), num_frames=10_000)
+  assert z.shape == (1, 10_000, 48) and bool(jnp.isfinite(z).all())
+
+
+def test_priming_reproduces_the_teacher_forced_states(loaded):
+  graphdef, params, meta = loaded
+  feats = Features.from_dict(meta["features"])
+  prime = jnp.asarray(feats.encode(read_csv(TAKE).positions[:30]))[None]
+  w = motion_weights(jnp.array([6]), 10)
+  model = nnx.merge(graphdef, params)
+  carry = model.initial_carry(w)
+  for t in range(30):
+    carry, _ = model.step(carry, prime[:, t])
+  forced = prime_state(graphdef, params, w, prime)
+  for a, b in zip(jax.tree.leaves(carry), jax.tree.leaves(forced)):
+    np.testing.assert_allclose(a, b, atol=1e-5)
+  # and generation continues from that state: greedy continuation equals stepping on from it
+  cont = generate(graphdef, params, w, jax.random.key(0), num_frames=3, prime_BxPxD=prime, greedy=True)
+  carry = model.initial_carry(w)
+  for t in range(30):
+    carry, raw = model.step(carry, prime[:, t])
+  np.testing.assert_allclose(cont[:, 0], model.sample(raw, None, greedy=True), atol=1e-5)
+
+
+class EchoModel(nnx.Module):
+  """A model that predicts its own input: its free-running sample must be the primed frame, held."""
+
+  def __init__(self, dim):
+    self.dim = dim
+    self.unused = nnx.Param(jnp.zeros(()))
+
+  def initial_carry(self, w):
+    return (jnp.zeros((w.shape[0], 1)),)
+
+  def run(self, x, carry):
+    return x, carry
+
+  def step(self, carry, x):
+    return carry, x
+
+  def sample(self, raw, key, *a):
+    return raw
+
+
+def test_samples_come_back_in_data_units_and_axes(run_dir):
+  ds = load_dataset(tiny_config().data)
+  graphdef, params = nnx.split(EchoModel(48), nnx.Param)
+  take = read_csv(TAKE).positions
+  prime = jnp.asarray(ds.features.encode(take[100:110]))[None]
+  z = generate(graphdef, nnx.to_pure_dict(params), motion_weights(jnp.array([0]), 10), jax.random.key(0),
+               num_frames=5, prime_BxPxD=prime)
+  pos = np.asarray(ds.features.decode(z))[0]
+  np.testing.assert_allclose(pos, np.broadcast_to(take[109], pos.shape), rtol=1e-4, atol=1e-3)
+
+
+def test_mix_parsing():
+  np.testing.assert_allclose(parse_mix("4:0.5,5:0.5", 10), np.eye(10)[4] * 0.5 + np.eye(10)[5] * 0.5)
+  from chorjax.errors import UserError
+  with pytest.raises(UserError, match="out of range"):
+    parse_mix("12:1", 10)
+
+
+def test_sample_cli_writes_csv_npz_with_blends_and_primes(run_dir, tmp_path, capsys):
+  out = tmp_path / "s.csv"
+  assert cli.main(["sample", str(run_dir), "-o", str(out), "--frames", "40", "--mix", "4:0.5,5:0.5"]) == 0
+  m = read_csv(out)
+  assert m.positions.shape == (40, 16, 3)
+  # data units: the sample's mean bone length is on the scale of the takes' (~54 units), not normalized
+  assert 20 < m.bone_lengths().mean() < 200
+  assert cli.main(["sample", str(run_dir), "-o", str(out), "--frames", "5"]) == 2  # no silent overwrite
+  assert "already exists" in capsys.readouterr().err
+  npz = tmp_path / "s.npz"
+  assert cli.main(["sample", str(run_dir), "-o", str(npz), "--frames", "20", "--num", "3",
+                   "--prime", f"{TAKE}:100:10", "--greedy", "--checkpoint", "3"]) == 0
+  ms = read_npz(npz)
+  assert len(ms) == 3 and ms[0].positions.shape == (10 + 20, 16, 3)
+  np.testing.assert_allclose(ms[0].positions[:10], read_csv(TAKE).positions[100:110], rtol=1e-4, atol=1e-2)
+  with np.load(npz) as z:
+    assert json.loads(str(z["meta"]))["settings"]["greedy"] is True
+
+
+def test_render_gif_and_mp4_are_valid(tmp_path):
+  gif, mp4 = tmp_path / "a.gif", tmp_path / "a.mp4"
+  assert cli.main(["render", str(TAKE), "-o", str(gif), "--frames", "12"]) == 0
+  frames = iio.imread(gif, index=None)
+  assert frames.shape[0] == 12 and frames.shape[1:3] == (400, 400)
+  assert cli.main(["render", str(TAKE), "-o", str(mp4), "--frames", "12"]) == 0
+  import imageio_ffmpeg
+  reader = imageio_ffmpeg.read_frames(str(mp4))
+  meta = next(reader)
+  assert tuple(meta["size"]) == (400, 400) and meta["fps"] == pytest.approx(30)
+  assert sum(1 for _ in reader) == 12
+  png = tmp_path / "a.png"
+  assert cli.main(["render", str(TAKE), "-o", str(png)]) == 0 and png.read_bytes()[:4] == b"\x89PNG"
+
+
+def chromium():
+  for name in ("chromium-headless-shell", "chromium"):
+    path = shutil.which(name)
+    if path:
+      return path
+  pytest.fail("headless Chromium is missing: .ci/run installs Debian's chromium-headless-shell")
+
+
+def test_html_player_in_headless_chromium(run_dir, tmp_path):
+  html = tmp_path / "player.html"
+  assert cli.main(["render", str(TAKE), str(bundled_path("cmu94") / "94_01_skeleton_3d.csv"),
+                   str(run_dir / "samples" / "sample.csv"), "-o", str(html), "--columns", "2"]) == 0
+  text = html.read_text()
+  assert "http://" not in text and "https://" not in text and "<script src" not in text  # offline
+  flags = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
+           "--disable-sync", "--no-first-run", f"--user-data-dir={tmp_path / 'profile'}"]
+  dom = subprocess.run([chromium(), *flags, "--virtual-time-budget=3000", "--dump-dom", f"file://{html}#selftest"],
+                       capture_output=True, text=True, timeout=120).stdout
+  report = json.loads(dom.split('<pre id="selftest">')[1].split("</pre>")[0])
+  assert report["errors"] == []
+  assert report["nonblank"] > 1000  # stick figures and floor were drawn
+  assert report["changed"] and report["frames"][1] > report["frames"][0]  # playing changes the picture
+  artifacts = ROOT / "test-artifacts"
+  artifacts.mkdir(exist_ok=True)
+  shot = artifacts / "player.png"
+  subprocess.run([chromium(), *flags, "--window-size=1200,900", f"--screenshot={shot}", f"file://{html}"],
+                 capture_output=True, timeout=120)
+  assert shot.read_bytes()[:4] == b"\x89PNG"
