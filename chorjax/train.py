@@ -75,8 +75,11 @@ def _loss_fn(graphdef, params, batch, num_motions, key, input_noise, dropout):
   return model.loss(raw, batch["targets"])
 
 
-def make_train_step(graphdef, tx, schedule, cfg: Config, num_motions: int):
-  """The jitted ``train_step(state, batch, key) -> (state, metrics)``; ``state`` is donated."""
+def make_train_step(graphdef, tx, schedule, cfg: Config, num_motions: int, wrap=lambda f: f):
+  """The jitted ``train_step(state, batch, key) -> (state, metrics)``; ``state`` is donated.
+
+  ``wrap`` decorates the Python function before jit (tests pass ``chex.assert_max_traces(n=1)``).
+  """
   noise, dropout = cfg.train.input_noise, cfg.model.dropout
 
   def train_step(state, batch, key):
@@ -89,7 +92,7 @@ def make_train_step(graphdef, tx, schedule, cfg: Config, num_motions: int):
                "update_norm": optax.tree.norm(updates), "lr": schedule(state["step"])}
     return {"params": params, "opt_state": opt_state, "step": state["step"] + 1}, metrics
 
-  return jax.jit(train_step, donate_argnums=0)
+  return jax.jit(wrap(train_step), donate_argnums=0)
 
 
 def make_eval_step(graphdef, num_motions: int):
@@ -352,5 +355,7 @@ def _write_end_sample(workdir: Path, graphdef, params, ds: Dataset, cfg: Config)
   motions = [real.replace(positions=real.positions[: s.frames], name=f"original: {name}")]
   motions += [Motion(p, real.fps, sk, real.up_axis, real.units, name=f"generated #{i} (motion {s.motion})")
               for i, p in enumerate(pos)]
-  html = write_player(motions, out / "player.html", title=f"chorjax: {cfg.name}", columns=len(motions))
+  # originals above, generated below (the reference notebook's catalog page)
+  html = write_player(motions, out / "player.html", title=f"chorjax: {cfg.name}", columns=max(s.num, 1),
+                      rows=[0] + [1] * s.num)
   return {"csv": str(csv), "html": str(html)}

@@ -10,6 +10,7 @@ import sys
 import time
 from pathlib import Path
 
+import chex
 import jax
 import numpy as np
 import pytest
@@ -81,7 +82,8 @@ def test_a_few_steps_lower_the_loss_and_the_step_compiles_once(tiny_setup, head)
   cfg, ds = tiny_setup
   cfg = load_config(None, [*TINY, "optim.lr=3e-3", f"model.head={head}"])
   graphdef, state, tx, schedule = init_state(cfg, 48, ds.num_motions)
-  step = make_train_step(graphdef, tx, schedule, cfg, ds.num_motions)
+  chex.clear_trace_counter()  # counts are per function code; the other parametrization traced it too
+  step = make_train_step(graphdef, tx, schedule, cfg, ds.num_motions, wrap=chex.assert_max_traces(n=1))
   evaluate = make_eval_step(graphdef, ds.num_motions)
   sampler = WindowSampler(ds.train, cfg.data.seq_length, 16, seed=0)
   held = sampler.batch(10_000)
@@ -112,27 +114,33 @@ def test_non_finite_loss_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_pa
 # ---------------------------------------------------------------- the run directory
 
 
-def read_scalars(event_file: Path) -> dict:
-  """Reads a TensorBoard event file with tensorboardX's bundled protobufs."""
+def read_events(event_file: Path) -> tuple[dict, dict]:
+  """Reads a TensorBoard event file with tensorboardX's bundled protobufs: (scalars, images) by tag."""
   from tensorboardX.proto import event_pb2
-  data, out, i = event_file.read_bytes(), {}, 0
+  data, scalars, images, i = event_file.read_bytes(), {}, {}, 0
   while i < len(data):
     (n,) = struct.unpack("<Q", data[i:i + 8])
     ev = event_pb2.Event.FromString(data[i + 12:i + 12 + n])
     i += 12 + n + 4
     for v in ev.summary.value:
-      out.setdefault(v.tag, []).append((ev.step, v.simple_value))
-  return out
+      if v.HasField("image"):
+        images.setdefault(v.tag, []).append((ev.step, v.image.encoded_image_string))
+      else:
+        scalars.setdefault(v.tag, []).append((ev.step, v.simple_value))
+  return scalars, images
 
 
 def test_run_directory_holds_config_metrics_events_checkpoints_and_sample(tmp_path):
-  cfg = tiny_config("train.num_steps=6", "train.checkpoint_every=3", "train.eval_every=3", "train.log_every=2")
+  cfg = tiny_config("train.num_steps=6", "train.checkpoint_every=3", "train.eval_every=3", "train.log_every=2",
+                    "train.figure_every=3")
   summary = train_and_evaluate(cfg, tmp_path)
   assert json.loads((tmp_path / "config.json").read_text())["model"] == cfg.to_dict()["model"]
   rows = [json.loads(l) for l in (tmp_path / "metrics.jsonl").read_text().splitlines()]
   assert [r["step"] for r in rows] == [2, 3, 4, 6] and all("train_loss" in r for r in rows)
   assert "val_loss" in rows[1] and "val_loss" in rows[-1]
-  scalars = read_scalars(next(tmp_path.glob("events.out.tfevents.*")))
+  scalars, images = read_events(next(tmp_path.glob("events.out.tfevents.*")))
+  assert [s for s, _ in images["sample/end_joints"]] == [3, 6]
+  assert images["sample/end_joints"][0][1][:4] == b"\x89PNG"  # a generated sample beside a real one
   assert [s for s, _ in scalars["train/loss"]] == [2, 3, 4, 6]
   assert scalars["val/val_loss"][-1][1] == pytest.approx(rows[-1]["val_loss"])
   step, meta = ckpt.read_meta(tmp_path, "latest")

@@ -35,17 +35,22 @@ def _payload(m: Motion) -> dict:
   }
 
 
-def player_html(motions: Sequence[Motion], title: str = "chorjax", columns: int | None = None) -> str:
-  """The player page as a string."""
+def player_html(motions: Sequence[Motion], title: str = "chorjax", columns: int | None = None,
+                rows: Sequence[int] | None = None) -> str:
+  """The player page as a string; ``rows`` optionally pins each motion to a grid row (0 = top)."""
   cols = columns or min(len(motions), 4)
-  data = json.dumps([_payload(m) for m in motions])
+  payloads = [_payload(m) for m in motions]
+  for p, r in zip(payloads, rows or []):
+    p["row"] = int(r)
+  data = json.dumps(payloads)
   return _TEMPLATE.replace("__TITLE__", html_lib.escape(title)).replace("__COLUMNS__", str(cols)).replace(
       "__DATA__", data)
 
 
-def write_player(motions: Sequence[Motion], path, title: str = "chorjax", columns: int | None = None) -> Path:
+def write_player(motions: Sequence[Motion], path, title: str = "chorjax", columns: int | None = None,
+                 rows: Sequence[int] | None = None) -> Path:
   """Writes the player page atomically."""
-  text = player_html(motions, title, columns)
+  text = player_html(motions, title, columns, rows)
   return atomic_write(path, lambda p: p.write_text(text, encoding="utf-8"))
 
 
@@ -85,6 +90,7 @@ canvas { width: 100%; height: auto; display: block; cursor: grab; }
     var cap = document.createElement('figcaption'); cap.textContent = m.title + ' (' + m.frames + ' frames, ' + m.fps + ' fps)';
     var cv = document.createElement('canvas'); cv.width = 480; cv.height = 400;
     fig.appendChild(cap); fig.appendChild(cv); document.getElementById('grid').appendChild(fig);
+    if (m.row !== undefined) fig.style.gridRow = String(m.row + 1);
     var pos = decode(m.data), J = m.joints, cx = 0, cz = 0, ymin = Infinity;
     for (var t = 0; t < m.frames; t++) {  // fixed camera: centre of the whole take on the floor
       cx += pos[(t * J) * 3]; cz += pos[(t * J) * 3 + 2];
