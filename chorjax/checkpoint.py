@@ -51,9 +51,16 @@ def best_step(manager) -> int | None:
   return min(losses, key=losses.get) if losses else None
 
 
-def restore(manager: ocp.CheckpointManager, step: int, template):
-  """Restores ``(state, meta)`` of ``step`` into the structure of ``template``."""
-  abstract = jax.tree.map(ocp.utils.to_shape_dtype_struct, template)
+def restore(manager: ocp.CheckpointManager, step: int, template, sharding=None):
+  """Restores ``(state, meta)`` of ``step`` into the structure of ``template``.
+
+  With ``sharding`` every array is restored with it (e.g. replicated over the current mesh), so a
+  checkpoint written by one process count resumes on another.
+  """
+  if sharding is None:
+    abstract = jax.tree.map(ocp.utils.to_shape_dtype_struct, template)
+  else:
+    abstract = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=sharding), template)
   try:
     r = manager.restore(step, args=ocp.args.Composite(state=ocp.args.StandardRestore(abstract),
                                                       meta=ocp.args.JsonRestore()))

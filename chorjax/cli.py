@@ -48,7 +48,10 @@ def _data_plot(args) -> int:
 
 def _config_show(args) -> int:
   from chorjax.config import load_config, to_toml
-  print(to_toml(load_config(args.config, args.overrides)), end="")
+  config, overrides = args.config, list(args.overrides)
+  if config and "=" in config and not Path(config).exists():  # only overrides of the defaults
+    config, overrides = None, [config, *overrides]
+  print(to_toml(load_config(config, overrides)), end="")
   return 0
 
 
@@ -56,9 +59,23 @@ def _train(args) -> int:
   from chorjax.config import load_config
   from chorjax.train import default_workdir, train_and_evaluate
 
-  cfg = load_config(args.config, args.overrides)
+  overrides = list(args.overrides)
+  if args.distributed:
+    overrides.append("parallel.distributed=true")
+  for flag, key in (("coordinator", "coordinator_address"), ("num_processes", "num_processes"),
+                    ("process_id", "process_id")):
+    if getattr(args, flag) is not None:
+      value = getattr(args, flag)
+      overrides.append(f"parallel.{key}={value!r}" if isinstance(value, str) else f"parallel.{key}={value}")
+  cfg = load_config(args.config, overrides)
   workdir = Path(args.workdir) if args.workdir else default_workdir(cfg)
-  summary = train_and_evaluate(cfg, workdir, force=args.force)
+  from chorjax.parallel import setup_parallel
+  parallel = setup_parallel(cfg)
+  summary = train_and_evaluate(cfg, workdir, force=args.force, parallel=parallel)
+  if parallel is not None and not parallel.is_main:
+    print(f"process {parallel.process_index}/{parallel.process_count}: steps {summary['start_step']}->"
+          f"{summary['final_step']}, final train loss {summary.get('final_train_loss', float('nan')):.6g}")
+    return 0
   print(f"trained {cfg.name}: steps {summary['start_step']}->{summary['final_step']}"
           + (f", train loss {summary['final_train_loss']:.4g}" if "final_train_loss" in summary else "")
           + (f", val loss {summary['final_val_loss']:.4g}" if "final_val_loss" in summary else "")
@@ -186,6 +203,11 @@ def build_parser() -> argparse.ArgumentParser:
   train.add_argument("--workdir", help="run directory (default: runs/<config name>)")
   train.add_argument("--force", action="store_true",
                      help="continue a workdir whose saved config differs (the old config is kept beside it)")
+  train.add_argument("--distributed", action="store_true",
+                     help="multi-process run: jax.distributed.initialize (same as parallel.distributed=true)")
+  train.add_argument("--coordinator", metavar="HOST:PORT", help="coordinator address (parallel.coordinator_address)")
+  train.add_argument("--num-processes", type=int, help="processes in the job (parallel.num_processes)")
+  train.add_argument("--process-id", type=int, help="this process's index (parallel.process_id)")
   train.set_defaults(func=_train)
 
   sample = sub.add_parser("sample", help="generate new dance from a trained run")

@@ -103,6 +103,16 @@ class LogConfig:
 
 
 @dataclasses.dataclass(frozen=True)
+class ParallelConfig:
+  data_parallel: bool = _field(False, "shard every batch over a 'data' mesh axis of all devices")
+  num_devices: int = _field(0, "devices in the mesh (0 = all devices of all processes)", minimum=0)
+  distributed: bool = _field(False, "call jax.distributed.initialize (multi-host / multi-process)")
+  coordinator_address: str = _field("", "HOST:PORT of process 0 ('' = detect from the cluster environment)")
+  num_processes: int = _field(0, "processes in the job (0 = detect from the environment)", minimum=0)
+  process_id: int = _field(-1, "this process's index (-1 = detect from the environment)", minimum=-1)
+
+
+@dataclasses.dataclass(frozen=True)
 class Config:
   data: DataConfig = dataclasses.field(default_factory=DataConfig)
   model: ModelConfig = dataclasses.field(default_factory=ModelConfig)
@@ -110,6 +120,7 @@ class Config:
   train: TrainConfig = dataclasses.field(default_factory=TrainConfig)
   sample: SampleConfig = dataclasses.field(default_factory=SampleConfig)
   log: LogConfig = dataclasses.field(default_factory=LogConfig)
+  parallel: ParallelConfig = dataclasses.field(default_factory=ParallelConfig)
   name: str = "default"
 
   def to_dict(self) -> dict:
@@ -122,7 +133,7 @@ class Config:
 
 SECTIONS = {f.name: f.type for f in dataclasses.fields(Config) if f.name != "name"}
 _SECTION_CLASSES = {"data": DataConfig, "model": ModelConfig, "optim": OptimConfig, "train": TrainConfig,
-                    "sample": SampleConfig, "log": LogConfig}
+                    "sample": SampleConfig, "log": LogConfig, "parallel": ParallelConfig}
 
 
 def valid_keys() -> list[str]:

@@ -30,7 +30,10 @@ from chorjax.models import create_model, motion_weights
 
 # Keys that may change when a run is continued without --force (e.g. to train longer).
 RESUMABLE_CHANGES = ("train.num_steps", "train.eval_every", "train.log_every", "train.figure_every",
-                     "log.progress", "log.tensorboard", "sample.frames", "sample.num", "sample.seed")
+                     "log.progress", "log.tensorboard", "sample.frames", "sample.num", "sample.seed",
+                     # a run may resume on another number of devices or processes
+                     "parallel.data_parallel", "parallel.num_devices", "parallel.distributed",
+                     "parallel.coordinator_address", "parallel.num_processes", "parallel.process_id")
 
 
 class TrainingDiverged(UserError):
@@ -75,14 +78,17 @@ def _loss_fn(graphdef, params, batch, num_motions, key, input_noise, dropout):
   return model.loss(raw, batch["targets"])
 
 
-def make_train_step(graphdef, tx, schedule, cfg: Config, num_motions: int, wrap=lambda f: f):
+def make_train_step(graphdef, tx, schedule, cfg: Config, num_motions: int, wrap=lambda f: f, parallel=None):
   """The jitted ``train_step(state, batch, key) -> (state, metrics)``; ``state`` is donated.
 
   ``wrap`` decorates the Python function before jit (tests pass ``chex.assert_max_traces(n=1)``).
+  With ``parallel`` the batch is sharded over the mesh's data axis and everything else replicated.
   """
   noise, dropout = cfg.train.input_noise, cfg.model.dropout
 
   def train_step(state, batch, key):
+    if not jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key):
+      key = jax.random.wrap_key_data(key)  # raw uint32 key data (replicated across processes)
     key = jax.random.fold_in(key, state["step"])
     grad_fn = jax.value_and_grad(_loss_fn, argnums=1, has_aux=True)
     (loss, aux), grads = grad_fn(graphdef, state["params"], batch, num_motions, key, noise, dropout)
@@ -92,7 +98,10 @@ def make_train_step(graphdef, tx, schedule, cfg: Config, num_motions: int, wrap=
                "update_norm": optax.tree.norm(updates), "lr": schedule(state["step"])}
     return {"params": params, "opt_state": opt_state, "step": state["step"] + 1}, metrics
 
-  return jax.jit(wrap(train_step), donate_argnums=0)
+  if parallel is None:
+    return jax.jit(wrap(train_step), donate_argnums=0)
+  repl, data = parallel.replicated, parallel.batch_sharding
+  return jax.jit(wrap(train_step), donate_argnums=0, in_shardings=(repl, data, repl), out_shardings=(repl, repl))
 
 
 def make_eval_step(graphdef, num_motions: int):
@@ -204,22 +213,25 @@ def _finite_or_raise(metrics: dict, step: int, last_good: int | None):
   return loss
 
 
-def train_and_evaluate(cfg: Config, workdir, *, force: bool = False) -> dict:
+def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=None) -> dict:
   """Trains ``cfg`` in ``workdir``, resuming from its latest checkpoint; returns a summary.
 
   Writes ``config.json``, ``metrics.jsonl``, TensorBoard events, ``checkpoints/`` and, at the end,
-  ``samples/`` (a short sample and its HTML player).
+  ``samples/`` (a short sample and its HTML player). With ``parallel`` (see ``chorjax.parallel``)
+  every process trains its share and only process 0 writes anything but checkpoints.
   """
   workdir = Path(workdir).absolute()
-  with workdir_lock(workdir):
-    _check_saved_config(workdir, cfg, force)
-    return _train_locked(cfg, workdir)
+  is_main = parallel is None or parallel.is_main
+  with workdir_lock(workdir) if is_main else contextlib.nullcontext():
+    _check_saved_config(workdir, cfg, force and is_main)
+    return _train_locked(cfg, workdir, parallel)
 
 
-def _train_locked(cfg: Config, workdir: Path) -> dict:
+def _train_locked(cfg: Config, workdir: Path, parallel) -> dict:
   t_start = time.time()
   ds = load_dataset(cfg.data)
   graphdef, state, tx, schedule = init_state(cfg, ds.features.dim, ds.num_motions)
+  is_main = parallel is None or parallel.is_main
   manager = ckpt.create_manager(workdir, keep=cfg.train.keep_checkpoints)
   writer = None
   progress = None
@@ -227,33 +239,44 @@ def _train_locked(cfg: Config, workdir: Path) -> dict:
     start = 0
     if manager.latest_step() is not None:
       start = manager.latest_step()
-      state, meta = ckpt.restore(manager, start, state)
+      state, meta = ckpt.restore(manager, start, state, None if parallel is None else parallel.replicated)
       if meta["id_map"] != ds.id_map:
         raise UserError(f"{workdir}: its checkpoints were trained on other takes ({list(meta['id_map'])[:3]}...)")
-    _write_config(workdir, cfg)
-    _truncate_metrics(workdir / "metrics.jsonl", start)
-    if cfg.log.tensorboard:
+    if is_main:
+      _write_config(workdir, cfg)
+      _truncate_metrics(workdir / "metrics.jsonl", start)
+    if cfg.log.tensorboard and is_main:
       from tensorboardX import SummaryWriter
       writer = SummaryWriter(str(workdir), flush_secs=10)
 
     sampler = WindowSampler(ds.train, cfg.data.seq_length, cfg.train.batch_size, cfg.train.seed)
     val = eval_windows(ds.val, cfg.data.seq_length, cfg.train.val_windows)
-    train_step = make_train_step(graphdef, tx, schedule, cfg, ds.num_motions)
+    train_step = make_train_step(graphdef, tx, schedule, cfg, ds.num_motions, parallel=parallel)
     eval_step = make_eval_step(graphdef, ds.num_motions)
     base_key = jax.random.key(cfg.train.seed)
+    get_batch = sampler.batch
+    host_params = lambda params: params
+    if parallel is not None:
+      state = parallel.replicate(state)
+      val = parallel.replicate(val)
+      base_key = parallel.replicate(jax.random.key_data(base_key))
+      get_batch = lambda s: parallel.global_batch(sampler, s)
+      host_params = parallel.local_copy
 
     total = cfg.train.num_steps
-    progress = _Progress(cfg.log.progress, total, start)
+    progress = _Progress(cfg.log.progress if is_main else "none", total, start)
     last_good = start if start > 0 else None
     pending = None  # (step, metrics) pulled to the host one step late
     t_last, steps_since = time.time(), 0
-    summary = {"start_step": start, "final_step": start}
+    summary = {"start_step": start, "final_step": start, "train_losses": {}}
     compile_s = None
 
     def log(step, metrics, val_loss=None):
       nonlocal t_last, steps_since
       loss = _finite_or_raise(metrics, step, last_good)
-      if step % cfg.train.log_every and val_loss is None and step != total:
+      summary["train_losses"][step] = loss
+      summary["final_train_loss"] = loss
+      if not is_main or (step % cfg.train.log_every and val_loss is None and step != total):
         return
       now = time.time()
       sps = steps_since / max(now - t_last, 1e-9)
@@ -262,18 +285,19 @@ def _train_locked(cfg: Config, workdir: Path) -> dict:
              "steps_per_s": sps}
       if val_loss is not None:
         row["val_loss"] = val_loss
-      with open(workdir / "metrics.jsonl", "a") as f:
+      with open(workdir / "metrics.jsonl", "a") as f:  # process 0 only
         f.write(json.dumps(row) + "\n")
       if writer is not None:
         for k, v in row.items():
           if k != "step":
             writer.add_scalar(("val/" if k == "val_loss" else "train/") + k.removeprefix("train_"), v, step)
       progress.update(step, row, (total - step) / max(sps, 1e-9))
-      summary.update(final_train_loss=loss, **({"final_val_loss": val_loss} if val_loss is not None else {}))
+      if val_loss is not None:
+        summary["final_val_loss"] = val_loss
 
     for step in range(start, total):
       t0 = time.time()
-      state, metrics = train_step(state, sampler.batch(step), base_key)
+      state, metrics = train_step(state, get_batch(step), base_key)
       if compile_s is None:
         jax.block_until_ready(metrics["loss"])
         compile_s = time.time() - t0
@@ -292,14 +316,14 @@ def _train_locked(cfg: Config, workdir: Path) -> dict:
           ckpt.save(manager, done, state, make_meta(cfg, ds, done), val_loss)
           last_good = done
         if writer is not None and cfg.train.figure_every and done % cfg.train.figure_every == 0:
-          _figure(writer, graphdef, state["params"], ds, cfg, done)
+          _figure(writer, graphdef, host_params(state["params"]), ds, cfg, done)
       summary["final_step"] = done
     if pending is not None:
       log(*pending)
     manager.wait_until_finished()
     summary.update(seconds=time.time() - t_start, compile_s=compile_s)
-    if cfg.sample.frames > 0 and total > 0:
-      summary["samples"] = _write_end_sample(workdir, graphdef, state["params"], ds, cfg)
+    if is_main and cfg.sample.frames > 0 and total > 0:
+      summary["samples"] = _write_end_sample(workdir, graphdef, host_params(state["params"]), ds, cfg)
     return summary
   finally:
     if progress is not None:
