@@ -173,6 +173,35 @@ def _render(args) -> int:
   return 0
 
 
+def _eval(args) -> int:
+  from chorjax.evaluate import evaluate, write_metrics
+  out = Path(args.output) if args.output else Path(args.workdir) / "eval" / "metrics.json"
+  _refuse_existing([out], args.force)
+  result = evaluate(args.workdir, args.data, frames=args.frames, num=args.num, checkpoint=args.checkpoint,
+                    seed=args.seed, pi_temperature=args.pi_temperature, sigma_temperature=args.sigma_temperature,
+                    greedy=True if args.greedy else None)
+  write_metrics(result, out)
+  for k in ("heldout_loss", "freeze_ratio_first_1000", "freeze_ratio_last_1000", "bone_cv_median", "foot_sliding",
+            "fid_k", "real_fid_k", "div_k", "novelty", "real_novelty"):
+    print(f"{k:26s} {result[k]:.4g}")
+  print(f"wrote {out}")
+  return 0
+
+
+def _sweep(args) -> int:
+  from chorjax.experiments import run_sweep
+  workdirs = run_sweep(args.sweep)
+  print("points: " + " ".join(map(str, workdirs)))
+  return 0
+
+
+def _compare(args) -> int:
+  from chorjax.experiments import compare
+  _refuse_existing([args.output], args.force)
+  print(f"wrote {compare(args.workdirs, args.output)}")
+  return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
   parser = argparse.ArgumentParser(prog="chorjax", description=(
       "Learn a dancer's movement language from motion capture and write new dance in it."))
@@ -237,6 +266,31 @@ def build_parser() -> argparse.ArgumentParser:
   render.add_argument("--title", help="HTML page title")
   render.add_argument("--force", action="store_true", help="overwrite OUT if it exists")
   render.set_defaults(func=_render)
+
+  ev = sub.add_parser("eval", help="held-out likelihood and generation metrics of a trained run")
+  ev.add_argument("workdir", metavar="WORKDIR")
+  ev.add_argument("--data", nargs="+", required=True, metavar="PATH_OR_NAME",
+                  help="real takes to compare with, e.g. cmu94/94_10_skeleton_3d.csv (the held-out take)")
+  ev.add_argument("--frames", type=int, default=10_000, help="frames per generated sequence (default 10000)")
+  ev.add_argument("--num", type=int, default=4, help="generated sequences (default 4)")
+  ev.add_argument("-o", "--output", metavar="metrics.json", help="default: WORKDIR/eval/metrics.json")
+  ev.add_argument("--checkpoint", default="latest", metavar="STEP|best|latest")
+  ev.add_argument("--seed", type=int, default=0)
+  ev.add_argument("--pi-temperature", type=float, help="default: the run's sample.pi_temperature")
+  ev.add_argument("--sigma-temperature", type=float, help="default: the run's sample.sigma_temperature")
+  ev.add_argument("--greedy", action="store_true")
+  ev.add_argument("--force", action="store_true", help="overwrite the output if it exists")
+  ev.set_defaults(func=_eval)
+
+  sw = sub.add_parser("sweep", help="train and evaluate every point of a grid over config keys")
+  sw.add_argument("sweep", metavar="SWEEP.toml")
+  sw.set_defaults(func=_sweep)
+
+  cmp_ = sub.add_parser("compare", help="a markdown report comparing evaluated runs, with plots")
+  cmp_.add_argument("workdirs", nargs="+", metavar="WORKDIR")
+  cmp_.add_argument("-o", "--output", required=True, metavar="report.md")
+  cmp_.add_argument("--force", action="store_true", help="overwrite the report if it exists")
+  cmp_.set_defaults(func=_compare)
   return parser
 
 

@@ -32,6 +32,9 @@ def bundled_path(name: str) -> Path:
 def resolve_files(spec: str) -> list[Path]:
   """A bundled name, a folder or a file -> the sorted list of take files."""
   path = bundled_path(spec) if spec in BUNDLED else Path(spec)
+  head, _, rest = spec.partition("/")
+  if not path.exists() and head in BUNDLED and rest:  # e.g. cmu94/94_10_skeleton_3d.csv
+    path = bundled_path(head) / rest
   if path.is_dir():
     files = sorted(p for p in path.iterdir() if p.suffix.lower() in READABLE_SUFFIXES)
     if not files:

@@ -1,0 +1,115 @@
+"""``chorjax eval``: held-out likelihood plus the generation metrics of ``chorjax.metrics`` for a run."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from chorjax import metrics as M
+from chorjax.data.dataset import eval_windows, read_takes
+from chorjax.data.features import Features
+from chorjax.errors import UserError, atomic_write
+from chorjax.sample import generate, load_run
+from chorjax.train import make_eval_step
+
+
+def _canonical(features: Features, pos):
+  """Data space -> y-up positions (unscaled): what the metrics measure."""
+  from chorjax.data import transforms as tf
+  return np.asarray(tf.rotate(pos, tf.up_axis_matrix(features.up_axis)))
+
+
+def evaluate(workdir, data: Sequence[str], *, frames: int = 10_000, num: int = 4, checkpoint="latest",
+             seed: int = 0, pi_temperature=None, sigma_temperature=None, greedy=None, window: int = 60) -> dict:
+  """Samples ``num`` dancers of ``frames`` frames and measures them against the takes in ``data``.
+
+  Args:
+    workdir: a run directory.
+    data: bundled names, folders or files: the real motion to compare with (e.g. the held-out take).
+    frames, num: length and count of generated sequences (dancer k is conditioned on the k-th
+      training take, round robin).
+    window: frames per window for FID_k, Div_k and novelty (60 = 2 s at 30 fps).
+    pi_temperature, sigma_temperature, greedy: sampling controls; default: the run's ``[sample]``.
+
+  Returns:
+    A flat dict of metrics (JSON-ready); see the README for each entry.
+  """
+  graphdef, params, meta = load_run(workdir, checkpoint)
+  cfg, feats = meta["config"], Features.from_dict(meta["features"])
+  sk, fps = feats.skeleton, float(cfg["data"]["fps"])
+  s = cfg["sample"]
+  pi_t = s["pi_temperature"] if pi_temperature is None else pi_temperature
+  sigma_t = s["sigma_temperature"] if sigma_temperature is None else sigma_temperature
+  greedy = s["greedy"] if greedy is None else greedy
+  d = cfg["data"]
+  real = read_takes(list(data), _DataCfg(d["skeleton"], d["fps"], d["up_axis"]))
+  if not real:
+    raise UserError(f"--data {' '.join(data)}: no takes")
+  train = read_takes([d["dataset"]], _DataCfg(d["skeleton"], d["fps"], d["up_axis"]))
+  train = [m for m in train if m.name in set(meta.get("train_takes", []))] or train
+  if frames < 2 * window:
+    raise UserError(f"--frames {frames}: need at least {2 * window} frames")
+
+  # held-out likelihood of the given takes under the model (teacher forced)
+  seq = cfg["data"]["seq_length"]
+  enc = [(meta["id_map"].get(m.name, 0), np.asarray(feats.encode(m.positions))) for m in real]
+  win = eval_windows(enc, seq, max_windows=256)
+  loss = float(make_eval_step(graphdef, len(meta["id_map"]))(params, win)) if win else float("nan")
+
+  # generation
+  ids = [meta["id_map"][m.name] for m in train] or [0]
+  w = jax.nn.one_hot(jnp.array([ids[k % len(ids)] for k in range(num)]), len(meta["id_map"]))
+  z = generate(graphdef, params, w, jax.random.key(seed), num_frames=frames, pi_temperature=pi_t,
+               sigma_temperature=sigma_t, greedy=bool(greedy))
+  gen = [_canonical(feats, p) for p in np.asarray(feats.decode(z))]
+  real_c = [_canonical(feats, m.positions) for m in real]
+  train_c = [_canonical(feats, m.positions) for m in train]
+
+  size = np.mean([M.body_size(p, sk) for p in train_c])
+  data_speed = float(np.mean(np.concatenate([M.joint_speed(p) for p in train_c])))
+  curves = np.stack([M.freeze_curve(g, data_speed, 100) for g in gen])
+  last = min(1000, frames // 2)
+  cv_gen = [M.bone_cv(g, sk) for g in gen]
+  cv_real = [M.bone_cv(p, sk) for p in real_c]
+
+  def kin(wins):
+    return np.stack([M.kinetic_features(x / size, fps) for x in wins])
+  gen_w = np.concatenate([M.windows(g, window, window) for g in gen])
+  real_w = np.concatenate([M.windows(p, window, window // 4) for p in real_c])
+  train_w = np.concatenate([M.windows(p, window, window // 4) for p in train_c])
+  if len(real_w) < 2:
+    raise UserError(f"--data: the takes give {len(real_w)} windows of {window} frames; need at least 2")
+  fid = M.fid_k(kin(real_w), kin(gen_w))
+  ref = M.fid_k(kin(real_w), kin(train_w))
+  return {
+      "run": str(workdir), "checkpoint_step": meta["step"], "frames": frames, "num": num, "data": list(data),
+      "sampling": {"pi_temperature": pi_t, "sigma_temperature": sigma_t, "greedy": bool(greedy), "seed": seed},
+      "loss_kind": "nll" if cfg["model"]["head"] == "mdn" else "mse", "heldout_loss": loss,
+      "freeze_ratio_first_1000": float(np.mean([M.freeze_ratio(g[:last + 1], data_speed) for g in gen])),
+      "freeze_ratio_last_1000": float(np.mean([M.freeze_ratio(g[-last - 1:], data_speed) for g in gen])),
+      "freeze_curve": curves.mean(0).tolist(),
+      "bone_cv_median": float(np.mean([c["median"] for c in cv_gen])),
+      "bone_cv_max": float(np.mean([c["max"] for c in cv_gen])),
+      "data_bone_cv_median": float(np.mean([c["median"] for c in cv_real])),
+      "foot_sliding": float(np.mean([M.foot_sliding(g, sk, fps, size) for g in gen])),
+      "data_foot_sliding": float(np.mean([M.foot_sliding(p, sk, fps, size) for p in real_c])),
+      "fid_k": fid["fid_k"], "div_k": fid["div_k"], "data_div_k": fid["real_div_k"],
+      "real_fid_k": ref["fid_k"], "real_train_div_k": ref["div_k"],
+      "novelty": M.novelty(gen_w / size, train_w / size, sk.root),
+      "real_novelty": M.novelty(real_w / size, train_w / size, sk.root),
+      "body_size": float(size), "window": window,
+  }
+
+
+class _DataCfg:
+  def __init__(self, skeleton, fps, up_axis):
+    self.skeleton, self.fps, self.up_axis = skeleton, fps, up_axis
+
+
+def write_metrics(result: dict, path) -> Path:
+  return atomic_write(path, lambda p: p.write_text(json.dumps(result, indent=2)))
