@@ -26,10 +26,10 @@ def _data_info(args) -> int:
     table.add_column(col, justify="left" if col == "take" else "right")
   for m in motions:
     lo, hi = m.positions.min(axis=(0, 1)), m.positions.max(axis=(0, 1))
-    cv = bone_length_cv(m.positions, m.skeleton) * 100
+    bones = [f"{m.bone_lengths().mean():.4g}", f"{np.median(cv):.2f}%", f"{cv.max():.2f}%"] \
+        if m.skeleton.bones and (cv := bone_length_cv(m.positions, m.skeleton) * 100) is not None else ["-"] * 3
     table.add_row(m.name, str(m.num_frames), str(m.skeleton.num_joints), f"{m.fps:g}",
-                  *[f"{lo[i]:.4g}..{hi[i]:.4g}" for i in range(3)],
-                  f"{m.bone_lengths().mean():.4g}", f"{np.median(cv):.2f}%", f"{cv.max():.2f}%")
+                  *[f"{lo[i]:.4g}..{hi[i]:.4g}" for i in range(3)], *bones)
   Console(width=200).print(table)
   return 0
 
@@ -43,6 +43,52 @@ def _data_plot(args) -> int:
     raise UserError(f"{args.input}: holds {len(motions)} takes; plot one file at a time")
   out = plot_trajectories(motions[0], args.output, split=args.split)
   print(f"wrote {out}")
+  return 0
+
+
+def _data_convert(args) -> int:
+  import numpy as np
+  from chorjax.data import transforms as tf
+  from chorjax.data.csv import write_csv
+  from chorjax.data.dataset import read_motions, read_takes, resolve_files, to_up_axis
+  from chorjax.data.skeletons import to_mpii16
+  from chorjax.metrics import body_size
+
+  motions = [m for spec in args.inputs for f in resolve_files(spec)
+             for m in read_motions(f, fps=args.fps, asf=args.asf, amc_fps=args.amc_fps)]
+  if args.drop_first_frame:
+    motions = [m.replace(positions=m.positions[1:]) for m in motions]
+  if args.joints == "mpii16":
+    motions = [to_mpii16(m) for m in motions]
+  if args.like:
+    ref = read_takes([args.like])
+    canon = lambda m: np.asarray(tf.rotate(m.positions, tf.up_axis_matrix(m.up_axis)))
+    ref_size = np.mean([body_size(canon(r), r.skeleton) for r in ref])
+    motions = [to_up_axis(m, ref[0].up_axis) for m in motions]
+    motions = [m.replace(positions=m.positions * np.float32(ref_size / body_size(canon(m), m.skeleton)),
+                         units=ref[0].units) for m in motions]
+    # same frame rate, and the same average place of the root (the root is absolute in the features)
+    motions = [m if m.fps == ref[0].fps else m.replace(
+        positions=np.asarray(tf.resample(m.positions, m.fps, ref[0].fps), np.float32), fps=ref[0].fps) for m in motions]
+    ref_root = np.mean([r.positions[:, r.skeleton.root].mean(0) for r in ref], axis=0)
+    motions = [m.replace(positions=m.positions - m.positions[:, m.skeleton.root].mean(0) + ref_root) for m in motions]
+  if args.up_axis:
+    motions = [to_up_axis(m, args.up_axis) for m in motions]
+  if args.scale != 1.0:
+    motions = [m.replace(positions=m.positions * np.float32(args.scale)) for m in motions]
+  out = Path(args.output)
+  if out.suffix.lower() == ".bvh":
+    if len(motions) != 1:
+      raise UserError(f"{out}: one .bvh holds one motion; give one input or an output folder")
+    from chorjax.data.bvh import write_bvh
+    _refuse_existing([out], args.force)
+    written = [write_bvh(motions[0], out, exact=not args.rigid)]
+  else:
+    targets = [out / f"{m.name}.csv" for m in motions]
+    _refuse_existing(targets, args.force)
+    written = [write_csv(m, t) for m, t in zip(motions, targets)]
+  for w, m in zip(written, motions):
+    print(f"wrote {w} ({m.num_frames} frames, {m.skeleton.num_joints} joints, {m.fps:g} fps, up {m.up_axis})")
   return 0
 
 
@@ -96,9 +142,7 @@ def _sample(args) -> int:
   out = Path(args.output)
   suffix = out.suffix.lower()
   if suffix not in (".csv", ".npz", ".html", ".bvh"):
-    raise UserError(f"{out}: output must end in .csv, .npz or .html")
-  if suffix == ".bvh":
-    raise UserError(f"{out}: BVH export is not implemented yet (see the formats issue); use .csv or .npz")
+    raise UserError(f"{out}: output must end in .csv, .npz, .bvh or .html")
   _refuse_existing([out], args.force)
   graphdef, params, meta = load_run(args.workdir, args.checkpoint)
   features = Features.from_dict(meta["features"])
@@ -141,9 +185,11 @@ def _write_sample(out: Path, pos, fps, sk, up, settings) -> list:
   if suffix == ".html":
     ms = [Motion(p, fps, sk, up, name=f"dancer {k}") for k, p in enumerate(pos)]
     return [write_player(ms, out, title=f"chorjax sample ({settings['workdir']})")]
-  if len(pos) == 1:
-    return [write_csv(pos[0], out)]
-  return [write_csv(p, out.with_name(f"{out.stem}_{k}{out.suffix}")) for k, p in enumerate(pos)]
+  paths = [out] if len(pos) == 1 else [out.with_name(f"{out.stem}_{k}{out.suffix}") for k in range(len(pos))]
+  if suffix == ".bvh":
+    from chorjax.data.bvh import write_bvh
+    return [write_bvh(Motion(p, fps, sk, up, name=out.stem), path) for p, path in zip(pos, paths)]
+  return [write_csv(p, path) for p, path in zip(pos, paths)]
 
 
 def _render(args) -> int:
@@ -218,6 +264,25 @@ def build_parser() -> argparse.ArgumentParser:
   plot.add_argument("-o", "--output", required=True, metavar="FILE.png")
   plot.add_argument("--split", type=int, default=200, help="frames in the first row (default 200)")
   plot.set_defaults(func=_data_plot)
+  conv = dsub.add_parser("convert", help="convert BVH, ASF/AMC, C3D or CSV takes to the training CSV layout or to BVH")
+  conv.add_argument("inputs", nargs="+", metavar="IN", help="motion files or folders")
+  conv.add_argument("-o", "--output", required=True, metavar="DIR|OUT.bvh",
+                    help="a folder (one CSV per take: 3*J columns, no header) or one .bvh file")
+  conv.add_argument("--joints", choices=("mpii16", "native"), default="native",
+                    help="map onto the 16-joint training layout (known CMU and Bandai skeletons), or keep all joints")
+  conv.add_argument("--like", metavar="DATASET",
+                    help="match DATASET's body size, up axis, frame rate and average root position (e.g. cmu94), "
+                         "so the takes can join it")
+  conv.add_argument("--up-axis", choices=("y", "-y", "z", "-z", "x", "-x"), help="rotate to this up axis")
+  conv.add_argument("--scale", type=float, default=1.0, help="multiply lengths (after --like)")
+  conv.add_argument("--asf", metavar="PATH", help="the skeleton of AMC inputs (default: found in the AMC's folder)")
+  conv.add_argument("--amc-fps", type=float, default=120.0, help="frame rate of AMC inputs (default 120)")
+  conv.add_argument("--fps", type=float, default=30.0, help="frame rate of CSV inputs (default 30)")
+  conv.add_argument("--drop-first-frame", action="store_true", help="drop frame 0 (a converter's T-pose frame)")
+  conv.add_argument("--rigid", action="store_true",
+                    help="BVH: rigid bones of mean length (rotations only) instead of exact per-frame offsets")
+  conv.add_argument("--force", action="store_true", help="overwrite outputs that exist")
+  conv.set_defaults(func=_data_convert)
 
   config = sub.add_parser("config", help="inspect run configs")
   csub = config.add_subparsers(dest="config_command", required=True, metavar="CONFIG_COMMAND")
@@ -242,7 +307,8 @@ def build_parser() -> argparse.ArgumentParser:
   sample = sub.add_parser("sample", help="generate new dance from a trained run")
   sample.add_argument("workdir", metavar="WORKDIR", help="a run directory with checkpoints")
   sample.add_argument("-o", "--output", required=True, metavar="OUT",
-                      help="OUT.csv (data layout; K>1 writes OUT_k.csv), OUT.npz (all dancers + settings) or OUT.html")
+                      help="OUT.csv (data layout; K>1 writes OUT_k.csv), OUT.bvh (for Blender; K>1: OUT_k.bvh), "
+                           "OUT.npz (all dancers + settings) or OUT.html")
   sample.add_argument("--frames", type=int, default=1000, help="frames to generate (default 1000)")
   sample.add_argument("--num", type=int, default=1, help="dancers generated in parallel (default 1)")
   ids = sample.add_mutually_exclusive_group()
@@ -258,7 +324,8 @@ def build_parser() -> argparse.ArgumentParser:
   sample.set_defaults(func=_sample)
 
   render = sub.add_parser("render", help="draw motion files or samples as PNG, GIF, MP4 or an HTML player")
-  render.add_argument("inputs", nargs="+", metavar="INPUT", help="motion files (.csv, .npz), folders or cmu94")
+  render.add_argument("inputs", nargs="+", metavar="INPUT",
+                      help="motion files (.csv, .npz, .bvh, .amc, .c3d), folders or cmu94")
   render.add_argument("-o", "--output", required=True, metavar="OUT.(png|gif|mp4|html)")
   render.add_argument("--frames", type=int, help="render only the first N frames")
   render.add_argument("--fps", type=float, default=30.0, help="frame rate of CSV inputs (default 30)")

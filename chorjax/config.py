@@ -30,6 +30,8 @@ def _field(default, help: str, choices: Sequence | None = None, minimum: float |
 class DataConfig:
   dataset: str = _field("cmu94", "a bundled dataset name (cmu94), a folder of takes, or one file")
   skeleton: str = _field("mpii16", "joint layout of CSV takes", choices=("mpii16",))
+  joints: str = _field("mpii16", "train on the 16-joint layout (BVH/ASF/AMC takes are mapped by joint name) "
+                       "or on the files' own skeleton", choices=("mpii16", "native"))
   fps: float = _field(30.0, "frame rate of CSV takes (CSV files do not record it)", minimum=1e-3)
   up_axis: str = _field("-y", "signed up axis of the files (cmu94: -y, y points down)",
                         choices=("y", "-y", "z", "-z", "x", "-x"))

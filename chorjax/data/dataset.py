@@ -21,7 +21,7 @@ from chorjax.data.skeletons import get_skeleton
 from chorjax.errors import UserError
 
 BUNDLED = ("cmu94",)
-READABLE_SUFFIXES = (".csv", ".npz")
+READABLE_SUFFIXES = (".csv", ".npz", ".bvh", ".amc", ".c3d")
 
 
 def bundled_path(name: str) -> Path:
@@ -51,8 +51,14 @@ def read_take(path: Path, *, skeleton: str = "mpii16", fps: float = 30.0, up_axi
   return read_motions(path, skeleton=skeleton, fps=fps, up_axis=up_axis)[0]
 
 
-def read_motions(path: Path, *, skeleton: str = "mpii16", fps: float = 30.0, up_axis: str = "-y") -> list[Motion]:
-  """Reads every motion in a file: one for a take, K for a sample ``.npz`` of K dancers."""
+def read_motions(path: Path, *, skeleton: str = "mpii16", fps: float = 30.0, up_axis: str = "-y",
+                 asf=None, amc_fps: float = 120.0) -> list[Motion]:
+  """Reads every motion in a file: one for a take, K for a sample ``.npz`` of K dancers.
+
+  CSV takes use ``skeleton``, ``fps`` and ``up_axis`` (CSV records none of them); BVH, ASF/AMC, C3D
+  and NPZ files carry their own. An AMC finds its skeleton by ``asf``, else by ``amc.find_asf``;
+  AMC files do not record their rate: ``amc_fps`` (120, the CMU rate, unless told).
+  """
   path = Path(path)
   suffix = path.suffix.lower()
   if suffix == ".csv":
@@ -60,6 +66,15 @@ def read_motions(path: Path, *, skeleton: str = "mpii16", fps: float = 30.0, up_
   if suffix == ".npz":
     from chorjax.data.npz import read_npz
     return read_npz(path)
+  if suffix == ".bvh":
+    from chorjax.data.bvh import read_bvh
+    return [read_bvh(path)]
+  if suffix == ".amc":
+    from chorjax.data.amc import read_amc
+    return [read_amc(path, asf, fps=amc_fps)]
+  if suffix == ".c3d":
+    from chorjax.data.c3d import read_c3d
+    return [read_c3d(path)]
   raise UserError(f"{path}: unsupported motion format {suffix!r} (supported: {', '.join(READABLE_SUFFIXES)})")
 
 
@@ -67,6 +82,25 @@ def read_takes(specs: Sequence[str], data_cfg=None) -> list[Motion]:
   """Reads every take named by ``specs`` (bundled names, folders or files)."""
   kw = {} if data_cfg is None else dict(skeleton=data_cfg.skeleton, fps=data_cfg.fps, up_axis=data_cfg.up_axis)
   return [m for spec in specs for f in resolve_files(spec) for m in read_motions(f, **kw)]
+
+
+def to_up_axis(motion: Motion, up_axis: str) -> Motion:
+  """The same motion expressed with another up axis (a rotation; exact)."""
+  if motion.up_axis == up_axis:
+    return motion
+  m = tf.up_axis_matrix(up_axis).T @ tf.up_axis_matrix(motion.up_axis)
+  return motion.replace(positions=np.asarray(tf.rotate(motion.positions, m), np.float32), up_axis=up_axis)
+
+
+def conform(motions: Sequence[Motion], data_cfg) -> list[Motion]:
+  """Brings takes of any format into the dataset's layout: joints (``data.joints``) and up axis."""
+  from chorjax.data.skeletons import to_mpii16
+  out = [to_mpii16(m) if data_cfg.joints == "mpii16" else m for m in motions]
+  out = [to_up_axis(m, data_cfg.up_axis) for m in out]
+  names = {m.skeleton.joint_names for m in out}
+  if len(names) > 1:
+    raise UserError(f"{data_cfg.dataset}: takes have different skeletons; use data.joints='mpii16' to map them")
+  return out
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -119,7 +153,7 @@ def load_dataset(data_cfg) -> Dataset:
   Raises:
     UserError: for unreadable files, an empty selection, or a take shorter than one window.
   """
-  motions = read_takes([data_cfg.dataset], data_cfg)
+  motions = conform(read_takes([data_cfg.dataset], data_cfg), data_cfg)
   names = [m.name for m in motions]
   if len(set(names)) != len(names):
     raise UserError(f"{data_cfg.dataset}: two takes share a name; ids come from file names")

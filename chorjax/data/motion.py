@@ -15,7 +15,7 @@ class Skeleton:
   Attributes:
     name: a short name (e.g. ``mpii16``).
     joint_names: one name per joint.
-    parents: parent index per joint, -1 for the root (exactly one root).
+    parents: parent index per joint, -1 for a root (one root for a skeleton; marker sets: all -1).
     twins: the left/right twin of each joint (itself for joints on the midline); used by mirroring.
     end_joints: joints plotted as trajectories (feet, head top, hands).
     feet: the foot joints (for foot-contact metrics).
@@ -32,9 +32,8 @@ class Skeleton:
     j = len(self.joint_names)
     if len(self.parents) != j or len(self.twins) != j:
       raise ValueError(f"skeleton {self.name}: joint_names, parents and twins must have equal length")
-    roots = [i for i, p in enumerate(self.parents) if p < 0]
-    if len(roots) != 1:
-      raise ValueError(f"skeleton {self.name}: needs exactly one root, found {roots}")
+    if not any(p < 0 for p in self.parents):
+      raise ValueError(f"skeleton {self.name}: needs a root (a joint whose parent is -1)")
     for i, t in enumerate(self.twins):
       if self.twins[t] != i:
         raise ValueError(f"skeleton {self.name}: twins must be symmetric (joint {i} <-> {t})")
@@ -46,6 +45,7 @@ class Skeleton:
 
   @property
   def root(self) -> int:
+    """The first root (marker sets have one root per marker: no bones)."""
     return self.parents.index(-1)
 
   @property
@@ -56,12 +56,11 @@ class Skeleton:
   @property
   def topological_order(self) -> tuple[int, ...]:
     """Joints ordered so that every parent comes before its children."""
-    order, seen = [], set()
-    frontier = [self.root]
+    order = []
+    frontier = [j for j, p in enumerate(self.parents) if p < 0]
     while frontier:
       j = frontier.pop(0)
       order.append(j)
-      seen.add(j)
       frontier.extend(c for c, p in enumerate(self.parents) if p == j)
     if len(order) != self.num_joints:
       raise ValueError(f"skeleton {self.name}: parents do not form a tree")

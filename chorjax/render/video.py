@@ -29,6 +29,7 @@ def _frames_rgb(motion: Motion, size: int = 400, max_frames: int | None = None):
   ax.set_box_aspect((1, 1, 1))
   bones = motion.skeleton.bones
   lines = [ax.plot([], [], [], color="#1f5fa8", lw=2)[0] for _ in bones]
+  dots = ax.plot([], [], [], "o", color="#c0392b", ms=2)[0]
   for a, c in zip("xyz", range(3)):
     getattr(ax, f"set_{a}lim")(centre[c] - half, centre[c] + half)
   ax.set_xticklabels([]); ax.set_yticklabels([]); ax.set_zticklabels([])
@@ -37,6 +38,7 @@ def _frames_rgb(motion: Motion, size: int = 400, max_frames: int | None = None):
   for t in range(pos.shape[0]):
     for line, (p, c) in zip(lines, bones):
       line.set_data_3d(pts[t, [p, c], 0], pts[t, [p, c], 1], pts[t, [p, c], 2])
+    dots.set_data_3d(pts[t, :, 0], pts[t, :, 1], pts[t, :, 2])
     title.set_text(f"{motion.name}  {t}/{pos.shape[0]}")
     fig.canvas.draw()
     yield np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()

@@ -1,0 +1,231 @@
+"""Acclaim ASF/AMC (the CMU database's native format): skeleton + frames -> joint positions.
+
+The ASF gives units, the root's channel order and axis, and per bone its direction (world frame at
+rest), length, axis (the bone's local frame as Euler angles and their order), degrees of freedom and
+limits; comments and unknown keywords (e.g. ``:namespace``) are skipped. An AMC gives, per frame, the
+root's translation and rotation and each bone's dof values. Forward kinematics, per bone with
+``C`` = its axis rotation and ``M`` = its dof rotation::
+
+    L_bone = L_parent @ C @ M @ C^-1        end = start + length * L_bone @ direction
+
+Euler angles apply in the listed order about fixed axes ("XYZ": x first, then y, then z). Joints are
+the root and the END of every bone, named after the bone. Positions are in ASF units unless
+``scale`` is given (``asf_metres_scale`` converts to metres: 1 unit = 1/length inches).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from chorjax.data.bvh import _guess_feet, _guess_twins
+from chorjax.data.motion import Motion, Skeleton
+from chorjax.data.rotations import euler_to_matrix
+from chorjax.errors import UserError
+
+
+class Asf:
+  def __init__(self, path):
+    self.path = Path(path)
+    self.length_unit, self.degrees = 1.0, True
+    self.root_order, self.root_axis = ["tx", "ty", "tz", "rx", "ry", "rz"], "xyz"
+    self.root_position, self.root_orientation = np.zeros(3), np.zeros(3)
+    self.bones: dict[str, dict] = {}
+    self.parent: dict[str, str] = {}
+
+
+def _fixed_axes_matrix(angles, order: str, degrees: bool):
+  """Rotations about fixed axes applied in ``order`` (e.g. 'xyz': R = Rz Ry Rx)."""
+  a = np.asarray(angles, np.float64)
+  a = a if degrees else np.rad2deg(a)
+  return euler_to_matrix(a[..., ::-1], order[::-1])
+
+
+def read_asf(path) -> Asf:
+  path = Path(path)
+  try:
+    lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
+  except FileNotFoundError:
+    raise UserError(f"{path}: no such ASF file") from None
+  asf, section, bone = Asf(path), None, None
+  for lineno, raw in enumerate(lines, start=1):
+    line = raw.split("#")[0].strip()
+    if not line:
+      continue
+    words = line.split()
+    try:
+      if words[0].startswith(":"):
+        section = words[0][1:].lower()
+        if section == "units" and len(words) > 1:  # units may also sit on the same line
+          words = words[1:]
+        else:
+          continue
+      if section == "units":
+        if words[0] == "length":
+          asf.length_unit = float(words[1])
+        elif words[0] == "angle":
+          asf.degrees = words[1].lower().startswith("deg")
+      elif section == "root":
+        if words[0] == "order":
+          asf.root_order = [w.lower() for w in words[1:]]
+        elif words[0] == "axis":
+          asf.root_axis = words[1].lower()
+        elif words[0] == "position":
+          asf.root_position = np.array([float(w) for w in words[1:4]])
+        elif words[0] == "orientation":
+          asf.root_orientation = np.array([float(w) for w in words[1:4]])
+      elif section == "bonedata":
+        if words[0] == "begin":
+          bone = {"dof": [], "axis": np.zeros(3), "axis_order": "xyz", "line": lineno}
+        elif words[0] == "end":
+          if bone is None or "name" not in bone:
+            raise UserError(f"{path}:{lineno}: bone block without a name")
+          asf.bones[bone["name"]] = bone
+          bone = None
+        elif bone is not None and words[0] == "name":
+          bone["name"] = words[1]
+        elif bone is not None and words[0] == "direction":
+          bone["direction"] = np.array([float(w) for w in words[1:4]])
+        elif bone is not None and words[0] == "length":
+          bone["length"] = float(words[1])
+        elif bone is not None and words[0] == "axis":
+          bone["axis"] = np.array([float(w) for w in words[1:4]])
+          bone["axis_order"] = words[4].lower() if len(words) > 4 else "xyz"
+        elif bone is not None and words[0] == "dof":
+          bone["dof"] = [w.lower() for w in words[1:]]
+      elif section == "hierarchy":
+        if words[0] in ("begin", "end"):
+          continue
+        for child in words[1:]:
+          asf.parent[child] = words[0]
+    except (ValueError, IndexError):
+      raise UserError(f"{path}:{lineno}: malformed {words[0]!r} line") from None
+  for name, b in asf.bones.items():
+    if "direction" not in b or "length" not in b:
+      raise UserError(f"{path}:{b['line']}: bone {name!r} lacks a direction or length")
+    if name not in asf.parent:
+      raise UserError(f"{path}: bone {name!r} is missing from :hierarchy")
+  if not asf.bones:
+    raise UserError(f"{path}: no :bonedata")
+  return asf
+
+
+def asf_metres_scale(asf: Asf) -> float:
+  """Multiplier from ASF length units to metres (CMU: length 0.45 -> 1 unit = 1/0.45 inch)."""
+  return 0.0254 / asf.length_unit
+
+
+def find_asf(amc: Path) -> Path:
+  """The only .asf in the AMC's folder, else the .asf whose name is the longest prefix of the AMC's."""
+  candidates = sorted(amc.parent.glob("*.asf")) + sorted(amc.parent.glob("*.ASF"))
+  if len(candidates) == 1:
+    return candidates[0]
+  prefixed = [c for c in candidates if amc.stem.startswith(c.stem)]
+  if prefixed:
+    return max(prefixed, key=lambda c: len(c.stem))
+  raise UserError(f"{amc}: cannot tell which .asf belongs to it ({len(candidates)} in the folder); pass --asf PATH")
+
+
+def read_amc(path, asf_path=None, *, fps: float = 120.0, scale: float = 1.0, units: str = "asf") -> Motion:
+  """Reads an AMC with its ASF skeleton into joint positions (root + every bone's end)."""
+  path = Path(path)
+  asf = read_asf(asf_path or find_asf(path))
+  try:
+    lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
+  except FileNotFoundError:
+    raise UserError(f"{path}: no such AMC file") from None
+  frames, current = [], None
+  for lineno, raw in enumerate(lines, start=1):
+    line = raw.strip()
+    if not line or line.startswith("#") or line.startswith(":"):
+      continue
+    words = line.split()
+    if len(words) == 1 and words[0].isdigit():
+      current = {}
+      frames.append(current)
+      continue
+    if current is None:
+      raise UserError(f"{path}:{lineno}: bone values before the first frame number")
+    name = words[0]
+    if name != "root" and name not in asf.bones:
+      raise UserError(f"{path}:{lineno}: bone {name!r} is not in the skeleton {asf.path.name}")
+    want = len(asf.root_order) if name == "root" else len(asf.bones[name]["dof"])
+    try:
+      values = [float(w) for w in words[1:]]
+    except ValueError:
+      bad = next(w for w in words[1:] if not _isnum(w))
+      raise UserError(f"{path}:{lineno}: not a number: {bad[:30]!r}") from None
+    if len(values) != want:
+      raise UserError(f"{path}:{lineno}: {name} has {len(values)} values, its dof list has {want}")
+    current[name] = values
+  if not frames:
+    raise UserError(f"{path}: no frames")
+  pos, names, parents = _fk(asf, frames, path)
+  skeleton = Skeleton(name=asf.path.stem, joint_names=names, parents=parents, twins=_guess_twins(names),
+                      end_joints=tuple(i for i, n in enumerate(names) if n not in asf.parent.values()),
+                      feet=_guess_feet(names))
+  return Motion((pos * scale).astype(np.float32), fps=fps, skeleton=skeleton, up_axis="y", units=units,
+                name=path.stem, source=str(path))
+
+
+def _isnum(s):
+  try:
+    float(s)
+    return True
+  except ValueError:
+    return False
+
+
+def _fk(asf: Asf, frames, path):
+  t = len(frames)
+  names = ["root"] + list(asf.bones)
+  index = {n: i for i, n in enumerate(names)}
+  order = _topological(asf, names)
+  parents = tuple(-1 if n == "root" else index[asf.parent[n]] for n in names)
+  pos = np.zeros((t, len(names), 3))
+  glob = np.zeros((t, len(names), 3, 3))
+
+  def column(name, dofs):
+    vals = np.zeros((t, len(dofs)))
+    for f, fr in enumerate(frames):
+      if name in fr:
+        vals[f] = fr[name]
+    return vals
+
+  root_vals = column("root", asf.root_order)
+  trans = np.zeros((t, 3))
+  rot_axes = []
+  for k, ch in enumerate(asf.root_order):
+    if ch.startswith("t"):
+      trans[:, "xyz".index(ch[1])] = root_vals[:, k]
+    elif ch.startswith("r"):
+      rot_axes.append((k, ch[1]))
+  c_root = _fixed_axes_matrix(asf.root_orientation, asf.root_axis, asf.degrees)
+  m_root = _fixed_axes_matrix(root_vals[:, [k for k, _ in rot_axes]], "".join(a for _, a in rot_axes), asf.degrees)
+  pos[:, 0] = asf.root_position + trans
+  glob[:, 0] = c_root @ m_root @ c_root.T
+  for name in order:
+    b, i, p = asf.bones[name], index[name], index[asf.parent[name]]
+    c = _fixed_axes_matrix(b["axis"], b["axis_order"], True if asf.degrees else False)
+    vals = column(name, b["dof"])
+    r_dofs = [(k, d[1]) for k, d in enumerate(b["dof"]) if d in ("rx", "ry", "rz")]
+    m = _fixed_axes_matrix(vals[:, [k for k, _ in r_dofs]], "".join(a for _, a in r_dofs), asf.degrees) \
+        if r_dofs else np.broadcast_to(np.eye(3), (t, 3, 3))
+    glob[:, i] = glob[:, p] @ c @ m @ c.T
+    pos[:, i] = pos[:, p] + b["length"] * np.einsum("tij,j->ti", glob[:, i], b["direction"])
+  return pos, tuple(names), parents
+
+
+def _topological(asf: Asf, names):
+  out, done = [], {"root"}
+  pending = [n for n in names if n != "root"]
+  while pending:
+    ready = [n for n in pending if asf.parent[n] in done]
+    if not ready:
+      raise UserError(f"{asf.path}: :hierarchy has a cycle or names an unknown bone ({pending[0]!r})")
+    for n in ready:
+      out.append(n)
+      done.add(n)
+    pending = [n for n in pending if n not in done]
+  return out

@@ -1,0 +1,313 @@
+"""BVH motion files: any hierarchy in, joint positions by forward kinematics; positions -> BVH out by IK.
+
+Reading: ROOT/JOINT/End Site, 3 or 6 channels on any joint, any Euler order per joint (mixed orders in
+one file), CRLF/LF and tab separators. Position channels, where present, ARE the joint's translation
+in its parent's frame (they replace the OFFSET, as Blender reads them). End Sites become joints named
+``<parent>_end``. Positions stay in the file's units.
+
+Writing (``write_bvh``): for every joint with children, the rotation that takes its rest-pose bone
+directions to the observed ones, composed down the chain. One child: the smallest rotation (swing)
+relative to the parent's frame, so a bone never twists about itself (the twist choice). Several
+children (pelvis, thorax): the best-fit rotation of all child directions (Kabsch). The rest pose is
+the first frame. With ``exact=True`` (default) every joint also gets position channels holding its
+real per-frame offset, so reading the file back gives the input positions exactly; with
+``exact=False`` the skeleton is rigid (mean bone lengths), as most animation tools expect.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from chorjax.data.motion import Motion, Skeleton
+from chorjax.data.rotations import best_fit_rotation, euler_to_matrix, matrix_to_euler, swing
+from chorjax.errors import UserError, atomic_write
+
+_ROT = {"xrotation": "x", "yrotation": "y", "zrotation": "z"}
+_POS = {"xposition": 0, "yposition": 1, "zposition": 2}
+
+
+class _Joint:
+  def __init__(self, name, parent, line):
+    self.name, self.parent, self.line = name, parent, line
+    self.offset = np.zeros(3)
+    self.channels: list[str] = []
+    self.end = False
+
+
+def _tokens(path: Path, text: str):
+  for lineno, line in enumerate(text.splitlines(), start=1):
+    for tok in line.split():
+      yield lineno, tok
+
+
+def _parse_hierarchy(path: Path, text: str):
+  toks = list(_tokens(path, text.split("MOTION")[0] if "MOTION" in text else text))
+  joints, stack, i = [], [], 0
+
+  def need(k):
+    if i + k > len(toks):
+      last = toks[-1][0] if toks else 1
+      raise UserError(f"{path}:{last}: truncated HIERARCHY (unexpected end of file)")
+
+  need(1)
+  if toks[0][1].upper() != "HIERARCHY":
+    raise UserError(f"{path}:{toks[0][0]}: expected HIERARCHY, found {toks[0][1][:30]!r}")
+  i = 1
+  while i < len(toks):
+    line, tok = toks[i]
+    up = tok.upper()
+    if up in ("ROOT", "JOINT") or (up == "END" and i + 1 < len(toks) and toks[i + 1][1].upper() == "SITE"):
+      if up == "END":
+        parent = stack[-1] if stack else None
+        if parent is None:
+          raise UserError(f"{path}:{line}: End Site outside a joint")
+        j = _Joint(f"{joints[parent].name}_end", parent, line)
+        j.end = True
+        i += 2
+      else:
+        need(2)
+        if up == "JOINT" and not stack:
+          raise UserError(f"{path}:{line}: JOINT outside the ROOT's braces")
+        j = _Joint(toks[i + 1][1], stack[-1] if stack else None, line)
+        i += 2
+      joints.append(j)
+      need(1)
+      if toks[i][1] != "{":
+        raise UserError(f"{path}:{toks[i][0]}: expected '{{' after {j.name}")
+      stack.append(len(joints) - 1)
+      i += 1
+    elif up == "OFFSET":
+      need(4)
+      try:
+        joints[stack[-1]].offset = np.array([float(t) for _, t in toks[i + 1:i + 4]])
+      except ValueError:
+        raise UserError(f"{path}:{line}: OFFSET needs 3 numbers") from None
+      i += 4
+    elif up == "CHANNELS":
+      need(2)
+      try:
+        n = int(toks[i + 1][1])
+      except ValueError:
+        raise UserError(f"{path}:{line}: CHANNELS needs a count") from None
+      need(2 + n)
+      names = [t.lower() for _, t in toks[i + 2:i + 2 + n]]
+      bad = [c for c in names if c not in _ROT and c not in _POS]
+      if bad or n not in (3, 6):
+        raise UserError(f"{path}:{line}: channel-count mismatch or unknown channel "
+                        f"({n} declared: {' '.join(names)[:60]})")
+      joints[stack[-1]].channels = names
+      i += 2 + n
+    elif tok == "}":
+      if not stack:
+        raise UserError(f"{path}:{line}: unbalanced '}}'")
+      stack.pop()
+      i += 1
+      if not stack:
+        break
+    else:
+      raise UserError(f"{path}:{line}: unexpected {tok[:30]!r} in HIERARCHY")
+  if stack or not joints:
+    raise UserError(f"{path}:{toks[-1][0]}: truncated HIERARCHY (unclosed braces)")
+  return joints
+
+
+def _parse_motion(path: Path, text: str, num_channels: int):
+  lines = text.splitlines()
+  start = next((k for k, l in enumerate(lines) if l.strip().upper() == "MOTION"), None)
+  if start is None:
+    raise UserError(f"{path}: no MOTION section")
+  try:
+    frames = int(lines[start + 1].split(":")[1])
+    frame_time = float(lines[start + 2].split(":")[1])
+    assert lines[start + 1].strip().lower().startswith("frames") and frame_time > 0
+  except (IndexError, ValueError, AssertionError):
+    raise UserError(f"{path}:{start + 2}: expected 'Frames: N' and 'Frame Time: T' after MOTION") from None
+  rows = []
+  for k in range(start + 3, len(lines)):
+    if not lines[k].strip():
+      continue
+    cells = lines[k].split()
+    if len(cells) != num_channels:
+      raise UserError(f"{path}:{k + 1}: {len(cells)} values, the hierarchy declares {num_channels} channels")
+    try:
+      rows.append([float(c) for c in cells])
+    except ValueError:
+      bad = next(c for c in cells if not _isnum(c))
+      raise UserError(f"{path}:{k + 1}: not a number: {bad[:30]!r}") from None
+  if len(rows) != frames:
+    raise UserError(f"{path}: header says {frames} frames, the file holds {len(rows)}")
+  return np.asarray(rows, np.float64).reshape(frames, num_channels), frame_time
+
+
+def _isnum(s):
+  try:
+    float(s)
+    return True
+  except ValueError:
+    return False
+
+
+def read_bvh(path, *, drop_first_frame: bool = False, scale: float = 1.0, units: str = "file",
+             up_axis: str = "y") -> Motion:
+  """Reads a BVH file into joint positions (End Sites included).
+
+  Args:
+    path: the file.
+    drop_first_frame: drop frame 0 (some converters prepend a T-pose frame).
+    scale: multiplies every length (e.g. 0.01 for centimetres -> metres); recorded via ``units``.
+    units: the unit name recorded in the Motion.
+    up_axis: the file's up axis (BVH is normally y-up).
+  """
+  path = Path(path)
+  try:
+    text = path.read_text(encoding="utf-8", errors="replace")
+  except FileNotFoundError:
+    raise UserError(f"{path}: no such file") from None
+  joints = _parse_hierarchy(path, text)
+  num_channels = sum(len(j.channels) for j in joints)
+  data, frame_time = _parse_motion(path, text, num_channels)
+  if drop_first_frame:
+    data = data[1:]
+  pos = forward_kinematics(joints, data) * scale
+  names = tuple(j.name for j in joints)
+  parents = tuple(-1 if j.parent is None else j.parent for j in joints)
+  skeleton = Skeleton(name=path.stem, joint_names=names, parents=parents, twins=_guess_twins(names),
+                      end_joints=tuple(k for k, j in enumerate(joints) if j.end), feet=_guess_feet(names))
+  fps = 1.0 / frame_time
+  fps = float(round(fps)) if abs(fps - round(fps)) < 0.01 else fps  # '.0083333' means 120 fps
+  return Motion(pos.astype(np.float32), fps=fps, skeleton=skeleton, up_axis=up_axis,
+                units=units, name=path.stem, source=str(path))
+
+
+def forward_kinematics(joints, data_TxC) -> np.ndarray:
+  t = data_TxC.shape[0]
+  pos = np.zeros((t, len(joints), 3))
+  rot = np.zeros((t, len(joints), 3, 3))
+  col = 0
+  for k, j in enumerate(joints):
+    chans = data_TxC[:, col:col + len(j.channels)]
+    col += len(j.channels)
+    local_t = np.broadcast_to(j.offset, (t, 3)).copy()
+    p_idx = [(i, _POS[c]) for i, c in enumerate(j.channels) if c in _POS]
+    if p_idx:
+      for i, axis in p_idx:
+        local_t[:, axis] = chans[:, i]
+    r_idx = [(i, _ROT[c]) for i, c in enumerate(j.channels) if c in _ROT]
+    local_r = euler_to_matrix(chans[:, [i for i, _ in r_idx]], "".join(a for _, a in r_idx)) if r_idx \
+        else np.broadcast_to(np.eye(3), (t, 3, 3))
+    if j.parent is None:
+      pos[:, k], rot[:, k] = local_t, local_r
+    else:
+      pos[:, k] = pos[:, j.parent] + np.einsum("tij,tj->ti", rot[:, j.parent], local_t)
+      rot[:, k] = rot[:, j.parent] @ local_r
+  return pos
+
+
+def _guess_twins(names) -> tuple[int, ...]:
+  """Left/right twins by name (Left/Right prefixes, _L/_R suffixes, l/r prefixes of CMU names)."""
+  index = {n: i for i, n in enumerate(names)}
+  pairs = [("Left", "Right"), ("left", "right"), ("_L", "_R"), ("L", "R"), ("l", "r")]
+
+  def twin(n):
+    for a, b in pairs:
+      for x, y in ((a, b), (b, a)):
+        for cand in (n.replace(x, y, 1) if n.startswith(x) else None,
+                     n[: -len(x)] + y if n.endswith(x) else None,
+                     n.replace(x + "_", y + "_") if (x + "_") in n else None):
+          if cand and cand != n and cand in index:
+            return index[cand]
+    return index[n]
+  out = [twin(n) for n in names]
+  return tuple(t if out[t] == i else i for i, t in enumerate(out))  # keep only symmetric pairs
+
+
+def _guess_feet(names) -> tuple[int, ...]:
+  keys = ("ankle", "foot")
+  return tuple(i for i, n in enumerate(names) if any(k in n.lower() for k in keys) and "end" not in n.lower())[:2]
+
+
+# ---------------------------------------------------------------- writing
+
+
+def write_bvh(motion: Motion, path, *, exact: bool = True, order: str = "zyx", overwrite: bool = True) -> Path:
+  """Writes joint positions as a BVH file by inverse kinematics (see the module docstring)."""
+  pos = np.asarray(motion.positions, np.float64)
+  sk = motion.skeleton
+  t, j = pos.shape[:2]
+  children = {k: [c for c in range(j) if sk.parents[c] == k] for k in range(j)}
+  rest = pos[0]
+  lengths = np.linalg.norm(pos - pos[:, np.maximum(np.array(sk.parents), 0)], axis=-1).mean(0)
+  glob = np.zeros((t, j, 3, 3))
+  for k in sk.topological_order:
+    parent = sk.parents[k]
+    parent_r = np.broadcast_to(np.eye(3), (t, 3, 3)) if parent < 0 else glob[:, parent]
+    kids = children[k]
+    if not kids:
+      glob[:, k] = parent_r
+    elif len(kids) == 1:
+      rest_dir = np.einsum("tij,j->ti", parent_r, rest[kids[0]] - rest[k])
+      glob[:, k] = swing(rest_dir, pos[:, kids[0]] - pos[:, k]) @ parent_r
+    else:
+      rest_dirs = np.stack([rest[c] - rest[k] for c in kids])
+      obs = np.stack([pos[:, c] - pos[:, k] for c in kids], axis=1)
+      glob[:, k] = best_fit_rotation(np.broadcast_to(rest_dirs, obs.shape), obs)
+  axes = {"x": "X", "y": "Y", "z": "Z"}
+  rot_names = " ".join(f"{axes[a]}rotation" for a in order)
+  lines = ["HIERARCHY"]
+
+  def offset_of(k):
+    if sk.parents[k] < 0:
+      return rest[k]
+    d = rest[k] - rest[sk.parents[k]]
+    return d if exact else d / max(np.linalg.norm(d), 1e-12) * lengths[k]
+
+  def emit(k, depth):
+    ind = "  " * depth
+    leaf = not children[k]
+    if leaf and sk.parents[k] >= 0 and not exact:
+      lines.extend([f"{ind}End Site", f"{ind}{{", f"{ind}  OFFSET {_fmt(offset_of(k))}", f"{ind}}}"])
+      return
+    kind = "ROOT" if sk.parents[k] < 0 else "JOINT"
+    lines.extend([f"{ind}{kind} {sk.joint_names[k]}", f"{ind}{{", f"{ind}  OFFSET {_fmt(offset_of(k))}"])
+    six = sk.parents[k] < 0 or exact
+    lines.append(f"{ind}  CHANNELS {6 if six else 3} " + ("Xposition Yposition Zposition " if six else "") + rot_names)
+    for c in children[k]:
+      emit(c, depth + 1)
+    if leaf:  # exact mode keeps leaves as joints (they carry positions); close with a zero End Site
+      lines.extend([f"{ind}  End Site", f"{ind}  {{", f"{ind}    OFFSET 0 0 0", f"{ind}  }}"])
+    lines.append(f"{ind}}}")
+
+  emit(sk.root, 0)
+  cols = []
+  for k in _emitted_order(sk, children, exact):
+    parent = sk.parents[k]
+    parent_r = np.broadcast_to(np.eye(3), (t, 3, 3)) if parent < 0 else glob[:, parent]
+    local_r = np.swapaxes(parent_r, -1, -2) @ glob[:, k]
+    if parent < 0:
+      cols.append(pos[:, k])
+    elif exact:
+      cols.append(np.einsum("tji,tj->ti", parent_r, pos[:, k] - pos[:, parent]))  # offset in parent frame
+    cols.append(matrix_to_euler(local_r, order))
+  table = np.concatenate(cols, axis=1)
+  lines += ["MOTION", f"Frames: {t}", f"Frame Time: {1.0 / motion.fps:.8f}"]
+  body = "\n".join(" ".join(f"{v:.6f}" for v in row) for row in table)
+  text = "\n".join(lines) + "\n" + body + "\n"
+  return atomic_write(path, lambda p: p.write_text(text), overwrite=overwrite)
+
+
+def _emitted_order(sk, children, exact):
+  out = []
+
+  def walk(k):
+    if children[k] or sk.parents[k] < 0 or exact:
+      out.append(k)
+    for c in children[k]:
+      walk(c)
+  walk(sk.root)
+  return out
+
+
+def _fmt(v):
+  return " ".join(f"{x:.6f}" for x in v)

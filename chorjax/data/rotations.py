@@ -1,0 +1,68 @@
+"""Rotation helpers (NumPy, float64): Euler angles in any axis order, and minimal/best-fit rotations."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def axis_rotation(axis: str, angle_rad) -> np.ndarray:
+  """``[..., 3, 3]`` rotation matrices about x, y or z (right-handed)."""
+  c, s = np.cos(angle_rad), np.sin(angle_rad)
+  o, z = np.ones_like(c), np.zeros_like(c)
+  m = {"x": [[o, z, z], [z, c, -s], [z, s, c]],
+       "y": [[c, z, s], [z, o, z], [-s, z, c]],
+       "z": [[c, -s, z], [s, c, z], [z, z, o]]}[axis.lower()]
+  return np.moveaxis(np.array(m, dtype=np.float64), (0, 1), (-2, -1))
+
+
+def euler_to_matrix(angles_deg_Nx3, order: str) -> np.ndarray:
+  """Intrinsic rotations in the listed order: ``order='zyx'`` gives Rz @ Ry @ Rx (BVH convention)."""
+  a = np.deg2rad(np.asarray(angles_deg_Nx3, np.float64))
+  m = np.broadcast_to(np.eye(3), a.shape[:-1] + (3, 3)).copy()
+  for k, ax in enumerate(order.lower()):
+    m = m @ axis_rotation(ax, a[..., k])
+  return m
+
+
+def matrix_to_euler(m_Nx3x3, order: str) -> np.ndarray:
+  """Inverse of ``euler_to_matrix`` for any of the six Tait-Bryan orders, in degrees."""
+  order = order.lower()
+  i, j, k = ("xyz".index(c) for c in order)
+  sign = 1.0 if (j - i) % 3 == 1 else -1.0  # even permutation of xyz
+  m = np.asarray(m_Nx3x3, np.float64)
+  # R = Ri(a) Rj(b) Rk(c): R[i,k] = sign * sin(b)
+  b = np.arcsin(np.clip(sign * m[..., i, k], -1.0, 1.0))
+  a = np.arctan2(-sign * m[..., j, k], m[..., k, k])
+  c = np.arctan2(-sign * m[..., i, j], m[..., i, i])
+  return np.rad2deg(np.stack([a, b, c], axis=-1))
+
+
+def swing(u_Nx3, v_Nx3) -> np.ndarray:
+  """The smallest rotation taking unit directions u to v (no twist about the bone)."""
+  u = u_Nx3 / np.maximum(np.linalg.norm(u_Nx3, axis=-1, keepdims=True), 1e-12)
+  v = v_Nx3 / np.maximum(np.linalg.norm(v_Nx3, axis=-1, keepdims=True), 1e-12)
+  axis = np.cross(u, v)
+  s, c = np.linalg.norm(axis, axis=-1), np.sum(u * v, axis=-1)
+  k = axis / np.maximum(s, 1e-12)[..., None]
+  kx = np.zeros(u.shape[:-1] + (3, 3))
+  kx[..., 0, 1], kx[..., 0, 2], kx[..., 1, 2] = -k[..., 2], k[..., 1], -k[..., 0]
+  kx[..., 1, 0], kx[..., 2, 0], kx[..., 2, 1] = k[..., 2], -k[..., 1], k[..., 0]
+  eye = np.broadcast_to(np.eye(3), kx.shape)
+  r = eye + s[..., None, None] * kx + (1 - c)[..., None, None] * (kx @ kx)
+  # opposite directions: turn 180 degrees about any axis perpendicular to u
+  opposite = (s < 1e-9) & (c < 0)
+  if np.any(opposite):
+    perp = np.cross(u[opposite], np.eye(3)[np.argmin(np.abs(u[opposite]), axis=-1)])
+    perp /= np.linalg.norm(perp, axis=-1, keepdims=True)
+    r[opposite] = 2 * perp[..., :, None] * perp[..., None, :] - np.eye(3)
+  return r
+
+
+def best_fit_rotation(rest_NxKx3, obs_NxKx3) -> np.ndarray:
+  """Kabsch: the rotation R (per row) minimizing sum ||R rest_k - obs_k||^2 over K directions."""
+  h = np.swapaxes(rest_NxKx3, -1, -2) @ obs_NxKx3  # [N, 3, 3] = sum rest^T obs
+  u, _, vt = np.linalg.svd(h)
+  d = np.sign(np.linalg.det(np.swapaxes(vt, -1, -2) @ np.swapaxes(u, -1, -2)))
+  fix = np.broadcast_to(np.eye(3), h.shape).copy()
+  fix[..., 2, 2] = d
+  return np.swapaxes(vt, -1, -2) @ fix @ np.swapaxes(u, -1, -2)

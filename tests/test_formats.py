@@ -1,0 +1,209 @@
+"""Real mocap formats from ../shared/data: BVH, ASF/AMC and C3D in; BVH out by inverse kinematics."""
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from chorjax import cli
+from chorjax.data.amc import read_amc
+from chorjax.data.bvh import read_bvh, write_bvh
+from chorjax.data.c3d import read_c3d
+from chorjax.data.csv import read_csv
+from chorjax.data.dataset import bundled_path, load_dataset, resolve_files
+from chorjax.data.skeletons import MPII16, to_mpii16
+from chorjax.errors import UserError
+from helpers import tiny_config
+
+
+def height(m):
+  return float(np.ptp(m.positions[..., 1]))
+
+
+def test_every_bvh_parses_with_header_frames_and_rate(shared_data):
+  files = sorted((shared_data / "bvh").rglob("*.bvh"))
+  assert len(files) == 10
+  for f in files:
+    text = f.read_text(errors="replace")
+    frames = int(re.search(r"Frames:\s*(\d+)", text).group(1))
+    frame_time = float(re.search(r"Frame Time:\s*([\d.]+)", text).group(1))
+    m = read_bvh(f)
+    assert m.num_frames == frames, f
+    assert m.fps == pytest.approx(1 / frame_time, rel=1e-3), f
+    assert np.isfinite(m.positions).all()
+    joints = len(re.findall(r"\b(?:ROOT|JOINT)\s", text)) + len(re.findall(r"End Site", text))
+    assert m.skeleton.num_joints == joints, f
+
+
+def test_every_amc_parses_with_its_asf(shared_data):
+  files = sorted((shared_data / "asfamc").rglob("*.amc"))
+  assert len(files) == 9
+  for f in files:
+    frames = sum(1 for line in f.read_text().splitlines() if line.strip().isdigit())
+    m = read_amc(f)
+    assert m.num_frames == frames and m.fps == 120.0 and m.skeleton.num_joints == 31
+    assert np.median(m.bone_lengths().std(0)) < 1e-4  # rigid bones by construction
+
+
+@pytest.mark.parametrize("take", ["131_01", "131_02", "131_03"])
+def test_asf_amc_and_bvh_give_the_same_positions(shared_data, take):
+  a = read_amc(shared_data / "asfamc" / "cmu131" / f"{take}.amc")
+  b = read_bvh(shared_data / "bvh" / "cmu131" / f"{take}.bvh")
+  assert a.num_frames == b.num_frames
+  ai = {n: i for i, n in enumerate(a.skeleton.joint_names)}
+  bi = {n: i for i, n in enumerate(b.skeleton.joint_names)}
+  tol = 1e-3 * height(b)
+  # joints at the same place in both files (BVH joint <- the ASF bone ending there)
+  same = {"Hips": "root", "LeftHip": "lhipjoint", "LeftKnee": "lfemur", "LeftAnkle": "ltibia", "LeftToe": "lfoot",
+          "LeftToe_end": "ltoes", "RightHip": "rhipjoint", "RightKnee": "rfemur", "RightAnkle": "rtibia",
+          "RightToe": "rfoot", "RightToe_end": "rtoes", "Chest": "lowerback", "Chest2": "upperback"}
+  for bn, an in same.items():
+    assert np.abs(a.positions[:, ai[an]] - b.positions[:, bi[bn]]).max() < tol, (bn, an)
+  # this BVH conversion leaves out the ASF 'thorax' bone (1.98 units), so above it compare bone vectors
+  for (b1, b0), (a1, a0) in [(("LeftElbow", "LeftShoulder"), ("lhumerus", "lclavicle")),
+                             (("LeftWrist", "LeftElbow"), ("lradius", "lhumerus")),
+                             (("RightElbow", "RightShoulder"), ("rhumerus", "rclavicle")),
+                             (("RightWrist", "RightElbow"), ("rradius", "rhumerus")),
+                             (("Head_end", "Head"), ("head", "upperneck"))]:
+    vb = b.positions[:, bi[b1]] - b.positions[:, bi[b0]]
+    va = a.positions[:, ai[a1]] - a.positions[:, ai[a0]]
+    assert np.abs(va - vb).max() < tol, (b1, b0)
+
+
+def test_c3d_rates_frames_markers_and_the_truncated_file(shared_data, capsys):
+  cmu = read_c3d(shared_data / "c3d" / "cmu01" / "01_01.c3d")
+  assert (cmu.fps, cmu.num_frames, cmu.skeleton.num_joints, cmu.units) == (120.0, 2751, 42, "mm")
+  q = read_c3d(shared_data / "c3d" / "ezc3d" / "Qualisys.c3d")
+  assert (q.fps, q.num_frames, q.skeleton.num_joints) == (200.0, 340, 55)
+  opto = shared_data / "c3d" / "ezc3d" / "Optotrak.c3d"
+  with pytest.raises(UserError, match=r"Optotrak\.c3d: header declares 1149 frames .* holds 29"):
+    read_c3d(opto)
+  assert cli.main(["data", "info", str(opto)]) == 2
+  assert "truncated" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------- BVH out
+
+
+@pytest.mark.parametrize("path", resolve_files("cmu94"), ids=lambda p: p.stem[:5])
+def test_bvh_round_trip_of_the_cmu94_takes(tmp_path, path):
+  m = read_csv(path)
+  back = read_bvh(write_bvh(m, tmp_path / "t.bvh"))
+  idx = [back.skeleton.joint_names.index(n) for n in m.skeleton.joint_names]
+  assert np.abs(back.positions[:, idx] - m.positions).max() < 1e-3 * height(m)
+  assert back.fps == pytest.approx(m.fps)
+
+
+def test_rigid_bvh_keeps_bone_directions_with_constant_lengths(tmp_path):
+  m = read_csv(resolve_files("cmu94")[4])
+  back = read_bvh(write_bvh(m, tmp_path / "r.bvh", exact=False))
+  idx = {n: i for i, n in enumerate(back.skeleton.joint_names)}
+  for p, c in m.skeleton.bones:
+    name = m.skeleton.joint_names
+    child = idx.get(name[c], idx.get(f"{name[p]}_end"))
+    got = back.positions[:, child] - back.positions[:, idx[name[p]]]
+    want = m.positions[:, c] - m.positions[:, p]
+    cos = np.sum(got * want, -1) / np.linalg.norm(got, axis=-1) / np.linalg.norm(want, axis=-1)
+    if m.skeleton.parents.count(p) == 1:
+      assert cos.min() > 0.9999, name[c]  # one child: the direction is kept exactly (swing)
+    else:  # pelvis/thorax: a rigid triangle best-fit (Kabsch) to a non-rigid marker triangle
+      assert cos.mean() > 0.995 and cos.min() > 0.98, name[c]  # a few degrees: shoulders wobble up to 7%
+    assert np.linalg.norm(got, axis=-1).std() < 1e-3 * np.linalg.norm(got, axis=-1).mean()  # rigid
+
+
+def test_written_bvh_reads_with_an_independent_reader(tmp_path):
+  from bvh import Bvh
+  m = read_csv(resolve_files("cmu94")[0])
+  for exact in (True, False):
+    text = write_bvh(m, tmp_path / f"{exact}.bvh", exact=exact).read_text()
+    other = Bvh(text)
+    assert other.nframes == m.num_frames and other.frame_time == pytest.approx(1 / 30, rel=1e-6)
+    joints = 16 if exact else 16 - len([j for j in range(16) if j not in m.skeleton.parents])  # leaves -> End Site
+    assert len(other.get_joints_names()) == joints
+
+
+def test_generated_sample_exports_to_bvh(tmp_path):
+  from chorjax.train import train_and_evaluate
+  train_and_evaluate(tiny_config("train.num_steps=2", "log.tensorboard=false"), tmp_path / "run")
+  args = ["sample", str(tmp_path / "run"), "--frames", "120", "--seed", "3"]
+  assert cli.main([*args, "-o", str(tmp_path / "s.csv")]) == 0
+  assert cli.main([*args, "-o", str(tmp_path / "s.bvh")]) == 0
+  csv, bvh = read_csv(tmp_path / "s.csv"), read_bvh(tmp_path / "s.bvh")
+  idx = [bvh.skeleton.joint_names.index(n) for n in csv.skeleton.joint_names]
+  assert np.abs(bvh.positions[:, idx] - csv.positions).max() < 1e-3 * height(csv)
+
+
+# ---------------------------------------------------------------- mapping, dataset, CLI
+
+
+def test_named_mappings_to_the_training_layout(shared_data):
+  for path in [shared_data / "asfamc" / "cmu131" / "131_01.amc", shared_data / "bvh" / "cmu131" / "131_01.bvh",
+               shared_data / "bvh" / "bandai" / "dataset-1_dance-short_normal_001.bvh"]:
+    m = to_mpii16(read_amc(path) if path.suffix == ".amc" else read_bvh(path))
+    assert m.skeleton is MPII16 and m.positions.shape[1:] == (16, 3)
+    y = m.positions[..., 1]  # y-up files: the head above the feet, the knees between
+    assert y[:, 9].mean() > y[:, 6].mean() > y[:, 1].mean() > y[:, 0].mean()
+    assert np.median(m.bone_lengths().std(0) / m.bone_lengths().mean(0)) < 0.05
+  with pytest.raises(UserError, match="no joint mapping"):
+    to_mpii16(read_bvh(shared_data / "bvh" / "pymo" / "AV_8Walk_Meredith_HVHA_Rep1.bvh"))
+
+
+def test_a_dataset_folder_may_mix_formats(shared_data, tmp_path):
+  for src in [shared_data / "bvh" / "cmu131" / "131_01.bvh", shared_data / "asfamc" / "cmu131" / "131_02.amc",
+              shared_data / "asfamc" / "cmu131" / "mjackson.asf", bundled_path("cmu94") / "94_01_skeleton_3d.csv"]:
+    (tmp_path / src.name).write_bytes(src.read_bytes())
+  ds = load_dataset(tiny_config(f"data.dataset={str(tmp_path)!r}", "data.val_takes=[]").data)
+  assert list(ds.id_map) == ["131_01", "131_02", "94_01_skeleton_3d"]
+  assert all(x.shape[1] == 48 for _, x in ds.train)
+
+
+def test_convert_info_and_render_on_every_format(shared_data, tmp_path, capsys):
+  inputs = [shared_data / "bvh" / "cmu131" / "131_03.bvh", shared_data / "asfamc" / "cmu05" / "md_03.amc",
+            shared_data / "bvh" / "bandai" / "dataset-1_walk_normal_002.bvh"]
+  out = tmp_path / "conv"
+  assert cli.main(["data", "convert", *map(str, inputs), "-o", str(out), "--joints", "mpii16", "--like", "cmu94"]) == 0
+  converted = sorted(out.glob("*.csv"))
+  assert len(converted) == 3
+  ref = np.mean([t.bone_lengths().mean() for t in map(read_csv, resolve_files("cmu94"))])
+  for f in converted:
+    m = read_csv(f)
+    assert 0.8 * ref < m.bone_lengths().mean() < 1.2 * ref  # cmu94's body size, axes and rate
+  assert cli.main(["data", "convert", str(inputs[0]), "-o", str(tmp_path / "x.bvh")]) == 0
+  assert read_bvh(tmp_path / "x.bvh").num_frames == read_bvh(inputs[0]).num_frames
+  assert cli.main(["data", "convert", str(inputs[0]), "-o", str(tmp_path / "x.bvh")]) == 2  # no silent overwrite
+  c3d = shared_data / "c3d" / "cmu01" / "01_01.c3d"
+  assert cli.main(["data", "info", *map(str, inputs), str(c3d)]) == 0
+  assert capsys.readouterr().out.count("│") > 20
+  assert cli.main(["render", *map(str, inputs), str(c3d), "-o", str(tmp_path / "all.html"), "--frames", "30"]) == 0
+  assert cli.main(["render", str(c3d), "-o", str(tmp_path / "m.gif"), "--frames", "5"]) == 0
+
+
+@pytest.mark.parametrize("text, pattern", [
+    ("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation\n"
+     "  JOINT Spine\n  {\n    OFFSET 0 1 0\n", r"truncated HIERARCHY"),
+    ("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 4 Xposition Yposition Zposition Zrotation\n}\n"
+     "MOTION\nFrames: 1\nFrame Time: 0.1\n0 0 0 0\n", r":5: channel-count mismatch"),
+    ("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 3 Zrotation Yrotation Xrotation\n}\n"
+     "MOTION\nFrames: 2\nFrame Time: 0.1\n0 0 0\n0 0 0 0\n", r":11: 4 values, the hierarchy declares 3"),
+    ("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 3 Zrotation Yrotation Xrotation\n}\n"
+     "MOTION\nFrames: 2\nFrame Time: 0.1\n0 0 0\n0 zero 0\n", r":11: not a number: 'zero'"),
+])
+def test_malformed_bvh_errors_name_file_and_line(tmp_path, capsys, text, pattern):
+  f = tmp_path / "bad.bvh"
+  f.write_text(text)
+  with pytest.raises(UserError, match=pattern) as e:
+    read_bvh(f)
+  assert str(e.value).startswith(str(f))
+  assert cli.main(["data", "info", str(f)]) == 2
+  assert capsys.readouterr().err.count("\n") == 1
+
+
+def test_amc_bone_missing_from_the_asf(shared_data, tmp_path):
+  src = shared_data / "asfamc" / "cmu131"
+  (tmp_path / "mjackson.asf").write_bytes((src / "mjackson.asf").read_bytes())
+  lines = (src / "131_01.amc").read_text().splitlines()[:40]
+  lines[10] = "tail 1 2 3"
+  (tmp_path / "x.amc").write_text("\n".join(lines))
+  with pytest.raises(UserError, match=r"x\.amc:11: bone 'tail' is not in the skeleton mjackson\.asf"):
+    read_amc(tmp_path / "x.amc")
