@@ -1,13 +1,19 @@
 """Single-step recurrent cells: LSTM, layer-normalized LSTM (Ba et al. 2016) and GRU.
 
-Every cell splits its work in two so that training and sampling share one code path:
+Every cell splits one frame's work in three so that training and sampling share one code path and
+training can be fast:
 
 * ``project(x_...xD) -> xp_...xG``: everything that depends on the input only. Training applies it
   to a whole window at once (one large matmul, hoisted out of the time loop).
-* ``step(carry, xp_BxG) -> (carry, h_BxH)``: the recurrence for one frame. Training scans it over
-  time; sampling calls it once per generated frame. The two can never disagree.
+* the recurrent matmul ``r = h @ w_h`` (the only work that must stay inside the loop);
+* ``post(small, xp_BxG, r_BxG, carry) -> (carry, h_BxH)``: pure elementwise work (gates, layer
+  norms), with ``small`` the cell's small parameters.
 
-A carry is a tuple of ``[B, H]`` arrays: ``(c, h)`` for the LSTMs, ``(h,)`` for the GRU.
+``step(carry, xp)`` = ``post(small, xp, h @ w_h, carry)`` is what sampling calls once per frame and
+what training scans over a window. (Keeping the elementwise part separate from the one in-loop
+matmul leaves room for a custom backward pass; one was tried and measured, see BENCHMARKS.md.)
+A carry is a tuple of ``[B, H]`` arrays whose LAST entry is h: ``(c, h)`` for the LSTMs, ``(h,)``
+for the GRU.
 """
 
 from __future__ import annotations
@@ -31,7 +37,16 @@ def _layer_norm(x_xGxH, gain_GxH, bias_GxH=None):
   return y if bias_GxH is None else y + bias_GxH
 
 
-class LSTMCell(nnx.Module):
+class _Cell(nnx.Module):
+  def small(self) -> dict:
+    """The small parameters ``post`` needs (biases and gains inside the loop)."""
+    return {}
+
+  def step(self, carry, xp_BxG):
+    return self.post(self.small(), xp_BxG, carry[-1] @ self.w_h[...], carry)
+
+
+class LSTMCell(_Cell):
   """LSTM (gates i, f, g, o); forget-gate bias initialized to ``forget_bias``."""
 
   num_carries = 2
@@ -45,16 +60,16 @@ class LSTMCell(nnx.Module):
   def project(self, x):
     return x @ self.w_x[...] + self.b[...]
 
-  def step(self, carry, xp_Bx4H):
-    c, h = carry
-    z = xp_Bx4H + h @ self.w_h[...]
-    i, f, g, o = jnp.split(z, 4, axis=-1)
+  @staticmethod
+  def post(small, xp_Bx4H, r_Bx4H, carry):
+    c, _ = carry
+    i, f, g, o = jnp.split(xp_Bx4H + r_Bx4H, 4, axis=-1)
     c = jax.nn.sigmoid(f) * c + jax.nn.sigmoid(i) * jnp.tanh(g)
     h = jax.nn.sigmoid(o) * jnp.tanh(c)
     return (c, h), h
 
 
-class LNLSTMCell(nnx.Module):
+class LNLSTMCell(_Cell):
   """Layer-normalized LSTM: LN on the input and recurrent gate pre-activations (separately, per
   gate) and on the cell state, as in Ba, Kiros & Hinton (2016). The input part, LN included,
   depends on x only and is hoisted out of the time loop."""
@@ -76,17 +91,22 @@ class LNLSTMCell(nnx.Module):
     z = (x @ self.w_x[...]).reshape(x.shape[:-1] + (4, self.hidden))
     return _layer_norm(z, self.gain_x[...], self.b[...]).reshape(x.shape[:-1] + (4 * self.hidden,))
 
-  def step(self, carry, xp_Bx4H):
-    c, h = carry
-    zh = (h @ self.w_h[...]).reshape(h.shape[:-1] + (4, self.hidden))
-    z = xp_Bx4H.reshape(zh.shape) + _layer_norm(zh, self.gain_h[...])
+  def small(self):
+    return {"gain_h": self.gain_h[...], "gain_c": self.gain_c[...], "bias_c": self.bias_c[...]}
+
+  @staticmethod
+  def post(small, xp_Bx4H, r_Bx4H, carry):
+    c, _ = carry
+    hidden = small["gain_c"].shape[-1]
+    zh = r_Bx4H.reshape(r_Bx4H.shape[:-1] + (4, hidden))
+    z = xp_Bx4H.reshape(zh.shape) + _layer_norm(zh, small["gain_h"])
     i, f, g, o = (z[..., k, :] for k in range(4))
     c = jax.nn.sigmoid(f) * c + jax.nn.sigmoid(i) * jnp.tanh(g)
-    h = jax.nn.sigmoid(o) * jnp.tanh(_layer_norm(c, self.gain_c[...], self.bias_c[...]))
+    h = jax.nn.sigmoid(o) * jnp.tanh(_layer_norm(c, small["gain_c"], small["bias_c"]))
     return (c, h), h
 
 
-class GRUCell(nnx.Module):
+class GRUCell(_Cell):
   """GRU (gates r, z, candidate n) with the reset gate applied after the recurrent matmul (cuDNN
   and PyTorch convention), so the input part is hoistable."""
 
@@ -103,11 +123,14 @@ class GRUCell(nnx.Module):
   def project(self, x):
     return x @ self.w_x[...] + self.b_x[...]
 
-  def step(self, carry, xp_Bx3H):
+  def small(self):
+    return {"b_h": self.b_h[...]}
+
+  @staticmethod
+  def post(small, xp_Bx3H, r_Bx3H, carry):
     (h,) = carry
-    hp = h @ self.w_h[...] + self.b_h[...]
     xr, xz, xn = jnp.split(xp_Bx3H, 3, axis=-1)
-    hr, hz, hn = jnp.split(hp, 3, axis=-1)
+    hr, hz, hn = jnp.split(r_Bx3H + small["b_h"], 3, axis=-1)
     r = jax.nn.sigmoid(xr + hr)
     z = jax.nn.sigmoid(xz + hz)
     n = jnp.tanh(xn + r * hn)

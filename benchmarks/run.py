@@ -1,0 +1,198 @@
+"""chorjax vs PyTorch on the reference model (3 x 256, batch 50, sequence 100, 48 features).
+
+    python -m benchmarks.run            # full: every cell x head, more repetitions
+    python -m benchmarks.run --quick    # < 5 minutes on 2 cores; writes benchmarks/results.json
+
+Both frameworks run in this one process; repetitions alternate (chorjax, torch, chorjax, ...) and
+medians are reported, so background load hits both sides alike. Writes ``benchmarks/results.json``
+(every figure and every chorjax/PyTorch ratio, keyed by name) and prints the tables that
+BENCHMARKS.md records.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+B, T, D, H, L, K = 50, 100, 48, 256, 3, 8
+HERE = Path(__file__).resolve().parent
+
+
+def timed(fn, sync):
+  t = time.perf_counter()
+  sync(fn())
+  return time.perf_counter() - t
+
+
+def alternate(pairs, reps):
+  """Runs the (name, fn, sync) entries round-robin ``reps`` times; returns name -> median seconds."""
+  times = {name: [] for name, _, _ in pairs}
+  for _ in range(reps):
+    for name, fn, sync in pairs:
+      times[name].append(timed(fn, sync))
+  return {k: float(np.median(v)) for k, v in times.items()}
+
+
+def jax_train_step(cell, head):
+  from chorjax.config import load_config
+  from chorjax.train import init_state, make_train_step
+  cfg = load_config(None, [f"model.cell={cell}", f"model.head={head}", f"model.num_layers={L}",
+                           f"model.hidden_size={H}", f"model.num_mixtures={K}", f"train.batch_size={B}",
+                           f"data.seq_length={T}"])
+  graphdef, state, tx, schedule = init_state(cfg, D, 10)
+  step = make_train_step(graphdef, tx, schedule, cfg, 10)
+  rng = np.random.default_rng(0)
+  batch = {"inputs": rng.normal(size=(B, T, D)).astype(np.float32),
+           "targets": rng.normal(size=(B, T, D)).astype(np.float32),
+           "motion_ids": rng.integers(0, 10, B).astype(np.int32)}
+  key = jax.random.key(0)
+  box = {"state": state}
+  t = time.perf_counter()
+  box["state"], m = step(box["state"], batch, key)
+  jax.block_until_ready(m)
+  compile_s = time.perf_counter() - t
+
+  def run():
+    box["state"], m = step(box["state"], batch, key)
+    return m["loss"]
+  return run, compile_s, graphdef, box
+
+
+def torch_train_step(cell, head):
+  import torch
+  from benchmarks.torch_peer import Model, make_train_step
+  torch.manual_seed(0)
+  model = Model(cell, head, D, H, L, K)
+  step = make_train_step(model)
+  x, y = torch.randn(B, T, D), torch.randn(B, T, D)
+  step(x, y)
+  return lambda: step(x, y)
+
+
+def train_flops(cell):
+  """Matmul FLOPs of one train step (forward x 3 for forward + backward)."""
+  gates = {"lstm": 4, "lnlstm": 4, "gru": 3}[cell] * H
+  fwd = 0
+  for l in range(L):
+    d_in = D if l == 0 else H
+    fwd += 2 * B * T * (d_in + H) * gates
+  fwd += 2 * B * T * H * D
+  return 3 * fwd
+
+
+def matmul_peak():
+  a = jnp.ones((2048, 2048), jnp.float32)
+  f = jax.jit(lambda a: a @ a)
+  f(a).block_until_ready()
+  ts = []
+  for _ in range(10):
+    t = time.perf_counter()
+    f(a).block_until_ready()
+    ts.append(time.perf_counter() - t)
+  return 2 * 2048**3 / float(np.median(ts))
+
+
+def jax_sampler(batch):
+  from chorjax.config import load_config
+  from chorjax.models import create_model
+  from chorjax.sample import generate
+  from flax import nnx
+  cfg = load_config(None, ["model.cell=lstm", "model.head=mdn", f"model.num_layers={L}", f"model.hidden_size={H}",
+                           f"model.num_mixtures={K}"])
+  graphdef, params = nnx.split(create_model(cfg.model, D, 10, 0), nnx.Param)
+  w = jax.nn.one_hot(jnp.zeros(batch, jnp.int32), 10)
+  run = lambda: generate(graphdef, params, w, jax.random.key(0), num_frames=1000)
+  run().block_until_ready()
+  return run
+
+
+def torch_samplers(batch):
+  import torch
+  from torch import nn
+  from benchmarks.torch_peer import sample_lstm_loop, sample_lstmcell_loop
+  torch.manual_seed(0)
+  cells = nn.ModuleList([nn.LSTMCell(D if l == 0 else H, H) for l in range(L)])
+  lstm, out = nn.LSTM(D, H, L, batch_first=True), nn.Linear(H, K + 2 * K * D)
+  return (lambda: sample_lstmcell_loop(cells, out, 1000, batch), lambda: sample_lstm_loop(lstm, out, 1000, batch))
+
+
+def peak_rss_of_default_training() -> float:
+  """Peak resident memory (MB) of `chorjax train configs/quickstart.toml` for 20 steps, in a child process."""
+  import tempfile
+  code = ("import resource, sys; from chorjax.cli import main; "
+          "rc = main(['train', 'configs/quickstart.toml', '--workdir', sys.argv[1], 'train.num_steps=20', "
+          "'log.tensorboard=false', 'sample.frames=60', 'log.progress=none']); "
+          "print('RSS', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)")
+  with tempfile.TemporaryDirectory() as d:
+    out = subprocess.run([sys.executable, "-c", code, d], capture_output=True, text=True, cwd=HERE.parent)
+  line = [l for l in out.stdout.splitlines() if l.startswith("RSS")]
+  return float(line[0].split()[1]) / 1024 if line else float("nan")
+
+
+def main(argv=None):
+  ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+  ap.add_argument("--quick", action="store_true", help="fewer repetitions (< 5 minutes on 2 cores)")
+  ap.add_argument("--out", default=str(HERE / "results.json"))
+  args = ap.parse_args(argv)
+  import torch
+  torch.set_num_threads(os.cpu_count() or 1)
+  reps = 5 if args.quick else 15
+  res = {"machine": {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
+                     "cpus": os.cpu_count(), "python": platform.python_version(), "jax": jax.__version__,
+                     "torch": torch.__version__, "device": str(jax.devices()[0])},
+         "config": {"batch": B, "seq": T, "features": D, "hidden": H, "layers": L, "mixtures": K, "reps": reps},
+         "train_step_s": {}, "compile_s": {}, "ratio_torch_over_chorjax": {}, "sample_1000_s": {}}
+  peak = matmul_peak()
+  res["matmul_peak_gflops"] = peak / 1e9
+  for cell in ("lstm", "lnlstm", "gru"):
+    for head in ("mse", "mdn"):
+      name = f"{cell}_{head}"
+      jrun, compile_s, *_ = jax_train_step(cell, head)
+      trun = torch_train_step(cell, head)
+      sync_j, sync_t = (lambda x: jax.block_until_ready(x)), (lambda x: float(x))
+      med = alternate([("chorjax", jrun, sync_j), ("torch", trun, sync_t)], reps if cell != "lnlstm" else max(3, reps // 3))
+      res["train_step_s"][f"chorjax_{name}"] = med["chorjax"]
+      res["train_step_s"][f"torch_{name}"] = med["torch"]
+      res["compile_s"][name] = compile_s
+      res["ratio_torch_over_chorjax"][f"train_{name}"] = med["torch"] / med["chorjax"]
+      print(f"train {name:12s} chorjax {med['chorjax'] * 1e3:7.1f} ms  torch {med['torch'] * 1e3:7.1f} ms  "
+            f"speed-up {med['torch'] / med['chorjax']:.2f}x  (compile {compile_s:.1f} s)", flush=True)
+  ts = res["train_step_s"]
+  res["ln_over_lstm"] = ts["chorjax_lnlstm_mse"] / ts["chorjax_lstm_mse"]
+  res["mdn_over_mse"] = ts["chorjax_lstm_mdn"] / ts["chorjax_lstm_mse"]
+  res["train_gflops"] = train_flops("lstm") / ts["chorjax_lstm_mse"] / 1e9
+  res["train_fraction_of_peak"] = res["train_gflops"] / res["matmul_peak_gflops"]
+  for batch in (1, 64):
+    jrun = jax_sampler(batch)
+    cell_loop, lstm_loop = torch_samplers(batch)
+    med = alternate([("chorjax", jrun, jax.block_until_ready), ("lstmcell", cell_loop, lambda x: None),
+                     ("lstm", lstm_loop, lambda x: None)], max(3, reps // 2))
+    best = min(med["lstmcell"], med["lstm"])
+    for k, v in med.items():
+      res["sample_1000_s"][f"{k}_b{batch}"] = v
+    res["ratio_torch_over_chorjax"][f"sample_b{batch}"] = best / med["chorjax"]
+    print(f"sample 1000 frames, batch {batch:2d}: chorjax {med['chorjax'] * 1e3:7.1f} ms  torch LSTMCell loop "
+          f"{med['lstmcell'] * 1e3:7.1f} ms  nn.LSTM loop {med['lstm'] * 1e3:7.1f} ms  speed-up {best / med['chorjax']:.2f}x",
+          flush=True)
+  res["peak_rss_mb_default_training"] = peak_rss_of_default_training()
+  print(f"LN-LSTM / LSTM step {res['ln_over_lstm']:.2f}x; MDN / MSE head {res['mdn_over_mse']:.2f}x; "
+        f"train step {res['train_gflops']:.1f} GFLOP/s = {100 * res['train_fraction_of_peak']:.0f}% of the "
+        f"{res['matmul_peak_gflops']:.0f} GFLOP/s matmul peak; default training peak RSS "
+        f"{res['peak_rss_mb_default_training']:.0f} MB")
+  Path(args.out).write_text(json.dumps(res, indent=2))
+  print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+  main()
