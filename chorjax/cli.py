@@ -139,11 +139,7 @@ def _sample(args) -> int:
   from chorjax.data.motion import Motion
   from chorjax.sample import generate, load_run, motion_weight_vector, read_prime
 
-  out = Path(args.output)
-  suffix = out.suffix.lower()
-  if suffix not in (".csv", ".npz", ".html", ".bvh"):
-    raise UserError(f"{out}: output must end in .csv, .npz, .bvh or .html")
-  _refuse_existing([out], args.force)
+  out, suffix = _output(args.output, (".csv", ".npz", ".bvh", ".html"), args.force)
   graphdef, params, meta = load_run(args.workdir, args.checkpoint)
   features = Features.from_dict(meta["features"])
   num_motions = len(meta["id_map"])
@@ -151,20 +147,33 @@ def _sample(args) -> int:
   prime = None
   if args.prime:
     prime = jnp.tile(jnp.asarray(read_prime(args.prime, features, meta["config"]["data"]))[None], (args.num, 1, 1))
+  run_sample = meta["config"]["sample"]
+  pi_t = run_sample["pi_temperature"] if args.pi_temperature is None else args.pi_temperature
+  sigma_t = run_sample["sigma_temperature"] if args.sigma_temperature is None else args.sigma_temperature
+  greedy = args.greedy or run_sample["greedy"]
   z = generate(graphdef, params, w, jax.random.key(args.seed), num_frames=args.frames, prime_BxPxD=prime,
-               pi_temperature=args.pi_temperature, sigma_temperature=args.sigma_temperature, greedy=args.greedy)
+               pi_temperature=pi_t, sigma_temperature=sigma_t, greedy=greedy)
   pos = np.asarray(features.decode(z))
   if prime is not None:  # the phrase the dancer gave, then the machine's continuation
     pos = np.concatenate([np.tile(np.asarray(features.decode(prime))[:1], (args.num, 1, 1, 1)), pos], axis=1)
   fps = meta["config"]["data"]["fps"]
   settings = {"workdir": str(args.workdir), "checkpoint_step": meta["step"], "frames": args.frames,
               "motion": args.motion, "mix": args.mix, "prime": args.prime, "seed": args.seed,
-              "pi_temperature": args.pi_temperature, "sigma_temperature": args.sigma_temperature,
-              "greedy": args.greedy}
+              "pi_temperature": pi_t, "sigma_temperature": sigma_t, "greedy": greedy}
   sk, up = features.skeleton, features.up_axis
   written = _write_sample(out, pos, fps, sk, up, settings)
   print("wrote " + ", ".join(map(str, written)))
   return 0
+
+
+def _output(path, allowed, force: bool) -> tuple[Path, str]:
+  """The output path and its suffix, checked: an allowed kind, and no silent overwrite."""
+  out = Path(path)
+  suffix = out.suffix.lower()
+  if suffix not in allowed:
+    raise UserError(f"{out}: output must end in {', '.join(allowed[:-1])} or {allowed[-1]}")
+  _refuse_existing([out], force)
+  return out, suffix
 
 
 def _refuse_existing(paths, force: bool):
@@ -195,11 +204,7 @@ def _write_sample(out: Path, pos, fps, sk, up, settings) -> list:
 def _render(args) -> int:
   from chorjax.data.dataset import read_motions, resolve_files
 
-  out = Path(args.output)
-  suffix = out.suffix.lower()
-  if suffix not in (".png", ".gif", ".mp4", ".html"):
-    raise UserError(f"{out}: output must end in .png, .gif, .mp4 or .html")
-  _refuse_existing([out], args.force)
+  out, suffix = _output(args.output, (".png", ".gif", ".mp4", ".html"), args.force)
   motions = [m for spec in args.inputs for f in resolve_files(spec) for m in read_motions(f, fps=args.fps)]
   if args.frames:
     motions = [m.replace(positions=m.positions[: args.frames]) for m in motions]
@@ -246,6 +251,18 @@ def _compare(args) -> int:
   _refuse_existing([args.output], args.force)
   print(f"wrote {compare(args.workdirs, args.output)}")
   return 0
+
+
+def _add_sampling_args(p) -> None:
+  """Sampling controls shared by `sample` and `eval`; unset ones come from the run's [sample] config."""
+  p.add_argument("--pi-temperature", type=float,
+                 help="mixture-weight temperature, 0 = most likely component (default: the run's sample.pi_temperature)")
+  p.add_argument("--sigma-temperature", type=float,
+                 help="MDN scale multiplier (default: the run's sample.sigma_temperature)")
+  p.add_argument("--greedy", action="store_true", help="mean of the most likely component (no noise)")
+  p.add_argument("--seed", type=int, default=0)
+  p.add_argument("--checkpoint", default="latest", metavar="STEP|best|latest")
+  p.add_argument("--force", action="store_true", help="overwrite the output if it exists")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -315,12 +332,7 @@ def build_parser() -> argparse.ArgumentParser:
   ids.add_argument("--motion", type=int, help="motion id that conditions the dance (default 0)")
   ids.add_argument("--mix", metavar="ID:W,ID:W", help="blend motion ids, e.g. 4:0.5,5:0.5")
   sample.add_argument("--prime", metavar="FILE[:START:LEN]", help="continue a real phrase (chor-rnn's collaboration mode)")
-  sample.add_argument("--pi-temperature", type=float, default=1.0, help="mixture-weight temperature (0 = most likely)")
-  sample.add_argument("--sigma-temperature", type=float, default=1.0, help="scale multiplier of the MDN")
-  sample.add_argument("--greedy", action="store_true", help="mean of the most likely component (no noise)")
-  sample.add_argument("--seed", type=int, default=0)
-  sample.add_argument("--checkpoint", default="latest", metavar="STEP|best|latest")
-  sample.add_argument("--force", action="store_true", help="overwrite OUT if it exists")
+  _add_sampling_args(sample)
   sample.set_defaults(func=_sample)
 
   render = sub.add_parser("render", help="draw motion files or samples as PNG, GIF, MP4 or an HTML player")
@@ -341,12 +353,7 @@ def build_parser() -> argparse.ArgumentParser:
   ev.add_argument("--frames", type=int, default=10_000, help="frames per generated sequence (default 10000)")
   ev.add_argument("--num", type=int, default=4, help="generated sequences (default 4)")
   ev.add_argument("-o", "--output", metavar="metrics.json", help="default: WORKDIR/eval/metrics.json")
-  ev.add_argument("--checkpoint", default="latest", metavar="STEP|best|latest")
-  ev.add_argument("--seed", type=int, default=0)
-  ev.add_argument("--pi-temperature", type=float, help="default: the run's sample.pi_temperature")
-  ev.add_argument("--sigma-temperature", type=float, help="default: the run's sample.sigma_temperature")
-  ev.add_argument("--greedy", action="store_true")
-  ev.add_argument("--force", action="store_true", help="overwrite the output if it exists")
+  _add_sampling_args(ev)
   ev.set_defaults(func=_eval)
 
   sw = sub.add_parser("sweep", help="train and evaluate every point of a grid over config keys")

@@ -46,3 +46,13 @@ def atomic_write(path: str | os.PathLike, write: Callable[[Path], None], *, over
     if tmp_path.exists():
       tmp_path.unlink()
   return path
+
+
+def first_non_number(cells) -> int | None:
+  """Index of the first cell that does not parse as a float (None if all do): for line errors."""
+  for i, c in enumerate(cells):
+    try:
+      float(c)
+    except ValueError:
+      return i
+  return None

@@ -30,7 +30,7 @@ TAKE = bundled_path("cmu94") / "94_07_skeleton_3d.csv"
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory):
   w = tmp_path_factory.mktemp("run")
-  train_and_evaluate(tiny_config("train.num_steps=3", "log.tensorboard=false"), w)
+  train_and_evaluate(tiny_config("train.num_steps=3", "log.tensorboard=false", "sample.pi_temperature=0.3"), w)
   return w
 
 
@@ -132,7 +132,9 @@ def test_sample_cli_writes_csv_npz_with_blends_and_primes(run_dir, tmp_path, cap
   assert len(ms) == 3 and ms[0].positions.shape == (10 + 20, 16, 3)
   np.testing.assert_allclose(ms[0].positions[:10], read_csv(TAKE).positions[100:110], rtol=1e-4, atol=1e-2)
   with np.load(npz) as z:
-    assert json.loads(str(z["meta"]))["settings"]["greedy"] is True
+    settings = json.loads(str(z["meta"]))["settings"]
+  assert settings["greedy"] is True
+  assert settings["pi_temperature"] == 0.3 and settings["sigma_temperature"] == 1.0  # the run's [sample] defaults
 
 
 def test_render_gif_and_mp4_are_valid(tmp_path):

@@ -22,7 +22,7 @@ import numpy as np
 from chorjax.data.bvh import _guess_feet, _guess_twins
 from chorjax.data.motion import Motion, Skeleton
 from chorjax.data.rotations import euler_to_matrix
-from chorjax.errors import UserError
+from chorjax.errors import UserError, first_non_number
 
 
 class Asf:
@@ -154,7 +154,7 @@ def read_amc(path, asf_path=None, *, fps: float = 120.0, scale: float = 1.0, uni
     try:
       values = [float(w) for w in words[1:]]
     except ValueError:
-      bad = next(w for w in words[1:] if not _isnum(w))
+      bad = words[1:][first_non_number(words[1:])]
       raise UserError(f"{path}:{lineno}: not a number: {bad[:30]!r}") from None
     if len(values) != want:
       raise UserError(f"{path}:{lineno}: {name} has {len(values)} values, its dof list has {want}")
@@ -167,14 +167,6 @@ def read_amc(path, asf_path=None, *, fps: float = 120.0, scale: float = 1.0, uni
                       feet=_guess_feet(names))
   return Motion((pos * scale).astype(np.float32), fps=fps, skeleton=skeleton, up_axis="y", units=units,
                 name=path.stem, source=str(path))
-
-
-def _isnum(s):
-  try:
-    float(s)
-    return True
-  except ValueError:
-    return False
 
 
 def _fk(asf: Asf, frames, path):

@@ -22,7 +22,7 @@ import numpy as np
 
 from chorjax.data.motion import Motion, Skeleton
 from chorjax.data.rotations import best_fit_rotation, euler_to_matrix, matrix_to_euler, swing
-from chorjax.errors import UserError, atomic_write
+from chorjax.errors import UserError, atomic_write, first_non_number
 
 _ROT = {"xrotation": "x", "yrotation": "y", "zrotation": "z"}
 _POS = {"xposition": 0, "yposition": 1, "zposition": 2}
@@ -134,19 +134,11 @@ def _parse_motion(path: Path, text: str, num_channels: int):
     try:
       rows.append([float(c) for c in cells])
     except ValueError:
-      bad = next(c for c in cells if not _isnum(c))
+      bad = cells[first_non_number(cells)]
       raise UserError(f"{path}:{k + 1}: not a number: {bad[:30]!r}") from None
   if len(rows) != frames:
     raise UserError(f"{path}: header says {frames} frames, the file holds {len(rows)}")
   return np.asarray(rows, np.float64).reshape(frames, num_channels), frame_time
-
-
-def _isnum(s):
-  try:
-    float(s)
-    return True
-  except ValueError:
-    return False
 
 
 def read_bvh(path, *, drop_first_frame: bool = False, scale: float = 1.0, units: str = "file",

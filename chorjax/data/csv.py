@@ -12,7 +12,7 @@ import numpy as np
 
 from chorjax.data.motion import Motion, Skeleton
 from chorjax.data.skeletons import MPII16
-from chorjax.errors import UserError, atomic_write
+from chorjax.errors import UserError, atomic_write, first_non_number
 
 
 def read_csv(path, skeleton: Skeleton = MPII16, fps: float = 30.0, up_axis: str = "-y",
@@ -53,7 +53,7 @@ def read_csv(path, skeleton: Skeleton = MPII16, fps: float = 30.0, up_axis: str 
     try:
       values = [float(c) for c in cells]
     except ValueError:
-      col = next(i for i, c in enumerate(cells) if not _is_float(c))
+      col = first_non_number(cells)
       raise UserError(f"{path}:{lineno}: column {col + 1}: not a number: {cells[col].strip()[:40]!r}") from None
     bad = [i for i, v in enumerate(values) if not math.isfinite(v)]
     if bad:
@@ -64,14 +64,6 @@ def read_csv(path, skeleton: Skeleton = MPII16, fps: float = 30.0, up_axis: str 
   positions = np.asarray(rows, dtype=np.float32).reshape(len(rows), skeleton.num_joints, 3)
   return Motion(positions, fps=fps, skeleton=skeleton, up_axis=up_axis, units=units,
                 name=path.stem, source=str(path))
-
-
-def _is_float(s: str) -> bool:
-  try:
-    float(s)
-    return True
-  except ValueError:
-    return False
 
 
 def write_csv(motion_or_positions, path, *, overwrite: bool = True) -> Path:
