@@ -148,9 +148,10 @@ def main(argv=None):
   import torch
   torch.set_num_threads(os.cpu_count() or 1)
   reps = 5 if args.quick else 15
-  res = {"machine": {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
-                     "cpus": os.cpu_count(), "python": platform.python_version(), "jax": jax.__version__,
-                     "torch": torch.__version__, "device": str(jax.devices()[0])},
+  from chorjax.experiments import machine_info
+  res = {"machine": {"description": machine_info(), "platform": platform.platform(), "cpus": os.cpu_count(),
+                     "python": platform.python_version(), "jax": jax.__version__, "torch": torch.__version__,
+                     "device": str(jax.devices()[0])},
          "config": {"batch": B, "seq": T, "features": D, "hidden": H, "layers": L, "mixtures": K, "reps": reps},
          "train_step_s": {}, "compile_s": {}, "ratio_torch_over_chorjax": {}, "sample_1000_s": {}}
   peak = matmul_peak()
