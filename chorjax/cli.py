@@ -26,8 +26,10 @@ def _data_info(args) -> int:
     table.add_column(col, justify="left" if col == "take" else "right")
   for m in motions:
     lo, hi = m.positions.min(axis=(0, 1)), m.positions.max(axis=(0, 1))
-    bones = [f"{m.bone_lengths().mean():.4g}", f"{np.median(cv):.2f}%", f"{cv.max():.2f}%"] \
-        if m.skeleton.bones and (cv := bone_length_cv(m.positions, m.skeleton) * 100) is not None else ["-"] * 3
+    bones = ["-"] * 3  # marker sets (C3D) have no bones
+    if m.skeleton.bones:
+      cv = bone_length_cv(m.positions, m.skeleton) * 100
+      bones = [f"{m.bone_lengths().mean():.4g}", f"{np.median(cv):.2f}%", f"{cv.max():.2f}%"]
     table.add_row(m.name, str(m.num_frames), str(m.skeleton.num_joints), f"{m.fps:g}",
                   *[f"{lo[i]:.4g}..{hi[i]:.4g}" for i in range(3)], *bones)
   Console(width=200).print(table)
