@@ -207,3 +207,33 @@ def test_amc_bone_missing_from_the_asf(shared_data, tmp_path):
   (tmp_path / "x.amc").write_text("\n".join(lines))
   with pytest.raises(UserError, match=r"x\.amc:11: bone 'tail' is not in the skeleton mjackson\.asf"):
     read_amc(tmp_path / "x.amc")
+
+
+def test_an_amc_finds_its_asf(shared_data, tmp_path):
+  from chorjax.data.amc import find_asf
+  asf = (shared_data / "asfamc" / "cmu131" / "mjackson.asf").read_bytes()
+  only = tmp_path / "only"
+  only.mkdir()
+  (only / "whatever.asf").write_bytes(asf)
+  assert find_asf(only / "131_01.amc") == only / "whatever.asf"  # the only .asf in the folder
+  many = tmp_path / "many"
+  many.mkdir()
+  for name in ("01.asf", "0.asf", "charleston.asf", "charles.asf", "other.asf"):
+    (many / name).write_bytes(asf)
+  assert find_asf(many / "01_01.amc") == many / "01.asf"  # the longest prefix wins
+  assert find_asf(many / "charleston1.amc") == many / "charleston.asf"
+  with pytest.raises(UserError, match="pass --asf"):
+    find_asf(many / "zzz.amc")
+
+
+def test_units_to_metres_are_recorded(shared_data):
+  from chorjax.data.amc import asf_metres_scale, read_asf
+  src = shared_data / "asfamc" / "cmu131"
+  scale = asf_metres_scale(read_asf(src / "mjackson.asf"))
+  assert scale == pytest.approx(0.0564444, rel=1e-5)
+  m = read_amc(src / "131_01.amc", scale=scale, units="m")
+  assert m.units == "m"
+  femur = np.linalg.norm(m.positions[:, 2] - m.positions[:, 1], axis=-1).mean()  # lfemur end - lhipjoint end
+  assert 0.35 < femur < 0.5  # an adult thigh, in metres
+  bandai = read_bvh(shared_data / "bvh" / "bandai" / "dataset-1_walk_normal_002.bvh", scale=0.01, units="m")
+  assert bandai.units == "m" and 1.4 < np.ptp(bandai.positions[..., 1]) < 2.0  # a person's height
