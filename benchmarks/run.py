@@ -161,7 +161,7 @@ def main(argv=None):
       name = f"{cell}_{head}"
       jrun, compile_s, *_ = jax_train_step(cell, head)
       trun = torch_train_step(cell, head)
-      sync_j, sync_t = (lambda x: jax.block_until_ready(x)), (lambda x: float(x))
+      sync_j, sync_t = (lambda x: jax.block_until_ready(x)), (lambda x: x.item())
       med = alternate([("chorjax", jrun, sync_j), ("torch", trun, sync_t)], reps if cell != "lnlstm" else max(3, reps // 3))
       res["train_step_s"][f"chorjax_{name}"] = med["chorjax"]
       res["train_step_s"][f"torch_{name}"] = med["torch"]
