@@ -237,3 +237,15 @@ def test_units_to_metres_are_recorded(shared_data):
   assert 0.35 < femur < 0.5  # an adult thigh, in metres
   bandai = read_bvh(shared_data / "bvh" / "bandai" / "dataset-1_walk_normal_002.bvh", scale=0.01, units="m")
   assert bandai.units == "m" and 1.4 < np.ptp(bandai.positions[..., 1]) < 2.0  # a person's height
+
+
+def test_scaled_copy_and_dropping_a_leading_frame(shared_data):
+  src = shared_data / "bvh" / "cmu131"
+  a = read_bvh(src / "131_01.bvh")
+  metres = read_bvh(src / "scaled_131_01.bvh")  # the same take in metres, with one extra frame at the end
+  assert metres.num_frames == a.num_frames + 1
+  back = read_bvh(src / "scaled_131_01.bvh", scale=1 / 0.0564444)  # metres -> ASF units
+  assert np.abs(back.positions[: a.num_frames] - a.positions).max() < 1e-3 * height(a)
+  dropped = read_bvh(src / "131_01.bvh", drop_first_frame=True)  # a converter's leading T-pose frame
+  assert dropped.num_frames == a.num_frames - 1
+  np.testing.assert_array_equal(dropped.positions, a.positions[1:])
