@@ -128,12 +128,15 @@ def torch_samplers(batch):
 
 
 def peak_rss_of_default_training() -> float:
-  """Peak resident memory (MB) of `chorjax train configs/quickstart.toml` for 20 steps, in a child process."""
+  """Peak resident memory (MB) of `chorjax train configs/quickstart.toml` for 20 steps (a checkpoint,
+  TensorBoard, the end sample and its player), in a child process."""
   import tempfile
-  code = ("import resource, sys; from chorjax.cli import main; "
+  # VmHWM, not ru_maxrss: Linux carries ru_maxrss across fork+exec, so a child would report this
+  # (large) benchmark process's high-water mark. VmHWM belongs to the new address space.
+  code = ("import sys; from chorjax.cli import main; "
           "rc = main(['train', 'configs/quickstart.toml', '--workdir', sys.argv[1], 'train.num_steps=20', "
-          "'log.tensorboard=false', 'sample.frames=60', 'log.progress=none']); "
-          "print('RSS', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)")
+          "'log.progress=none']); "
+          "print('RSS', [l.split()[1] for l in open('/proc/self/status') if l.startswith('VmHWM')][0])")
   with tempfile.TemporaryDirectory() as d:
     out = subprocess.run([sys.executable, "-c", code, d], capture_output=True, text=True, cwd=HERE.parent)
   line = [l for l in out.stdout.splitlines() if l.startswith("RSS")]
