@@ -139,7 +139,8 @@ def workdir_lock(workdir: Path):
     f.close()
 
 
-def _check_saved_config(workdir: Path, cfg: Config, force: bool) -> None:
+def _check_saved_config(workdir: Path, cfg: Config, force: bool, may_write: bool = True) -> None:
+  """Refuses a workdir whose saved config differs (unless ``force``; then process 0 keeps the old one)."""
   path = workdir / "config.json"
   if not path.exists():
     return
@@ -153,7 +154,7 @@ def _check_saved_config(workdir: Path, cfg: Config, force: bool) -> None:
   if diff and not force:
     raise UserError(f"{workdir}: holds a run with a different config ({'; '.join(diff[:3])}"
                     f"{' ...' if len(diff) > 3 else ''}); use another --workdir, or --force to continue it")
-  if diff:  # keep the old config beside the new one: nothing is overwritten silently
+  if diff and may_write:  # keep the old config beside the new one: nothing is overwritten silently
     os.replace(path, workdir / f"config.{int(time.time())}.json")
 
 
@@ -223,7 +224,7 @@ def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=No
   workdir = Path(workdir).absolute()
   is_main = parallel is None or parallel.is_main
   with workdir_lock(workdir) if is_main else contextlib.nullcontext():
-    _check_saved_config(workdir, cfg, force and is_main)
+    _check_saved_config(workdir, cfg, force, may_write=is_main)
     return _train_locked(cfg, workdir, parallel)
 
 
