@@ -64,7 +64,7 @@ def _data_convert(args) -> int:
     motions = [to_mpii16(m) for m in motions]
   if args.like:
     ref = read_takes([args.like])
-    canon = lambda m: np.asarray(tf.rotate(m.positions, tf.up_axis_matrix(m.up_axis)))
+    canon = lambda m: np.asarray(tf.to_y_up(m.positions, m.up_axis))
     ref_size = np.mean([body_size(canon(r), r.skeleton) for r in ref])
     motions = [to_up_axis(m, ref[0].up_axis) for m in motions]
     motions = [m.replace(positions=m.positions * np.float32(ref_size / body_size(canon(m), m.skeleton)),

@@ -11,17 +11,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from chorjax import metrics as M
-from chorjax.data.dataset import eval_windows, read_takes
+from chorjax.config import config_from_dict
+from chorjax.data.dataset import conform, eval_windows, read_takes
+from chorjax.data.transforms import to_y_up
 from chorjax.data.features import Features
 from chorjax.errors import UserError, atomic_write
 from chorjax.sample import generate, load_run
 from chorjax.train import make_eval_step
-
-
-def _canonical(features: Features, pos):
-  """Data space -> y-up positions (unscaled): what the metrics measure."""
-  from chorjax.data import transforms as tf
-  return np.asarray(tf.rotate(pos, tf.up_axis_matrix(features.up_axis)))
 
 
 def evaluate(workdir, data: Sequence[str], *, frames: int = 10_000, num: int = 4, checkpoint="latest",
@@ -46,11 +42,11 @@ def evaluate(workdir, data: Sequence[str], *, frames: int = 10_000, num: int = 4
   pi_t = s["pi_temperature"] if pi_temperature is None else pi_temperature
   sigma_t = s["sigma_temperature"] if sigma_temperature is None else sigma_temperature
   greedy = s["greedy"] if greedy is None else greedy
-  d = cfg["data"]
-  real = read_takes(list(data), _DataCfg(d["skeleton"], d["fps"], d["up_axis"]))
+  data_cfg = config_from_dict(cfg).data
+  real = conform(read_takes(list(data), data_cfg), data_cfg)  # read exactly as training read its takes
   if not real:
     raise UserError(f"--data {' '.join(data)}: no takes")
-  train = read_takes([d["dataset"]], _DataCfg(d["skeleton"], d["fps"], d["up_axis"]))
+  train = conform(read_takes([data_cfg.dataset], data_cfg), data_cfg)
   train = [m for m in train if m.name in set(meta.get("train_takes", []))] or train
   if frames < 2 * window:
     raise UserError(f"--frames {frames}: need at least {2 * window} frames")
@@ -66,9 +62,10 @@ def evaluate(workdir, data: Sequence[str], *, frames: int = 10_000, num: int = 4
   w = jax.nn.one_hot(jnp.array([ids[k % len(ids)] for k in range(num)]), len(meta["id_map"]))
   z = generate(graphdef, params, w, jax.random.key(seed), num_frames=frames, pi_temperature=pi_t,
                sigma_temperature=sigma_t, greedy=bool(greedy))
-  gen = [_canonical(feats, p) for p in np.asarray(feats.decode(z))]
-  real_c = [_canonical(feats, m.positions) for m in real]
-  train_c = [_canonical(feats, m.positions) for m in train]
+  y_up = lambda pos: np.asarray(to_y_up(pos, feats.up_axis))  # data space -> y-up: what the metrics measure
+  gen = [y_up(p) for p in np.asarray(feats.decode(z))]
+  real_c = [y_up(m.positions) for m in real]
+  train_c = [y_up(m.positions) for m in train]
 
   size = np.mean([M.body_size(p, sk) for p in train_c])
   data_speed = float(np.mean(np.concatenate([M.joint_speed(p) for p in train_c])))
@@ -104,11 +101,6 @@ def evaluate(workdir, data: Sequence[str], *, frames: int = 10_000, num: int = 4
       "real_novelty": M.novelty(real_w / size, train_w / size, sk.root),
       "body_size": float(size), "window": window,
   }
-
-
-class _DataCfg:
-  def __init__(self, skeleton, fps, up_axis):
-    self.skeleton, self.fps, self.up_axis = skeleton, fps, up_axis
 
 
 def write_metrics(result: dict, path) -> Path:

@@ -43,7 +43,7 @@ class Features:
 
   def canonical(self, pos_TxJx3):
     """Data space -> y-up, scaled positions (before the representation)."""
-    return tf.scale_units(tf.rotate(pos_TxJx3, tf.up_axis_matrix(self.up_axis)), self.scale)
+    return tf.scale_units(tf.to_y_up(pos_TxJx3, self.up_axis), self.scale)
 
   def uncanonical(self, pos_TxJx3):
     return tf.rotate(tf.scale_units(pos_TxJx3, 1.0 / self.scale), tf.up_axis_matrix(self.up_axis).T)

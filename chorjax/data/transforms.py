@@ -126,6 +126,11 @@ def up_axis_matrix(up_axis: str) -> np.ndarray:
   return np.asarray(table[up_axis], np.float32)
 
 
+def to_y_up(pos_Tx_x3, up_axis: str):
+  """Positions whose up axis is ``up_axis`` -> the same positions with y up (a rotation)."""
+  return rotate(pos_Tx_x3, up_axis_matrix(up_axis))
+
+
 def rotate(pos_Tx_x3, matrix_3x3):
   """Applies a 3x3 matrix to every point. With ``matrix.T`` it undoes a rotation."""
   return jnp.einsum("ij,...j->...i", matrix_3x3, pos_Tx_x3)

@@ -26,7 +26,7 @@ from chorjax.errors import atomic_write
 
 
 def _payload(m: Motion) -> dict:
-  pos = np.asarray(tf.rotate(m.positions, tf.up_axis_matrix(m.up_axis)), np.float32)  # y-up for the viewer
+  pos = np.asarray(tf.to_y_up(m.positions, m.up_axis), np.float32)  # the viewer is y-up
   height = float(np.ptp(pos[..., 1])) or 1.0
   return {
       "title": m.name, "fps": m.fps, "frames": int(pos.shape[0]), "joints": int(pos.shape[1]),

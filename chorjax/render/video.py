@@ -17,7 +17,7 @@ from chorjax.render.plot import require_matplotlib
 
 def _frames_rgb(motion: Motion, size: int = 400, max_frames: int | None = None):
   plt = require_matplotlib()
-  pos = np.asarray(tf.rotate(motion.positions, tf.up_axis_matrix(motion.up_axis)))  # y-up
+  pos = np.asarray(tf.to_y_up(motion.positions, motion.up_axis))
   if max_frames:
     pos = pos[:max_frames]
   # matplotlib's 3D axes are z-up: plot (x, z, y)
