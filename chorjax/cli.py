@@ -137,18 +137,21 @@ def _sample(args) -> int:
   import jax
   import jax.numpy as jnp
   import numpy as np
+  from chorjax.config import config_from_dict
   from chorjax.data.features import Features
-  from chorjax.data.motion import Motion
   from chorjax.sample import generate, load_run, motion_weight_vector, read_prime
 
-  out, suffix = _output(args.output, (".csv", ".npz", ".bvh", ".html"), args.force)
+  out, suffix = _output(args.output, (".csv", ".npz", ".bvh", ".html"))
+  paths = _sample_paths(out, args.num)
+  _refuse_existing(paths, args.force)  # the files really written (OUT_k.csv for several dancers)
   graphdef, params, meta = load_run(args.workdir, args.checkpoint)
   features = Features.from_dict(meta["features"])
   num_motions = len(meta["id_map"])
   w = jnp.tile(jnp.asarray(motion_weight_vector(num_motions, args.motion, args.mix))[None], (args.num, 1))
-  prime = None
+  prime = phrase = None
   if args.prime:
-    prime = jnp.tile(jnp.asarray(read_prime(args.prime, features, meta["config"]["data"]))[None], (args.num, 1, 1))
+    phrase = read_prime(args.prime, features, config_from_dict(meta["config"]).data)
+    prime = jnp.tile(jnp.asarray(phrase)[None], (args.num, 1, 1))
   run_sample = meta["config"]["sample"]
   pi_t = run_sample["pi_temperature"] if args.pi_temperature is None else args.pi_temperature
   sigma_t = run_sample["sigma_temperature"] if args.sigma_temperature is None else args.sigma_temperature
@@ -156,26 +159,32 @@ def _sample(args) -> int:
   z = generate(graphdef, params, w, jax.random.key(args.seed), num_frames=args.frames, prime_BxPxD=prime,
                pi_temperature=pi_t, sigma_temperature=sigma_t, greedy=greedy)
   pos = np.asarray(features.decode(z))
-  if prime is not None:  # the phrase the dancer gave, then the machine's continuation
-    pos = np.concatenate([np.tile(np.asarray(features.decode(prime))[:1], (args.num, 1, 1, 1)), pos], axis=1)
+  if phrase is not None:  # the phrase the dancer gave, then the machine's continuation
+    pos = np.concatenate([np.tile(np.asarray(features.decode(phrase))[None], (args.num, 1, 1, 1)), pos], axis=1)
   fps = meta["config"]["data"]["fps"]
   settings = {"workdir": str(args.workdir), "checkpoint_step": meta["step"], "frames": args.frames,
               "motion": args.motion, "mix": args.mix, "prime": args.prime, "seed": args.seed,
               "pi_temperature": pi_t, "sigma_temperature": sigma_t, "greedy": greedy}
   sk, up = features.skeleton, features.up_axis
-  written = _write_sample(out, pos, fps, sk, up, settings)
+  written = _write_sample(out, paths, pos, fps, sk, up, settings)
   print("wrote " + ", ".join(map(str, written)))
   return 0
 
 
-def _output(path, allowed, force: bool) -> tuple[Path, str]:
-  """The output path and its suffix, checked: an allowed kind, and no silent overwrite."""
+def _output(path, allowed) -> tuple[Path, str]:
+  """The output path and its suffix, checked to be an allowed kind."""
   out = Path(path)
   suffix = out.suffix.lower()
   if suffix not in allowed:
     raise UserError(f"{out}: output must end in {', '.join(allowed[:-1])} or {allowed[-1]}")
-  _refuse_existing([out], force)
   return out, suffix
+
+
+def _sample_paths(out: Path, num: int) -> list[Path]:
+  """The files a sample of ``num`` dancers writes: OUT itself, or OUT_k per dancer for CSV/BVH."""
+  if num == 1 or out.suffix.lower() in (".npz", ".html"):
+    return [out]
+  return [out.with_name(f"{out.stem}_{k}{out.suffix}") for k in range(num)]
 
 
 def _refuse_existing(paths, force: bool):
@@ -184,7 +193,7 @@ def _refuse_existing(paths, force: bool):
       raise UserError(f"{p}: already exists (use --force to overwrite)")
 
 
-def _write_sample(out: Path, pos, fps, sk, up, settings) -> list:
+def _write_sample(out: Path, paths, pos, fps, sk, up, settings) -> list:
   from chorjax.data.csv import write_csv
   from chorjax.data.motion import Motion
   from chorjax.data.npz import write_npz
@@ -196,7 +205,6 @@ def _write_sample(out: Path, pos, fps, sk, up, settings) -> list:
   if suffix == ".html":
     ms = [Motion(p, fps, sk, up, name=f"dancer {k}") for k, p in enumerate(pos)]
     return [write_player(ms, out, title=f"chorjax sample ({settings['workdir']})")]
-  paths = [out] if len(pos) == 1 else [out.with_name(f"{out.stem}_{k}{out.suffix}") for k in range(len(pos))]
   if suffix == ".bvh":
     from chorjax.data.bvh import write_bvh
     return [write_bvh(Motion(p, fps, sk, up, name=out.stem), path) for p, path in zip(pos, paths)]
@@ -206,7 +214,8 @@ def _write_sample(out: Path, pos, fps, sk, up, settings) -> list:
 def _render(args) -> int:
   from chorjax.data.dataset import read_motions, resolve_files
 
-  out, suffix = _output(args.output, (".png", ".gif", ".mp4", ".html"), args.force)
+  out, suffix = _output(args.output, (".png", ".gif", ".mp4", ".html"))
+  _refuse_existing([out], args.force)
   motions = [m for spec in args.inputs for f in resolve_files(spec) for m in read_motions(f, fps=args.fps)]
   if args.frames:
     motions = [m.replace(positions=m.positions[: args.frames]) for m in motions]

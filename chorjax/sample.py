@@ -78,12 +78,14 @@ def parse_mix(text: str, num_motions: int) -> np.ndarray:
   return w / w.sum()
 
 
-def motion_weight_vector(num_motions: int, motion: Optional[int] = None, mix: Optional[str] = None):
+def motion_weight_vector(num_motions: int, motion: Optional[int] = None, mix: Optional[str] = None,
+                         source: str = "--motion"):
+  """One-hot weights of ``motion`` (default 0), or the blend ``mix``; ``source`` names the setting in errors."""
   if mix:
     return parse_mix(mix, num_motions)
   motion = 0 if motion is None else motion
   if not 0 <= motion < num_motions:
-    raise UserError(f"--motion {motion}: out of range (0..{num_motions - 1})")
+    raise UserError(f"{source} {motion}: out of range (0..{num_motions - 1})")
   return np.eye(num_motions, dtype=np.float32)[motion]
 
 
@@ -109,16 +111,17 @@ def load_run(workdir, which: str | int = "latest"):
 
 
 def read_prime(spec: str, features, data_cfg) -> np.ndarray:
-  """``FILE[:START:LEN]`` -> normalized frames ``[P, D]`` of a real phrase."""
+  """``FILE[:START:LEN]`` -> normalized frames ``[P, D]`` of a real phrase, read as training read its
+  takes (``data_cfg`` is the run's DataConfig: joints mapped, rotated to its up axis)."""
   from pathlib import Path
-  from chorjax.data.dataset import read_take
+  from chorjax.data.dataset import conform, read_takes
 
   parts = spec.rsplit(":", 2)
   if len(parts) == 3 and parts[1].isdigit() and parts[2].isdigit():
     path, start, length = Path(parts[0]), int(parts[1]), int(parts[2])
   else:
     path, start, length = Path(spec), 0, None
-  motion = read_take(path, skeleton=data_cfg["skeleton"], fps=data_cfg["fps"], up_axis=data_cfg["up_axis"])
+  motion = conform(read_takes([str(path)], data_cfg)[:1], data_cfg)[0]
   if motion.skeleton.num_joints != features.skeleton.num_joints:
     raise UserError(f"{path}: {motion.skeleton.num_joints} joints; the model was trained on "
                     f"{features.skeleton.num_joints}")

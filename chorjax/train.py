@@ -231,6 +231,9 @@ def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=No
 def _train_locked(cfg: Config, workdir: Path, parallel) -> dict:
   t_start = time.time()
   ds = load_dataset(cfg.data)
+  if cfg.sample.frames > 0:  # fail now, not after hours of training, if the end sample cannot be drawn
+    from chorjax.sample import motion_weight_vector
+    motion_weight_vector(ds.num_motions, cfg.sample.motion, source="sample.motion =")
   graphdef, state, tx, schedule = init_state(cfg, ds.features.dim, ds.num_motions)
   is_main = parallel is None or parallel.is_main
   manager = ckpt.create_manager(workdir, keep=cfg.train.keep_checkpoints)
@@ -345,7 +348,9 @@ def _figure(writer, graphdef, params, ds, cfg, step):
   from chorjax.sample import generate
   n = 120
   w = motion_weights(jnp.array([ds.val[0][0] if ds.val else ds.train[0][0]]), ds.num_motions)
-  z = generate(graphdef, params, w, jax.random.key(step), num_frames=n)
+  s = cfg.sample  # drawn as the run's own samples are
+  z = generate(graphdef, params, w, jax.random.key(step), num_frames=n, pi_temperature=s.pi_temperature,
+               sigma_temperature=s.sigma_temperature, greedy=s.greedy)
   gen = np.asarray(ds.features.decode(z[0]))
   real_z = (ds.val or ds.train)[0][1][:n]
   real = np.asarray(ds.features.decode(real_z))

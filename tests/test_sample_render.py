@@ -180,3 +180,32 @@ def test_html_player_in_headless_chromium(run_dir, tmp_path):
   subprocess.run([chromium(), *flags, "--window-size=1200,900", f"--screenshot={shot}", f"file://{html}"],
                  capture_output=True, timeout=120)
   assert shot.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_several_dancers_never_overwrite_their_files(run_dir, tmp_path, capsys):
+  (tmp_path / "s_1.csv").write_text("mine")
+  assert cli.main(["sample", str(run_dir), "-o", str(tmp_path / "s.csv"), "--frames", "5", "--num", "2"]) == 2
+  assert "s_1.csv: already exists" in capsys.readouterr().err
+  assert (tmp_path / "s_1.csv").read_text() == "mine" and not (tmp_path / "s_0.csv").exists()
+
+
+def test_prime_from_another_format_is_read_as_training_reads(run_dir, tmp_path, shared_data):
+  from chorjax.config import config_from_dict
+  from chorjax.data.bvh import read_bvh
+  from chorjax.data.dataset import conform
+  bvh = shared_data / "bvh" / "cmu131" / "131_01.bvh"  # y-up, 38 joints: mapped and rotated like a take
+  assert cli.main(["sample", str(run_dir), "-o", str(tmp_path / "p.csv"), "--frames", "5",
+                   "--prime", f"{bvh}:100:10"]) == 0
+  data_cfg = config_from_dict(json.loads((run_dir / "config.json").read_text())).data
+  want = conform([read_bvh(bvh)], data_cfg)[0].positions[100:110]
+  got = read_csv(tmp_path / "p.csv").positions[:10]
+  np.testing.assert_allclose(got, want, atol=1e-3 * np.ptp(want[..., 1]))
+
+
+def test_an_impossible_end_sample_fails_before_training(tmp_path, capsys):
+  from chorjax.config import to_toml
+  cfg = tmp_path / "c.toml"
+  cfg.write_text(to_toml(tiny_config("sample.motion=12")))
+  assert cli.main(["train", str(cfg), "--workdir", str(tmp_path / "w")]) == 2
+  assert "sample.motion = 12: out of range (0..9)" in capsys.readouterr().err
+  assert not (tmp_path / "w" / "checkpoints").exists()
