@@ -40,19 +40,20 @@ def save(manager: ocp.CheckpointManager, step: int, state, meta: dict, val_loss:
                metrics=metrics)
 
 
-def _meta(manager, step) -> dict:
+def step_meta(manager, step) -> dict:
+  """The JSON meta of one checkpoint step (config, features, id map, ...)."""
   return dict(manager.restore(step, args=ocp.args.Composite(meta=ocp.args.JsonRestore()))["meta"])
 
 
 def best_step(manager) -> int | None:
   """The kept step with the lowest validation loss (None if no checkpoint has one)."""
-  losses = {s: _meta(manager, s).get("val_loss") for s in manager.all_steps()}
+  losses = {s: step_meta(manager, s).get("val_loss") for s in manager.all_steps()}
   losses = {s: v for s, v in losses.items() if v is not None}
   return min(losses, key=losses.get) if losses else None
 
 
 def restore(manager: ocp.CheckpointManager, step: int, template, sharding=None):
-  """Restores ``(state, meta)`` of ``step`` into the structure of ``template``.
+  """Restores the state of ``step`` into the structure of ``template`` (its meta: ``step_meta``).
 
   With ``sharding`` every array is restored with it (e.g. replicated over the current mesh), so a
   checkpoint written by one process count resumes on another.
@@ -62,25 +63,28 @@ def restore(manager: ocp.CheckpointManager, step: int, template, sharding=None):
   else:
     abstract = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=sharding), template)
   try:
-    r = manager.restore(step, args=ocp.args.Composite(state=ocp.args.StandardRestore(abstract),
-                                                      meta=ocp.args.JsonRestore()))
+    r = manager.restore(step, args=ocp.args.Composite(state=ocp.args.StandardRestore(abstract)))
   except (ValueError, KeyError, TypeError) as e:
     raise UserError(f"{manager.directory}/{step}: checkpoint does not match this model config "
                     f"({str(e).splitlines()[0][:160]})") from None
   # Re-impose the template's tree (optax states are namedtuples; keep their types exactly).
-  state = jax.tree.unflatten(jax.tree.structure(template), jax.tree.leaves(r["state"]))
-  return state, dict(r["meta"])
+  return jax.tree.unflatten(jax.tree.structure(template), jax.tree.leaves(r["state"]))
+
+
+def open_run(workdir) -> ocp.CheckpointManager:
+  """A read-only manager over a run's checkpoints (close it after use)."""
+  d = checkpoint_dir(workdir)
+  if not d.is_dir():
+    raise UserError(f"{workdir}: no checkpoints (expected {d}); train first with `chorjax train`")
+  return create_manager(workdir, read_only=True)
 
 
 def read_meta(workdir, which: str | int = "latest") -> tuple[int, dict]:
   """``(step, meta)`` of a checkpoint chosen by step number, ``latest`` or ``best``."""
-  d = checkpoint_dir(workdir)
-  if not d.is_dir():
-    raise UserError(f"{workdir}: no checkpoints (expected {d}); train first with `chorjax train`")
-  manager = create_manager(workdir, read_only=True)
+  manager = open_run(workdir)
   try:
     step = resolve_step(manager, which, workdir)
-    return step, _meta(manager, step)
+    return step, step_meta(manager, step)
   finally:
     manager.close()
 

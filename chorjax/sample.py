@@ -99,12 +99,14 @@ def load_run(workdir, which: str | int = "latest"):
   workdir = Path(workdir)
   if not workdir.is_dir():
     raise UserError(f"{workdir}: no such run directory")
-  step, meta = ckpt.read_meta(workdir, which)
-  cfg = config_from_dict(meta["config"])
-  graphdef, template, _, _ = init_state(cfg, 3 * len(meta["features"]["skeleton"]["joint_names"]), len(meta["id_map"]))
-  manager = ckpt.create_manager(workdir, read_only=True)
+  manager = ckpt.open_run(workdir)
   try:
-    state, meta = ckpt.restore(manager, step, template)
+    step = ckpt.resolve_step(manager, which, workdir)
+    meta = ckpt.step_meta(manager, step)
+    cfg = config_from_dict(meta["config"])
+    dim = 3 * len(meta["features"]["skeleton"]["joint_names"])
+    graphdef, template, _, _ = init_state(cfg, dim, len(meta["id_map"]))
+    state = ckpt.restore(manager, step, template)
   finally:
     manager.close()
   return graphdef, state["params"], meta

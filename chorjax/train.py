@@ -243,9 +243,10 @@ def _train_locked(cfg: Config, workdir: Path, parallel) -> dict:
     start = 0
     if manager.latest_step() is not None:
       start = manager.latest_step()
-      state, meta = ckpt.restore(manager, start, state, None if parallel is None else parallel.replicated)
+      meta = ckpt.step_meta(manager, start)
       if meta["id_map"] != ds.id_map:
         raise UserError(f"{workdir}: its checkpoints were trained on other takes ({list(meta['id_map'])[:3]}...)")
+      state = ckpt.restore(manager, start, state, None if parallel is None else parallel.replicated)
     if is_main:
       _write_config(workdir, cfg)
       _truncate_metrics(workdir / "metrics.jsonl", start)
