@@ -139,7 +139,7 @@ def _sample(args) -> int:
   import numpy as np
   from chorjax.config import config_from_dict
   from chorjax.data.features import Features
-  from chorjax.sample import generate, load_run, motion_weight_vector, read_prime
+  from chorjax.sample import generate, load_run, motion_weight_vector, read_prime, sampling_settings
 
   out, suffix = _output(args.output, (".csv", ".npz", ".bvh", ".html"))
   paths = _sample_paths(out, args.num)
@@ -152,19 +152,15 @@ def _sample(args) -> int:
   if args.prime:
     phrase = read_prime(args.prime, features, config_from_dict(meta["config"]).data)
     prime = jnp.tile(jnp.asarray(phrase)[None], (args.num, 1, 1))
-  run_sample = meta["config"]["sample"]
-  pi_t = run_sample["pi_temperature"] if args.pi_temperature is None else args.pi_temperature
-  sigma_t = run_sample["sigma_temperature"] if args.sigma_temperature is None else args.sigma_temperature
-  greedy = args.greedy or run_sample["greedy"]
+  sampling = sampling_settings(meta, args.pi_temperature, args.sigma_temperature, True if args.greedy else None)
   z = generate(graphdef, params, w, jax.random.key(args.seed), num_frames=args.frames, prime_BxPxD=prime,
-               pi_temperature=pi_t, sigma_temperature=sigma_t, greedy=greedy)
+               **sampling)
   pos = np.asarray(features.decode(z))
   if phrase is not None:  # the phrase the dancer gave, then the machine's continuation
     pos = np.concatenate([np.tile(np.asarray(features.decode(phrase))[None], (args.num, 1, 1, 1)), pos], axis=1)
   fps = meta["config"]["data"]["fps"]
   settings = {"workdir": str(args.workdir), "checkpoint_step": meta["step"], "frames": args.frames,
-              "motion": args.motion, "mix": args.mix, "prime": args.prime, "seed": args.seed,
-              "pi_temperature": pi_t, "sigma_temperature": sigma_t, "greedy": greedy}
+              "motion": args.motion, "mix": args.mix, "prime": args.prime, "seed": args.seed, **sampling}
   sk, up = features.skeleton, features.up_axis
   written = _write_sample(out, paths, pos, fps, sk, up, settings)
   print("wrote " + ", ".join(map(str, written)))

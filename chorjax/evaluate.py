@@ -16,7 +16,7 @@ from chorjax.data.dataset import conform, eval_windows, read_takes
 from chorjax.data.transforms import to_y_up
 from chorjax.data.features import Features
 from chorjax.errors import UserError, atomic_write
-from chorjax.sample import generate, load_run
+from chorjax.sample import generate, load_run, sampling_settings
 from chorjax.train import make_eval_step
 
 
@@ -38,10 +38,7 @@ def evaluate(workdir, data: Sequence[str], *, frames: int = 10_000, num: int = 4
   graphdef, params, meta = load_run(workdir, checkpoint)
   cfg, feats = meta["config"], Features.from_dict(meta["features"])
   sk, fps = feats.skeleton, float(cfg["data"]["fps"])
-  s = cfg["sample"]
-  pi_t = s["pi_temperature"] if pi_temperature is None else pi_temperature
-  sigma_t = s["sigma_temperature"] if sigma_temperature is None else sigma_temperature
-  greedy = s["greedy"] if greedy is None else greedy
+  sampling = sampling_settings(meta, pi_temperature, sigma_temperature, greedy)
   data_cfg = config_from_dict(cfg).data
   real = conform(read_takes(list(data), data_cfg), data_cfg)  # read exactly as training read its takes
   if not real:
@@ -60,8 +57,7 @@ def evaluate(workdir, data: Sequence[str], *, frames: int = 10_000, num: int = 4
   # generation
   ids = [meta["id_map"][m.name] for m in train] or [0]
   w = jax.nn.one_hot(jnp.array([ids[k % len(ids)] for k in range(num)]), len(meta["id_map"]))
-  z = generate(graphdef, params, w, jax.random.key(seed), num_frames=frames, pi_temperature=pi_t,
-               sigma_temperature=sigma_t, greedy=bool(greedy))
+  z = generate(graphdef, params, w, jax.random.key(seed), num_frames=frames, **sampling)
   y_up = lambda pos: np.asarray(to_y_up(pos, feats.up_axis))  # data space -> y-up: what the metrics measure
   gen = [y_up(p) for p in np.asarray(feats.decode(z))]
   real_c = [y_up(m.positions) for m in real]
@@ -85,7 +81,7 @@ def evaluate(workdir, data: Sequence[str], *, frames: int = 10_000, num: int = 4
   ref = M.fid_k(kin(real_w), kin(train_w))
   return {
       "run": str(workdir), "checkpoint_step": meta["step"], "frames": frames, "num": num, "data": list(data),
-      "sampling": {"pi_temperature": pi_t, "sigma_temperature": sigma_t, "greedy": bool(greedy), "seed": seed},
+      "sampling": {**sampling, "seed": seed},
       "loss_kind": "nll" if cfg["model"]["head"] == "mdn" else "mse", "heldout_loss": loss,
       "freeze_ratio_first_1000": float(np.mean([M.freeze_ratio(g[:last + 1], data_speed) for g in gen])),
       "freeze_ratio_last_1000": float(np.mean([M.freeze_ratio(g[-last - 1:], data_speed) for g in gen])),

@@ -89,6 +89,14 @@ def motion_weight_vector(num_motions: int, motion: Optional[int] = None, mix: Op
   return np.eye(num_motions, dtype=np.float32)[motion]
 
 
+def sampling_settings(meta: dict, pi_temperature=None, sigma_temperature=None, greedy=None) -> dict:
+  """Sampling controls: the ones given, else the run's ``[sample]`` config (saved in ``meta``)."""
+  run = meta["config"]["sample"]
+  return {"pi_temperature": run["pi_temperature"] if pi_temperature is None else pi_temperature,
+          "sigma_temperature": run["sigma_temperature"] if sigma_temperature is None else sigma_temperature,
+          "greedy": bool(run["greedy"] if greedy is None else greedy)}
+
+
 def load_run(workdir, which: str | int = "latest"):
   """``(graphdef, params, meta)`` of a run's checkpoint (``latest``, ``best`` or a step number)."""
   from pathlib import Path
