@@ -232,8 +232,8 @@ def _render(args) -> int:
 
 
 def _eval(args) -> int:
-  from chorjax.evaluate import evaluate, write_metrics
-  out = Path(args.output) if args.output else Path(args.workdir) / "eval" / "metrics.json"
+  from chorjax.evaluate import evaluate, metrics_path, write_metrics
+  out = Path(args.output) if args.output else metrics_path(args.workdir)
   _refuse_existing([out], args.force)
   result = evaluate(args.workdir, args.data, frames=args.frames, num=args.num, checkpoint=args.checkpoint,
                     seed=args.seed, pi_temperature=args.pi_temperature, sigma_temperature=args.sigma_temperature,

@@ -99,5 +99,10 @@ def evaluate(workdir, data: Sequence[str], *, frames: int = 10_000, num: int = 4
   }
 
 
+def metrics_path(workdir) -> Path:
+  """Where a run's evaluation lives by default (what `chorjax compare` and sweeps read)."""
+  return Path(workdir) / "eval" / "metrics.json"
+
+
 def write_metrics(result: dict, path) -> Path:
   return atomic_write(path, lambda p: p.write_text(json.dumps(result, indent=2)))

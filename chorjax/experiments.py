@@ -80,13 +80,14 @@ def sweep_points(sweep: dict) -> list[tuple[str, list[str]]]:
 
 def is_finished(workdir: Path, num_steps: int, with_eval: bool) -> bool:
   from chorjax import checkpoint as ckpt
+  from chorjax.evaluate import metrics_path
   done = (ckpt.checkpoint_dir(workdir) / str(num_steps)).is_dir()
-  return done and (not with_eval or (workdir / "eval" / "metrics.json").exists())
+  return done and (not with_eval or metrics_path(workdir).exists())
 
 
 def run_sweep(path, log=print) -> list[Path]:
   """Trains (and evaluates) every point of a sweep; returns the point workdirs."""
-  from chorjax.evaluate import evaluate, write_metrics
+  from chorjax.evaluate import evaluate, metrics_path, write_metrics
   from chorjax.train import train_and_evaluate
 
   sweep = load_sweep(path)
@@ -104,7 +105,7 @@ def run_sweep(path, log=print) -> list[Path]:
     if ev:
       log(f"{name}: evaluating")
       kw = {k: v for k, v in ev.items() if k != "data"}
-      write_metrics(evaluate(workdir, ev.get("data", [cfg.data.dataset]), **kw), workdir / "eval" / "metrics.json")
+      write_metrics(evaluate(workdir, ev.get("data", [cfg.data.dataset]), **kw), metrics_path(workdir))
   return workdirs
 
 
@@ -138,7 +139,8 @@ def machine_info() -> str:
 
 
 def _read_run(workdir: Path) -> dict:
-  cfg_path, ev_path = workdir / "config.json", workdir / "eval" / "metrics.json"
+  from chorjax.evaluate import metrics_path
+  cfg_path, ev_path = workdir / "config.json", metrics_path(workdir)
   if not cfg_path.exists():
     raise UserError(f"{workdir}: not a run directory (no config.json)")
   if not ev_path.exists():
