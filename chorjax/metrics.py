@@ -18,13 +18,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from chorjax.data.motion import Skeleton, bone_length_cv
+from chorjax.data.motion import Skeleton, bone_length_cv, bone_lengths
 
 
 def body_size(pos_TxJx3, skeleton: Skeleton) -> float:
   """Root->first foot plus root->highest end joint, along the bones (mean bone lengths)."""
-  p, c = np.array(skeleton.bones).T
-  length = dict(zip(c.tolist(), np.linalg.norm(pos_TxJx3[:, c] - pos_TxJx3[:, p], axis=-1).mean(0)))
+  children = [c for _, c in skeleton.bones]
+  length = dict(zip(children, bone_lengths(pos_TxJx3, skeleton).mean(0)))
 
   def chain(j):
     total = 0.0

@@ -113,8 +113,13 @@ class Motion:
 
   def bone_lengths(self) -> np.ndarray:
     """``[T, num_bones]`` lengths of the skeleton's bones."""
-    p, c = np.array(self.skeleton.bones).T
-    return np.linalg.norm(self.positions[:, c] - self.positions[:, p], axis=-1)
+    return bone_lengths(self.positions, self.skeleton)
+
+
+def bone_lengths(positions_TxJx3, skeleton: Skeleton) -> np.ndarray:
+  """``[T, num_bones]`` lengths of the skeleton's bones, in ``skeleton.bones`` order."""
+  p, c = np.array(skeleton.bones).T
+  return np.linalg.norm(positions_TxJx3[:, c] - positions_TxJx3[:, p], axis=-1)
 
 
 def bone_length_cv(positions: np.ndarray, skeleton: Skeleton, eps: Optional[float] = 1e-9) -> np.ndarray:
@@ -123,6 +128,5 @@ def bone_length_cv(positions: np.ndarray, skeleton: Skeleton, eps: Optional[floa
   The one-number summary chorjax reports ("bone CV") is the MEDIAN over bones of this vector, a
   typical bone; its maximum is reported beside it (marker-based elbows and shoulders wobble most).
   """
-  p, c = np.array(skeleton.bones).T
-  lengths = np.linalg.norm(positions[:, c] - positions[:, p], axis=-1)
+  lengths = bone_lengths(positions, skeleton)
   return lengths.std(axis=0) / np.maximum(lengths.mean(axis=0), eps)
