@@ -48,6 +48,17 @@ def atomic_write(path: str | os.PathLike, write: Callable[[Path], None], *, over
   return path
 
 
+def read_text(path, kind: str, errors: str = "strict") -> str:
+  """A text file's contents, or a one-line ``UserError`` naming the file (``kind``: e.g. "BVH")."""
+  path = Path(path)
+  try:
+    return path.read_text(encoding="utf-8", errors=errors)
+  except FileNotFoundError:
+    raise UserError(f"{path}: no such {kind} file") from None
+  except (UnicodeDecodeError, IsADirectoryError, PermissionError) as e:
+    raise UserError(f"{path}: cannot read as a {kind} text file ({type(e).__name__})") from None
+
+
 def first_non_number(cells) -> int | None:
   """Index of the first cell that does not parse as a float (None if all do): for line errors."""
   for i, c in enumerate(cells):

@@ -249,3 +249,11 @@ def test_scaled_copy_and_dropping_a_leading_frame(shared_data):
   dropped = read_bvh(src / "131_01.bvh", drop_first_frame=True)  # a converter's leading T-pose frame
   assert dropped.num_frames == a.num_frames - 1
   np.testing.assert_array_equal(dropped.positions, a.positions[1:])
+
+
+def test_unreadable_motion_files_are_one_line_errors(shared_data, tmp_path):
+  (tmp_path / "d.bvh").mkdir()
+  with pytest.raises(UserError, match=r"d\.bvh: cannot read as a BVH text file \(IsADirectoryError\)"):
+    read_bvh(tmp_path / "d.bvh")
+  with pytest.raises(UserError, match=r"missing\.amc: no such AMC file"):
+    read_amc(tmp_path / "missing.amc", shared_data / "asfamc" / "cmu131" / "mjackson.asf")

@@ -22,7 +22,7 @@ import numpy as np
 from chorjax.data.bvh import _guess_feet, _guess_twins
 from chorjax.data.motion import Motion, Skeleton
 from chorjax.data.rotations import euler_to_matrix
-from chorjax.errors import UserError, first_non_number
+from chorjax.errors import UserError, first_non_number, read_text
 
 
 class Asf:
@@ -44,10 +44,7 @@ def _fixed_axes_matrix(angles, order: str, degrees: bool):
 
 def read_asf(path) -> Asf:
   path = Path(path)
-  try:
-    lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
-  except FileNotFoundError:
-    raise UserError(f"{path}: no such ASF file") from None
+  lines = read_text(path, "ASF", errors="replace").splitlines()
   asf, section, bone = Asf(path), None, None
   for lineno, raw in enumerate(lines, start=1):
     line = raw.split("#")[0].strip()
@@ -131,10 +128,7 @@ def read_amc(path, asf_path=None, *, fps: float = 120.0, scale: float = 1.0, uni
   """Reads an AMC with its ASF skeleton into joint positions (root + every bone's end)."""
   path = Path(path)
   asf = read_asf(asf_path or find_asf(path))
-  try:
-    lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
-  except FileNotFoundError:
-    raise UserError(f"{path}: no such AMC file") from None
+  lines = read_text(path, "AMC", errors="replace").splitlines()
   frames, current = [], None
   for lineno, raw in enumerate(lines, start=1):
     line = raw.strip()

@@ -22,7 +22,7 @@ import numpy as np
 
 from chorjax.data.motion import Motion, Skeleton
 from chorjax.data.rotations import best_fit_rotation, euler_to_matrix, matrix_to_euler, swing
-from chorjax.errors import UserError, atomic_write, first_non_number
+from chorjax.errors import UserError, atomic_write, first_non_number, read_text
 
 _ROT = {"xrotation": "x", "yrotation": "y", "zrotation": "z"}
 _POS = {"xposition": 0, "yposition": 1, "zposition": 2}
@@ -153,10 +153,7 @@ def read_bvh(path, *, drop_first_frame: bool = False, scale: float = 1.0, units:
     up_axis: the file's up axis (BVH is normally y-up).
   """
   path = Path(path)
-  try:
-    text = path.read_text(encoding="utf-8", errors="replace")
-  except FileNotFoundError:
-    raise UserError(f"{path}: no such file") from None
+  text = read_text(path, "BVH", errors="replace")
   joints = _parse_hierarchy(path, text)
   num_channels = sum(len(j.channels) for j in joints)
   data, frame_time = _parse_motion(path, text, num_channels)

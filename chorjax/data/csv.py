@@ -12,7 +12,7 @@ import numpy as np
 
 from chorjax.data.motion import Motion, Skeleton
 from chorjax.data.skeletons import MPII16
-from chorjax.errors import UserError, atomic_write, first_non_number
+from chorjax.errors import UserError, atomic_write, first_non_number, read_text
 
 
 def read_csv(path, skeleton: Skeleton = MPII16, fps: float = 30.0, up_axis: str = "-y",
@@ -34,12 +34,7 @@ def read_csv(path, skeleton: Skeleton = MPII16, fps: float = 30.0, up_axis: str 
       non-numeric cell, or a NaN/Inf value.
   """
   path = Path(path)
-  try:
-    text = path.read_text(encoding="utf-8", errors="strict")
-  except FileNotFoundError:
-    raise UserError(f"{path}: no such file") from None
-  except (UnicodeDecodeError, IsADirectoryError, PermissionError) as e:
-    raise UserError(f"{path}: cannot read as a CSV text file ({type(e).__name__})") from None
+  text = read_text(path, "CSV")
   want = 3 * skeleton.num_joints
   rows = []
   for lineno, line in enumerate(text.splitlines(), start=1):
