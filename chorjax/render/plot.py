@@ -20,6 +20,16 @@ def require_matplotlib():
     raise UserError("this needs matplotlib: pip install 'chorjax[viz]'") from None
 
 
+def save_figure(fig, path) -> Path:
+  """Writes a matplotlib figure atomically (format from the suffix, PNG by default) and closes it."""
+  import matplotlib.pyplot as plt
+  fmt = (Path(path).suffix or ".png").lstrip(".")
+  try:
+    return atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=80, format=fmt))
+  finally:
+    plt.close(fig)
+
+
 def plot_trajectories(motion: Motion, path, split: int = 200) -> Path:
   """Plots x, y, z of the pelvis and end joints over time: frames [0, split) and [split, T).
 
@@ -43,7 +53,4 @@ def plot_trajectories(motion: Motion, path, split: int = 200) -> Path:
   axes[0, 0].legend(fontsize=7, loc="best")
   fig.suptitle(f"{motion.name} ({motion.fps:g} fps, up axis {motion.up_axis}, {motion.units})")
   fig.tight_layout()
-  suffix = Path(path).suffix or ".png"
-  out = atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=80, format=suffix.lstrip(".")))
-  plt.close(fig)
-  return out
+  return save_figure(fig, path)
