@@ -259,6 +259,7 @@ def write_bvh(motion: Motion, path, *, exact: bool = True, order: str = "zyx", o
       lines.extend([f"{ind}End Site", f"{ind}{{", f"{ind}  OFFSET {_fmt(offset_of(k))}", f"{ind}}}"])
       return
     kind = "ROOT" if sk.parents[k] < 0 else "JOINT"
+    with_channels.append(k)  # MOTION columns follow the order channels are declared in
     lines.extend([f"{ind}{kind} {sk.joint_names[k]}", f"{ind}{{", f"{ind}  OFFSET {_fmt(offset_of(k))}"])
     six = sk.parents[k] < 0 or exact
     lines.append(f"{ind}  CHANNELS {6 if six else 3} " + ("Xposition Yposition Zposition " if six else "") + rot_names)
@@ -268,9 +269,10 @@ def write_bvh(motion: Motion, path, *, exact: bool = True, order: str = "zyx", o
       lines.extend([f"{ind}  End Site", f"{ind}  {{", f"{ind}    OFFSET 0 0 0", f"{ind}  }}"])
     lines.append(f"{ind}}}")
 
+  with_channels = []
   emit(sk.root, 0)
   cols = []
-  for k in _emitted_order(sk, children, exact):
+  for k in with_channels:
     parent = sk.parents[k]
     parent_r = np.broadcast_to(np.eye(3), (t, 3, 3)) if parent < 0 else glob[:, parent]
     local_r = np.swapaxes(parent_r, -1, -2) @ glob[:, k]
@@ -284,18 +286,6 @@ def write_bvh(motion: Motion, path, *, exact: bool = True, order: str = "zyx", o
   body = "\n".join(" ".join(f"{v:.6f}" for v in row) for row in table)
   text = "\n".join(lines) + "\n" + body + "\n"
   return atomic_write(path, lambda p: p.write_text(text), overwrite=overwrite)
-
-
-def _emitted_order(sk, children, exact):
-  out = []
-
-  def walk(k):
-    if children[k] or sk.parents[k] < 0 or exact:
-      out.append(k)
-    for c in children[k]:
-      walk(c)
-  walk(sk.root)
-  return out
 
 
 def _fmt(v):
