@@ -179,25 +179,26 @@ def _fk(asf: Asf, frames, path):
         vals[f] = fr[name]
     return vals
 
+  def rotation_of(vals_TxN, channels):
+    """The rotation of a frame's rx/ry/rz values, applied in the listed order (identity if none)."""
+    rot = [(k, ch[1]) for k, ch in enumerate(channels) if ch in ("rx", "ry", "rz")]
+    if not rot:
+      return np.broadcast_to(np.eye(3), (t, 3, 3))
+    return _fixed_axes_matrix(vals_TxN[:, [k for k, _ in rot]], "".join(a for _, a in rot), asf.degrees)
+
   root_vals = column("root", asf.root_order)
   trans = np.zeros((t, 3))
-  rot_axes = []
   for k, ch in enumerate(asf.root_order):
-    if ch.startswith("t"):
+    if ch in ("tx", "ty", "tz"):
       trans[:, "xyz".index(ch[1])] = root_vals[:, k]
-    elif ch.startswith("r"):
-      rot_axes.append((k, ch[1]))
   c_root = _fixed_axes_matrix(asf.root_orientation, asf.root_axis, asf.degrees)
-  m_root = _fixed_axes_matrix(root_vals[:, [k for k, _ in rot_axes]], "".join(a for _, a in rot_axes), asf.degrees)
+  m_root = rotation_of(root_vals, asf.root_order)
   pos[:, 0] = asf.root_position + trans
   glob[:, 0] = c_root @ m_root @ c_root.T
   for name in order:
     b, i, p = asf.bones[name], index[name], index[asf.parent[name]]
-    c = _fixed_axes_matrix(b["axis"], b["axis_order"], True if asf.degrees else False)
-    vals = column(name, b["dof"])
-    r_dofs = [(k, d[1]) for k, d in enumerate(b["dof"]) if d in ("rx", "ry", "rz")]
-    m = _fixed_axes_matrix(vals[:, [k for k, _ in r_dofs]], "".join(a for _, a in r_dofs), asf.degrees) \
-        if r_dofs else np.broadcast_to(np.eye(3), (t, 3, 3))
+    c = _fixed_axes_matrix(b["axis"], b["axis_order"], asf.degrees)
+    m = rotation_of(column(name, b["dof"]), b["dof"])
     glob[:, i] = glob[:, p] @ c @ m @ c.T
     pos[:, i] = pos[:, p] + b["length"] * np.einsum("tij,j->ti", glob[:, i], b["direction"])
   return pos, tuple(names), parents
