@@ -79,16 +79,6 @@ def open_run(workdir) -> ocp.CheckpointManager:
   return create_manager(workdir, read_only=True)
 
 
-def read_meta(workdir, which: str | int = "latest") -> tuple[int, dict]:
-  """``(step, meta)`` of a checkpoint chosen by step number, ``latest`` or ``best``."""
-  manager = open_run(workdir)
-  try:
-    step = resolve_step(manager, which, workdir)
-    return step, step_meta(manager, step)
-  finally:
-    manager.close()
-
-
 def resolve_step(manager, which, workdir) -> int:
   steps = manager.all_steps()
   if not steps:

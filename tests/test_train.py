@@ -143,8 +143,9 @@ def test_run_directory_holds_config_metrics_events_checkpoints_and_sample(tmp_pa
   assert images["sample/end_joints"][0][1][:4] == b"\x89PNG"  # a generated sample beside a real one
   assert [s for s, _ in scalars["train/loss"]] == [2, 3, 4, 6]
   assert scalars["val/val_loss"][-1][1] == pytest.approx(rows[-1]["val_loss"])
-  step, meta = ckpt.read_meta(tmp_path, "latest")
-  assert step == 6
+  from chorjax.sample import load_run
+  meta = load_run(tmp_path, "latest")[2]
+  assert meta["step"] == 6
   assert set(meta) >= {"config", "features", "id_map", "rng", "sampler", "step"}
   assert len(meta["features"]["mean"]) == 48 and meta["sampler"]["position"] == 6
   assert Path(summary["samples"]["csv"]).exists() and Path(summary["samples"]["html"]).exists()

@@ -46,11 +46,6 @@ def resolve_files(spec: str) -> list[Path]:
   raise UserError(f"{spec}: no such file, folder or bundled dataset{hint}")
 
 
-def read_take(path: Path, *, skeleton: str = "mpii16", fps: float = 30.0, up_axis: str = "-y") -> Motion:
-  """Reads one take of any supported format (a multi-dancer ``.npz`` sample: the first dancer)."""
-  return read_motions(path, skeleton=skeleton, fps=fps, up_axis=up_axis)[0]
-
-
 def read_motions(path: Path, *, skeleton: str = "mpii16", fps: float = 30.0, up_axis: str = "-y",
                  asf=None, amc_fps: float = 120.0) -> list[Motion]:
   """Reads every motion in a file: one for a take, K for a sample ``.npz`` of K dancers.
