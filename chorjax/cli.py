@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 from chorjax.errors import UserError
+from chorjax.runtime import keep_freed_memory
 
 
 def _data_info(args) -> int:
@@ -376,6 +377,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+  keep_freed_memory()  # before the first JAX computation; see chorjax/runtime.py
   parser = build_parser()
   args, extra = parser.parse_known_args(argv)
   # KEY=VALUE overrides may also follow options (`train c.toml --workdir w model.cell=gru`).
