@@ -148,13 +148,15 @@ def main(argv=None):
   ap.add_argument("--quick", action="store_true", help="fewer repetitions (< 5 minutes on 2 cores)")
   ap.add_argument("--out", default=str(HERE / "results.json"))
   args = ap.parse_args(argv)
+  from chorjax.runtime import keep_freed_memory
+  tuned = keep_freed_memory()  # as the chorjax command does; the PyTorch peer in this process gains too
   import torch
   torch.set_num_threads(os.cpu_count() or 1)
   reps = 5 if args.quick else 15
   from chorjax.experiments import machine_info
   res = {"machine": {"description": machine_info(), "platform": platform.platform(), "cpus": os.cpu_count(),
                      "python": platform.python_version(), "jax": jax.__version__, "torch": torch.__version__,
-                     "device": str(jax.devices()[0])},
+                     "device": str(jax.devices()[0]), "glibc_keep_freed_memory": tuned},
          "config": {"batch": B, "seq": T, "features": D, "hidden": H, "layers": L, "mixtures": K, "reps": reps},
          "train_step_s": {}, "compile_s": {}, "ratio_torch_over_chorjax": {}, "sample_1000_s": {}}
   peak = matmul_peak()

@@ -199,3 +199,72 @@ def test_golden_one_step_loss(head):
   m = create_model(cfg.model, 48, ds.num_motions, seed=0)
   loss, _ = m.loss(m(jnp.asarray(batch["inputs"]), motion_weights(batch["motion_ids"], 10)), batch["targets"])
   assert float(loss) == pytest.approx(GOLDEN[head], rel=1e-5)
+
+
+@pytest.fixture(scope="module")
+def real_batch():
+  """Windows of the bundled CMU subject 94 dance, normalized as training sees them."""
+  from chorjax.data.dataset import WindowSampler, load_dataset
+  cfg = tiny_config("data.seq_length=40")
+  ds = load_dataset(cfg.data)
+  return WindowSampler(ds.train, 40, 6, seed=0).batch(0), ds.num_motions
+
+
+def _close(a, b, tol=1e-5):
+  """Equal to ``tol`` relative to the largest magnitude (leaf by leaf)."""
+  for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)):
+    np.testing.assert_allclose(x, y, rtol=0, atol=tol * max(1.0, float(jnp.max(jnp.abs(y)))))
+
+
+@pytest.mark.parametrize("cell_name", ["lstm", "lnlstm"])
+def test_fused_layer_equals_the_plain_scan_in_outputs_and_gradients(real_batch, cell_name):
+  from chorjax.models.cells import CELLS
+  from chorjax.models.fused import lnlstm_scan, lstm_scan
+  from flax import nnx
+  batch, _ = real_batch
+  cls = CELLS[cell_name]
+  cell = cls(48, 32, rngs=nnx.Rngs(params=1))
+  xp = cell.project(jnp.swapaxes(jnp.asarray(batch["inputs"]), 0, 1))  # [T, B, 4H] of real frames
+  k = jax.random.split(jax.random.key(2), 8)
+  carry = (0.5 * jax.random.normal(k[0], (6, 32)), 0.5 * jax.random.normal(k[1], (6, 32)))
+  probe_h, probe_c = jax.random.normal(k[2], (40, 6, 32)), jax.random.normal(k[3], (6, 32))
+  params = {"w_h": cell.w_h[...]}
+  if cell_name == "lnlstm":  # gains and bias away from their initial values, so their gradients matter
+    params.update(gain_h=1 + 0.3 * jax.random.normal(k[4], (4, 32)), gain_c=1 + 0.3 * jax.random.normal(k[5], (32,)),
+                  bias_c=0.3 * jax.random.normal(k[6], (32,)))
+    fused = lambda p, xp, c0, h0: lnlstm_scan(p["w_h"], p["gain_h"], p["gain_c"], p["bias_c"], xp, c0, h0)
+  else:
+    fused = lambda p, xp, c0, h0: lstm_scan(p["w_h"], xp, c0, h0)
+
+  def plain(p, xp, c0, h0):  # lax.scan of the cell's step, differentiated by JAX
+    small = {k: v for k, v in p.items() if k != "w_h"}
+    return jax.lax.scan(lambda carry, xp_t: cls.post(small, xp_t, carry[1] @ p["w_h"], carry), (c0, h0), xp)
+
+  def objective(scan, p, xp, carry):
+    (c, h), hs = scan(p, xp, *carry)
+    return jnp.sum(hs * probe_h) + jnp.sum(c * probe_c) + jnp.sum(h), hs
+
+  grads = lambda scan: jax.value_and_grad(objective, argnums=(1, 2, 3), has_aux=True)(scan, params, xp, carry)
+  got, want = grads(fused), grads(plain)
+  _close(got[0], want[0])  # loss and every output frame
+  _close(got[1], want[1])  # gradients for w_h (and the gains), the projections and both initial carries
+  assert all(float(jnp.abs(g).max()) > 0 for g in jax.tree.leaves(got[1]))
+
+
+@pytest.mark.parametrize("cell_name", ["lstm", "lnlstm"])
+def test_model_gradients_through_the_fused_layer_equal_the_plain_scan(real_batch, monkeypatch, cell_name):
+  from chorjax.models.cells import CELLS, _Cell
+  from chorjax.train import _loss_fn
+  from flax import nnx
+  batch, num_motions = real_batch
+  cfg = tiny_config(f"model.cell={cell_name}", "model.head=mdn", "model.num_layers=3", "model.hidden_size=32",
+                    "model.dropout=0.2")
+  graphdef, params = nnx.split(create_model(cfg.model, 48, num_motions, 0), nnx.Param)
+  grad = jax.jit(jax.value_and_grad(lambda p: _loss_fn(graphdef, p, batch, num_motions, jax.random.key(3), 0.01, 0.2),
+                                    has_aux=True))
+  fused = grad(params)
+  monkeypatch.setattr(CELLS[cell_name], "scan", _Cell.scan)  # lax.scan of the step, differentiated by JAX
+  plain = jax.jit(jax.value_and_grad(lambda p: _loss_fn(graphdef, p, batch, num_motions, jax.random.key(3), 0.01, 0.2),
+                                     has_aux=True))(params)
+  _close(fused[0][0], plain[0][0])
+  _close(nnx.to_pure_dict(fused[1]), nnx.to_pure_dict(plain[1]))

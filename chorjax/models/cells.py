@@ -9,9 +9,10 @@ training can be fast:
 * ``post(small, xp_BxG, r_BxG, carry) -> (carry, h_BxH)``: pure elementwise work (gates, layer
   norms), with ``small`` the cell's small parameters.
 
-``step(carry, xp)`` = ``post(small, xp, h @ w_h, carry)`` is what sampling calls once per frame and
-what training scans over a window. (Keeping the elementwise part separate from the one in-loop
-matmul leaves room for a custom backward pass; one was tried and measured, see BENCHMARKS.md.)
+``step(carry, xp)`` = ``post(small, xp, h @ w_h, carry)`` is what sampling calls once per frame.
+``scan(carry, xp_TxBxG)`` runs a whole (time-major) window: ``lax.scan`` of ``step``, except for the
+LSTM and the LN-LSTM, whose training runs through the fused layers of :mod:`chorjax.models.fused`
+(same numbers, faster gradients).
 A carry is a tuple of ``[B, H]`` arrays whose LAST entry is h: ``(c, h)`` for the LSTMs, ``(h,)``
 for the GRU.
 """
@@ -22,19 +23,11 @@ import jax
 import jax.numpy as jnp
 from flax import nnx
 
-_LN_EPS = 1e-5
+from chorjax.models.fused import layer_norm, lnlstm_scan, lnlstm_step, lstm_gates, lstm_scan, lstm_update
 
 
 def _kernel(rngs, shape, init):
   return nnx.Param(init(rngs.params(), shape, jnp.float32))
-
-
-def _layer_norm(x_xGxH, gain_GxH, bias_GxH=None):
-  """Normalizes the last axis (of every gate separately, for ``[..., G, H]`` inputs)."""
-  mean = x_xGxH.mean(-1, keepdims=True)
-  var = jnp.square(x_xGxH - mean).mean(-1, keepdims=True)
-  y = (x_xGxH - mean) * jax.lax.rsqrt(var + _LN_EPS) * gain_GxH
-  return y if bias_GxH is None else y + bias_GxH
 
 
 class _Cell(nnx.Module):
@@ -44,6 +37,10 @@ class _Cell(nnx.Module):
 
   def step(self, carry, xp_BxG):
     return self.post(self.small(), xp_BxG, carry[-1] @ self.w_h[...], carry)
+
+  def scan(self, carry, xp_TxBxG):
+    """``(final carry, h_TxBxH)`` over a time-major window of input projections."""
+    return jax.lax.scan(self.step, carry, xp_TxBxG)
 
 
 class LSTMCell(_Cell):
@@ -62,11 +59,11 @@ class LSTMCell(_Cell):
 
   @staticmethod
   def post(small, xp_Bx4H, r_Bx4H, carry):
-    c, _ = carry
-    i, f, g, o = jnp.split(xp_Bx4H + r_Bx4H, 4, axis=-1)
-    c = jax.nn.sigmoid(f) * c + jax.nn.sigmoid(i) * jnp.tanh(g)
-    h = jax.nn.sigmoid(o) * jnp.tanh(c)
+    c, h = lstm_update(lstm_gates(xp_Bx4H + r_Bx4H), carry[0])
     return (c, h), h
+
+  def scan(self, carry, xp_TxBx4H):
+    return lstm_scan(self.w_h[...], xp_TxBx4H, *carry)
 
 
 class LNLSTMCell(_Cell):
@@ -89,21 +86,18 @@ class LNLSTMCell(_Cell):
 
   def project(self, x):
     z = (x @ self.w_x[...]).reshape(x.shape[:-1] + (4, self.hidden))
-    return _layer_norm(z, self.gain_x[...], self.b[...]).reshape(x.shape[:-1] + (4 * self.hidden,))
+    return layer_norm(z, self.gain_x[...], self.b[...]).reshape(x.shape[:-1] + (4 * self.hidden,))
 
   def small(self):
     return {"gain_h": self.gain_h[...], "gain_c": self.gain_c[...], "bias_c": self.bias_c[...]}
 
   @staticmethod
   def post(small, xp_Bx4H, r_Bx4H, carry):
-    c, _ = carry
-    hidden = small["gain_c"].shape[-1]
-    zh = r_Bx4H.reshape(r_Bx4H.shape[:-1] + (4, hidden))
-    z = xp_Bx4H.reshape(zh.shape) + _layer_norm(zh, small["gain_h"])
-    i, f, g, o = (z[..., k, :] for k in range(4))
-    c = jax.nn.sigmoid(f) * c + jax.nn.sigmoid(i) * jnp.tanh(g)
-    h = jax.nn.sigmoid(o) * jnp.tanh(_layer_norm(c, small["gain_c"], small["bias_c"]))
+    c, h, _ = lnlstm_step(small["gain_h"], small["gain_c"], small["bias_c"], xp_Bx4H, r_Bx4H, carry[0])
     return (c, h), h
+
+  def scan(self, carry, xp_TxBx4H):
+    return lnlstm_scan(self.w_h[...], self.gain_h[...], self.gain_c[...], self.bias_c[...], xp_TxBx4H, *carry)
 
 
 class GRUCell(_Cell):

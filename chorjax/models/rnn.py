@@ -49,19 +49,17 @@ class RecurrentCore(nnx.Module):
     """Runs the stack over a window: ``([B, T, H] top-layer outputs, final carry)``.
 
     Dropout (when ``dropout_key`` is given and the rate is > 0) drops the same units of each
-    layer's output at every time step.
+    layer's output at every time step. Inside, the window is time-major (one transpose in, one out).
     """
     new_carry = []
-    inp = x_BxTxD
+    inp = jnp.swapaxes(x_BxTxD, 0, 1)
     for l, cell in enumerate(self.cells):
-      xp_TxBxG = jnp.swapaxes(cell.project(inp), 0, 1)  # one big matmul, outside the time loop
-      c, h_TxBxH = jax.lax.scan(cell.step, carry[l], xp_TxBxG)
+      c, inp = cell.scan(carry[l], cell.project(inp))  # one big matmul, outside the time loop
       new_carry.append(c)
-      inp = jnp.swapaxes(h_TxBxH, 0, 1)
       if dropout_key is not None and self.dropout > 0:
-        mask = dropout_mask(jax.random.fold_in(dropout_key, l), (inp.shape[0], 1, self.hidden), self.dropout)
+        mask = dropout_mask(jax.random.fold_in(dropout_key, l), (inp.shape[1], self.hidden), self.dropout)
         inp = inp * mask
-    return inp, tuple(new_carry)
+    return jnp.swapaxes(inp, 0, 1), tuple(new_carry)
 
   def step(self, carry, x_BxD):
     """One frame through every layer: ``(carry, h_BxH)``. No dropout (used for generation)."""

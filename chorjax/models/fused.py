@@ -1,0 +1,167 @@
+"""Fused LSTM and LN-LSTM layers for training: one forward scan and a hand-written backward scan.
+
+``jax.grad`` of a plain ``lax.scan`` over the LSTM step works, but on CPU it is slow in ways that add
+up over ``layers x frames`` loop iterations: the forward loop stores a dozen separate residuals per
+step, and the reverse loop runs many small elementwise kernels and a second, per-step matmul for the
+recurrent weight gradient. :func:`lstm_scan` keeps exactly three stacks (the gate activations, the
+cell state and the output), computes every gate gradient in one elementwise pass, keeps one matmul in
+the reverse loop (``dz @ w_h.T``), and computes the recurrent weight gradient after the loop as one
+large matmul. :func:`lnlstm_scan` does the same for the layer-normalized LSTM, whose layer-norm gains
+also get their gradients after the loop. Tests check it against the straightforward scan (outputs and gradients to 1e-5);
+BENCHMARKS.md has the timings.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+LN_EPS = 1e-5
+
+
+def normalize(x):
+  """``((x - mean) / std, 1 / std)`` over the last axis."""
+  mean = x.mean(-1, keepdims=True)
+  rstd = jax.lax.rsqrt(jnp.square(x - mean).mean(-1, keepdims=True) + LN_EPS)
+  return (x - mean) * rstd, rstd
+
+
+def layer_norm(x, gain, bias=None):
+  """Layer norm over the last axis (of every gate separately, for ``[..., G, H]`` inputs)."""
+  y = normalize(x)[0] * gain
+  return y if bias is None else y + bias
+
+
+def _normalize_bwd(dn, n, rstd):
+  """The gradient of :func:`normalize`'s input from the gradient of its output ``n``."""
+  return rstd * (dn - dn.mean(-1, keepdims=True) - n * (dn * n).mean(-1, keepdims=True))
+
+
+def lstm_gates(z_Bx4H):
+  """``[sigmoid(i), sigmoid(f), tanh(g), sigmoid(o)]`` of the pre-activations, in one elementwise pass
+  (``tanh(x) = 2 sigmoid(2x) - 1``)."""
+  hidden = z_Bx4H.shape[-1] // 4
+  m = jnp.concatenate([jnp.ones((2 * hidden,), z_Bx4H.dtype), jnp.full((hidden,), 2.0, z_Bx4H.dtype),
+                       jnp.ones((hidden,), z_Bx4H.dtype)])
+  return jax.nn.sigmoid(z_Bx4H * m) * m - (m - 1.0)
+
+
+def lstm_update(a_Bx4H, c_BxH):
+  """The new ``(c, h)`` from gate activations and the previous cell state."""
+  i, f, g, o = jnp.split(a_Bx4H, 4, axis=-1)
+  c = f * c_BxH + i * g
+  return c, o * jnp.tanh(c)
+
+
+def _forward(w_h, xp_TxBx4H, c0, h0):
+  def body(carry, xp_t):
+    c, h = carry
+    a = lstm_gates(xp_t + h @ w_h)
+    c, h = lstm_update(a, c)
+    return (c, h), (h, c, a)
+
+  return jax.lax.scan(body, (c0, h0), xp_TxBx4H)
+
+
+@jax.custom_vjp
+def lstm_scan(w_h, xp_TxBx4H, c0, h0):
+  """Runs an LSTM over precomputed input projections ``xp = x @ w_x + b`` (time-major):
+  ``((c_T, h_T), h_TxBxH)``."""
+  carry, (hs, _, _) = _forward(w_h, xp_TxBx4H, c0, h0)
+  return carry, hs
+
+
+def _lstm_scan_fwd(w_h, xp_TxBx4H, c0, h0):
+  carry, (hs, cs, acts) = _forward(w_h, xp_TxBx4H, c0, h0)
+  return (carry, hs), (w_h, c0, h0, hs, cs, acts)
+
+
+def _lstm_scan_bwd(res, cotangents):
+  w_h, c0, h0, hs, cs, acts = res
+  (dc_last, dh_last), dhs = cotangents
+  w_hT = w_h.T
+  c_prev = jnp.concatenate([c0[None], cs[:-1]], 0)
+
+  def body(carry, inputs):
+    dc_next, dh_next = carry
+    dh_out, a, c, cp = inputs
+    i, f, g, o = jnp.split(a, 4, axis=-1)
+    tc = jnp.tanh(c)
+    dh = dh_out + dh_next
+    dc = dc_next + dh * o * (1.0 - tc * tc)
+    dz = jnp.concatenate([dc * g * i * (1.0 - i), dc * cp * f * (1.0 - f), dc * i * (1.0 - g * g),
+                          dh * tc * o * (1.0 - o)], -1)
+    return (dc * f, dz @ w_hT), dz
+
+  (dc0, dh0), dz_TxBx4H = jax.lax.scan(body, (dc_last, dh_last), (dhs, acts, cs, c_prev), reverse=True)
+  h_prev = jnp.concatenate([h0[None], hs[:-1]], 0)
+  dw_h = jnp.einsum("tbh,tbg->hg", h_prev, dz_TxBx4H)
+  return dw_h, dz_TxBx4H, dc0, dh0
+
+
+lstm_scan.defvjp(_lstm_scan_fwd, _lstm_scan_bwd)
+
+
+def lnlstm_step(gain_h, gain_c, bias_c, xp_Bx4H, r_Bx4H, c_BxH):
+  """One LN-LSTM step from the input part ``xp`` (already normalized) and ``r = h @ w_h``:
+  ``(c, h, (a, n_h, rstd_h))`` with the gate activations and the normalized ``r`` for the backward."""
+  hidden = c_BxH.shape[-1]
+  n_h, rstd_h = normalize(r_Bx4H.reshape(r_Bx4H.shape[:-1] + (4, hidden)))
+  a = lstm_gates(xp_Bx4H + (n_h * gain_h).reshape(xp_Bx4H.shape))
+  i, f, g, o = jnp.split(a, 4, axis=-1)
+  c = f * c_BxH + i * g
+  return c, o * jnp.tanh(layer_norm(c, gain_c, bias_c)), (a, n_h, rstd_h)
+
+
+def _ln_forward(w_h, gain_h, gain_c, bias_c, xp_TxBx4H, c0, h0):
+  def body(carry, xp_t):
+    c, h = carry
+    c, h, (a, n_h, rstd_h) = lnlstm_step(gain_h, gain_c, bias_c, xp_t, h @ w_h, c)
+    return (c, h), (h, c, a, n_h, rstd_h)
+
+  return jax.lax.scan(body, (c0, h0), xp_TxBx4H)
+
+
+@jax.custom_vjp
+def lnlstm_scan(w_h, gain_h, gain_c, bias_c, xp_TxBx4H, c0, h0):
+  """Runs a layer-normalized LSTM over precomputed (normalized) input parts, time-major:
+  ``((c_T, h_T), h_TxBxH)``."""
+  carry, (hs, *_) = _ln_forward(w_h, gain_h, gain_c, bias_c, xp_TxBx4H, c0, h0)
+  return carry, hs
+
+
+def _lnlstm_scan_fwd(w_h, gain_h, gain_c, bias_c, xp_TxBx4H, c0, h0):
+  carry, (hs, cs, acts, n_hs, rstd_hs) = _ln_forward(w_h, gain_h, gain_c, bias_c, xp_TxBx4H, c0, h0)
+  return (carry, hs), (w_h, gain_h, gain_c, bias_c, c0, h0, hs, cs, acts, n_hs, rstd_hs)
+
+
+def _lnlstm_scan_bwd(res, cotangents):
+  w_h, gain_h, gain_c, bias_c, c0, h0, hs, cs, acts, n_hs, rstd_hs = res
+  (dc_last, dh_last), dhs = cotangents
+  w_hT = w_h.T
+  c_prev = jnp.concatenate([c0[None], cs[:-1]], 0)
+
+  def body(carry, inputs):
+    dc_next, dh_next = carry
+    dh_out, a, c, cp, n_h, rstd_h = inputs
+    i, f, g, o = jnp.split(a, 4, axis=-1)
+    n_c, rstd_c = normalize(c)
+    tl = jnp.tanh(n_c * gain_c + bias_c)
+    dh = dh_out + dh_next
+    dln_c = dh * o * (1.0 - tl * tl)
+    dc = dc_next + _normalize_bwd(dln_c * gain_c, n_c, rstd_c)
+    dz = jnp.concatenate([dc * g * i * (1.0 - i), dc * cp * f * (1.0 - f), dc * i * (1.0 - g * g),
+                          dh * tl * o * (1.0 - o)], -1)
+    dr = _normalize_bwd(dz.reshape(n_h.shape) * gain_h, n_h, rstd_h).reshape(dz.shape)
+    return (dc * f, dr @ w_hT), (dz, dr, dln_c)
+
+  (dc0, dh0), (dz, dr, dln_c) = jax.lax.scan(body, (dc_last, dh_last), (dhs, acts, cs, c_prev, n_hs, rstd_hs),
+                                              reverse=True)
+  h_prev = jnp.concatenate([h0[None], hs[:-1]], 0)
+  dw_h = jnp.einsum("tbh,tbg->hg", h_prev, dr)
+  dgain_h = jnp.einsum("tbkh,tbkh->kh", dz.reshape(n_hs.shape), n_hs)
+  dgain_c = jnp.einsum("tbh,tbh->h", dln_c, normalize(cs)[0])
+  return dw_h, dgain_h, dgain_c, dln_c.sum((0, 1)), dz, dc0, dh0
+
+
+lnlstm_scan.defvjp(_lnlstm_scan_fwd, _lnlstm_scan_bwd)
