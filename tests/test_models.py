@@ -216,42 +216,40 @@ def _close(a, b, tol=1e-5):
     np.testing.assert_allclose(x, y, rtol=0, atol=tol * max(1.0, float(jnp.max(jnp.abs(y)))))
 
 
-@pytest.mark.parametrize("cell_name", ["lstm", "lnlstm"])
+@pytest.mark.parametrize("cell_name", CELLS)
 def test_fused_layer_equals_the_plain_scan_in_outputs_and_gradients(real_batch, cell_name):
-  from chorjax.models.cells import CELLS
-  from chorjax.models.fused import lnlstm_scan, lstm_scan
+  from chorjax.models.cells import CELLS as CELL_CLASSES
+  from chorjax.models.fused import gru_scan, lnlstm_scan, lstm_scan
   from flax import nnx
   batch, _ = real_batch
-  cls = CELLS[cell_name]
+  cls = CELL_CLASSES[cell_name]
   cell = cls(48, 32, rngs=nnx.Rngs(params=1))
-  xp = cell.project(jnp.swapaxes(jnp.asarray(batch["inputs"]), 0, 1))  # [T, B, 4H] of real frames
+  xp = cell.project(jnp.swapaxes(jnp.asarray(batch["inputs"]), 0, 1))  # [T, B, G] of real frames
   k = jax.random.split(jax.random.key(2), 8)
-  carry = (0.5 * jax.random.normal(k[0], (6, 32)), 0.5 * jax.random.normal(k[1], (6, 32)))
+  carry = tuple(0.5 * jax.random.normal(k[j], (6, 32)) for j in range(cls.num_carries))
   probe_h, probe_c = jax.random.normal(k[2], (40, 6, 32)), jax.random.normal(k[3], (6, 32))
-  params = {"w_h": cell.w_h[...]}
-  if cell_name == "lnlstm":  # gains and bias away from their initial values, so their gradients matter
-    params.update(gain_h=1 + 0.3 * jax.random.normal(k[4], (4, 32)), gain_c=1 + 0.3 * jax.random.normal(k[5], (32,)),
-                  bias_c=0.3 * jax.random.normal(k[6], (32,)))
-    fused = lambda p, xp, c0, h0: lnlstm_scan(p["w_h"], p["gain_h"], p["gain_c"], p["bias_c"], xp, c0, h0)
-  else:
-    fused = lambda p, xp, c0, h0: lstm_scan(p["w_h"], xp, c0, h0)
+  # the small parameters away from their initial values, so that their gradients matter
+  params = {"w_h": cell.w_h[...], **{name: v + 0.3 * jax.random.normal(k[4], v.shape) for name, v in cell.small().items()}}
+  fused = {"lstm": lambda p, xp, carry: lstm_scan(p["w_h"], xp, *carry),
+           "lnlstm": lambda p, xp, carry: lnlstm_scan(p["w_h"], p["gain_h"], p["gain_c"], p["bias_c"], xp, *carry),
+           "gru": lambda p, xp, carry: gru_scan(p["w_h"], p["b_h"], xp, *carry)}[cell_name]
 
-  def plain(p, xp, c0, h0):  # lax.scan of the cell's step, differentiated by JAX
+  def plain(p, xp, carry):  # lax.scan of the cell's step, differentiated by JAX
     small = {k: v for k, v in p.items() if k != "w_h"}
-    return jax.lax.scan(lambda carry, xp_t: cls.post(small, xp_t, carry[1] @ p["w_h"], carry), (c0, h0), xp)
+    return jax.lax.scan(lambda c, xp_t: cls.post(small, xp_t, c[-1] @ p["w_h"], c), carry, xp)
 
   def objective(scan, p, xp, carry):
-    (c, h), hs = scan(p, xp, *carry)
-    return jnp.sum(hs * probe_h) + jnp.sum(c * probe_c) + jnp.sum(h), hs
+    last, hs = scan(p, xp, carry)
+    return jnp.sum(hs * probe_h) + jnp.sum(last[0] * probe_c) + jnp.sum(last[-1]), hs
 
   grads = lambda scan: jax.value_and_grad(objective, argnums=(1, 2, 3), has_aux=True)(scan, params, xp, carry)
   got, want = grads(fused), grads(plain)
   _close(got[0], want[0])  # loss and every output frame
-  _close(got[1], want[1])  # gradients for w_h (and the gains), the projections and both initial carries
+  _close(got[1], want[1])  # gradients for w_h and the small parameters, the projections and the carry
   assert all(float(jnp.abs(g).max()) > 0 for g in jax.tree.leaves(got[1]))
 
 
-@pytest.mark.parametrize("cell_name", ["lstm", "lnlstm"])
+@pytest.mark.parametrize("cell_name", CELLS)
 def test_model_gradients_through_the_fused_layer_equal_the_plain_scan(real_batch, monkeypatch, cell_name):
   from chorjax.models.cells import CELLS, _Cell
   from chorjax.train import _loss_fn

@@ -10,9 +10,8 @@ training can be fast:
   norms), with ``small`` the cell's small parameters.
 
 ``step(carry, xp)`` = ``post(small, xp, h @ w_h, carry)`` is what sampling calls once per frame.
-``scan(carry, xp_TxBxG)`` runs a whole (time-major) window: ``lax.scan`` of ``step``, except for the
-LSTM and the LN-LSTM, whose training runs through the fused layers of :mod:`chorjax.models.fused`
-(same numbers, faster gradients).
+``scan(carry, xp_TxBxG)`` runs a whole (time-major) window; training runs it through the fused
+layers of :mod:`chorjax.models.fused` (the same numbers as ``lax.scan`` of ``step``, faster gradients).
 A carry is a tuple of ``[B, H]`` arrays whose LAST entry is h: ``(c, h)`` for the LSTMs, ``(h,)``
 for the GRU.
 """
@@ -23,7 +22,8 @@ import jax
 import jax.numpy as jnp
 from flax import nnx
 
-from chorjax.models.fused import layer_norm, lnlstm_scan, lnlstm_step, lstm_gates, lstm_scan, lstm_update
+from chorjax.models.fused import (gru_scan, gru_step, layer_norm, lnlstm_scan, lnlstm_step, lstm_gates, lstm_scan,
+                                  lstm_update)
 
 
 def _kernel(rngs, shape, init):
@@ -39,7 +39,8 @@ class _Cell(nnx.Module):
     return self.post(self.small(), xp_BxG, carry[-1] @ self.w_h[...], carry)
 
   def scan(self, carry, xp_TxBxG):
-    """``(final carry, h_TxBxH)`` over a time-major window of input projections."""
+    """``(final carry, h_TxBxH)`` over a time-major window of input projections. Here, the plain
+    ``lax.scan`` of ``step``; every cell overrides it with its fused layer, and tests compare the two."""
     return jax.lax.scan(self.step, carry, xp_TxBxG)
 
 
@@ -122,14 +123,11 @@ class GRUCell(_Cell):
 
   @staticmethod
   def post(small, xp_Bx3H, r_Bx3H, carry):
-    (h,) = carry
-    xr, xz, xn = jnp.split(xp_Bx3H, 3, axis=-1)
-    hr, hz, hn = jnp.split(r_Bx3H + small["b_h"], 3, axis=-1)
-    r = jax.nn.sigmoid(xr + hr)
-    z = jax.nn.sigmoid(xz + hz)
-    n = jnp.tanh(xn + r * hn)
-    h = (1.0 - z) * n + z * h
+    h, _ = gru_step(small["b_h"], xp_Bx3H, r_Bx3H, carry[0])
     return (h,), h
+
+  def scan(self, carry, xp_TxBx3H):
+    return gru_scan(self.w_h[...], self.b_h[...], xp_TxBx3H, *carry)
 
 
 CELLS = {"lstm": LSTMCell, "lnlstm": LNLSTMCell, "gru": GRUCell}

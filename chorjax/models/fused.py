@@ -1,4 +1,4 @@
-"""Fused LSTM and LN-LSTM layers for training: one forward scan and a hand-written backward scan.
+"""Fused LSTM, LN-LSTM and GRU layers for training: one forward scan and a hand-written backward scan.
 
 ``jax.grad`` of a plain ``lax.scan`` over the LSTM step works, but on CPU it is slow in ways that add
 up over ``layers x frames`` loop iterations: the forward loop stores a dozen separate residuals per
@@ -7,7 +7,7 @@ recurrent weight gradient. :func:`lstm_scan` keeps exactly three stacks (the gat
 cell state and the output), computes every gate gradient in one elementwise pass, keeps one matmul in
 the reverse loop (``dz @ w_h.T``), and computes the recurrent weight gradient after the loop as one
 large matmul. :func:`lnlstm_scan` does the same for the layer-normalized LSTM, whose layer-norm gains
-also get their gradients after the loop. Tests check it against the straightforward scan (outputs and gradients to 1e-5);
+also get their gradients after the loop, and :func:`gru_scan` for the GRU. Tests check it against the straightforward scan (outputs and gradients to 1e-5);
 BENCHMARKS.md has the timings.
 """
 
@@ -165,3 +165,59 @@ def _lnlstm_scan_bwd(res, cotangents):
 
 
 lnlstm_scan.defvjp(_lnlstm_scan_fwd, _lnlstm_scan_bwd)
+
+
+def gru_step(b_h, xp_Bx3H, r_Bx3H, h_BxH):
+  """One GRU step (reset gate after the recurrent matmul, as in cuDNN and PyTorch) from the input part
+  ``xp`` and ``r = h @ w_h``: ``(h, (reset, update, candidate, recurrent candidate part))``."""
+  hidden = h_BxH.shape[-1]
+  rh = r_Bx3H + b_h
+  gates = jax.nn.sigmoid(xp_Bx3H[..., :2 * hidden] + rh[..., :2 * hidden])
+  reset, update = gates[..., :hidden], gates[..., hidden:]
+  hn = rh[..., 2 * hidden:]
+  n = jnp.tanh(xp_Bx3H[..., 2 * hidden:] + reset * hn)
+  return (1.0 - update) * n + update * h_BxH, (reset, update, n, hn)
+
+
+def _gru_forward(w_h, b_h, xp_TxBx3H, h0):
+  def body(h, xp_t):
+    h, parts = gru_step(b_h, xp_t, h @ w_h, h)
+    return h, (h, jnp.concatenate(parts, -1))
+
+  return jax.lax.scan(body, h0, xp_TxBx3H)
+
+
+@jax.custom_vjp
+def gru_scan(w_h, b_h, xp_TxBx3H, h0):
+  """Runs a GRU over precomputed input projections, time-major: ``((h_T,), h_TxBxH)``."""
+  h, (hs, _) = _gru_forward(w_h, b_h, xp_TxBx3H, h0)
+  return (h,), hs
+
+
+def _gru_scan_fwd(w_h, b_h, xp_TxBx3H, h0):
+  h, (hs, parts) = _gru_forward(w_h, b_h, xp_TxBx3H, h0)
+  return ((h,), hs), (w_h, h0, hs, parts)
+
+
+def _gru_scan_bwd(res, cotangents):
+  w_h, h0, hs, parts = res
+  (dh_last,), dhs = cotangents
+  w_hT = w_h.T
+  h_prev = jnp.concatenate([h0[None], hs[:-1]], 0)
+
+  def body(dh_next, inputs):
+    dh_out, p, hp = inputs
+    reset, update, n, hn = jnp.split(p, 4, axis=-1)
+    dh = dh_out + dh_next
+    dn = dh * (1.0 - update) * (1.0 - n * n)
+    dreset = dn * hn * reset * (1.0 - reset)
+    dupdate = dh * (hp - n) * update * (1.0 - update)
+    dxp = jnp.concatenate([dreset, dupdate, dn], -1)
+    dr = jnp.concatenate([dreset, dupdate, dn * reset], -1)
+    return dh * update + dr @ w_hT, (dxp, dr)
+
+  dh0, (dxp, dr) = jax.lax.scan(body, dh_last, (dhs, parts, h_prev), reverse=True)
+  return jnp.einsum("tbh,tbg->hg", h_prev, dr), dr.sum((0, 1)), dxp, dh0
+
+
+gru_scan.defvjp(_gru_scan_fwd, _gru_scan_bwd)
