@@ -7,8 +7,10 @@ recurrent weight gradient. :func:`lstm_scan` keeps exactly three stacks (the gat
 cell state and the output), computes every gate gradient in one elementwise pass, keeps one matmul in
 the reverse loop (``dz @ w_h.T``), and computes the recurrent weight gradient after the loop as one
 large matmul. :func:`lnlstm_scan` does the same for the layer-normalized LSTM, whose layer-norm gains
-also get their gradients after the loop, and :func:`gru_scan` for the GRU. Tests check it against the straightforward scan (outputs and gradients to 1e-5);
-BENCHMARKS.md has the timings.
+also get their gradients after the loop, and :func:`gru_scan` for the GRU. Tests check them against
+the straightforward scan (outputs and gradients to 1e-5); BENCHMARKS.md has the timings. Being ``jax.custom_vjp`` functions they support reverse-mode
+differentiation (``jax.grad``, ``jax.vjp``, ``jax.jacrev``) and ``vmap``, not forward mode (``jax.jvp``,
+``jax.jacfwd``); the cells' plain scan (``chorjax.models.cells._Cell.scan``) does both.
 """
 
 from __future__ import annotations
