@@ -8,9 +8,11 @@ cell state and the output), computes every gate gradient in one elementwise pass
 the reverse loop (``dz @ w_h.T``), and computes the recurrent weight gradient after the loop as one
 large matmul. :func:`lnlstm_scan` does the same for the layer-normalized LSTM, whose layer-norm gains
 also get their gradients after the loop, and :func:`gru_scan` for the GRU. Tests check them against
-the straightforward scan (outputs and gradients to 1e-5); BENCHMARKS.md has the timings. Being ``jax.custom_vjp`` functions they support reverse-mode
-differentiation (``jax.grad``, ``jax.vjp``, ``jax.jacrev``) and ``vmap``, not forward mode (``jax.jvp``,
-``jax.jacfwd``); the cells' plain scan (``chorjax.models.cells._Cell.scan``) does both.
+the straightforward scan (outputs and gradients to 1e-5); BENCHMARKS.md has the timings.
+
+Being ``jax.custom_vjp`` functions they support reverse-mode differentiation (``jax.grad``,
+``jax.vjp``, ``jax.jacrev``) and ``vmap``, not forward mode (``jax.jvp``, ``jax.jacfwd``); the cells'
+plain scan (``chorjax.models.cells._Cell.scan``) does both.
 """
 
 from __future__ import annotations
@@ -37,6 +39,19 @@ def layer_norm(x, gain, bias=None):
 def _normalize_bwd(dn, n, rstd):
   """The gradient of :func:`normalize`'s input from the gradient of its output ``n``."""
   return rstd * (dn - dn.mean(-1, keepdims=True) - n * (dn * n).mean(-1, keepdims=True))
+
+
+def _previous(first_BxH, stack_TxBxH):
+  """The stack shifted one step back in time: ``[first, stack[0], ..., stack[T-2]]``."""
+  return jnp.concatenate([first_BxH[None], stack_TxBxH[:-1]], 0)
+
+
+def _gate_grads(a_Bx4H, dc_BxH, c_prev_BxH, dh_squashed_BxH):
+  """The gradient of the LSTM gate pre-activations ``[i, f, g, o]`` from the gate activations, the
+  cell-state gradient and ``dh * squash(c)`` (the output gate's input)."""
+  i, f, g, o = jnp.split(a_Bx4H, 4, axis=-1)
+  return jnp.concatenate([dc_BxH * g * i * (1.0 - i), dc_BxH * c_prev_BxH * f * (1.0 - f),
+                          dc_BxH * i * (1.0 - g * g), dh_squashed_BxH * o * (1.0 - o)], -1)
 
 
 def lstm_gates(z_Bx4H):
@@ -82,22 +97,19 @@ def _lstm_scan_bwd(res, cotangents):
   w_h, c0, h0, hs, cs, acts = res
   (dc_last, dh_last), dhs = cotangents
   w_hT = w_h.T
-  c_prev = jnp.concatenate([c0[None], cs[:-1]], 0)
 
   def body(carry, inputs):
     dc_next, dh_next = carry
     dh_out, a, c, cp = inputs
-    i, f, g, o = jnp.split(a, 4, axis=-1)
+    _, f, _, o = jnp.split(a, 4, axis=-1)
     tc = jnp.tanh(c)
     dh = dh_out + dh_next
     dc = dc_next + dh * o * (1.0 - tc * tc)
-    dz = jnp.concatenate([dc * g * i * (1.0 - i), dc * cp * f * (1.0 - f), dc * i * (1.0 - g * g),
-                          dh * tc * o * (1.0 - o)], -1)
+    dz = _gate_grads(a, dc, cp, dh * tc)
     return (dc * f, dz @ w_hT), dz
 
-  (dc0, dh0), dz_TxBx4H = jax.lax.scan(body, (dc_last, dh_last), (dhs, acts, cs, c_prev), reverse=True)
-  h_prev = jnp.concatenate([h0[None], hs[:-1]], 0)
-  dw_h = jnp.einsum("tbh,tbg->hg", h_prev, dz_TxBx4H)
+  (dc0, dh0), dz_TxBx4H = jax.lax.scan(body, (dc_last, dh_last), (dhs, acts, cs, _previous(c0, cs)), reverse=True)
+  dw_h = jnp.einsum("tbh,tbg->hg", _previous(h0, hs), dz_TxBx4H)
   return dw_h, dz_TxBx4H, dc0, dh0
 
 
@@ -141,26 +153,23 @@ def _lnlstm_scan_bwd(res, cotangents):
   w_h, gain_h, gain_c, bias_c, c0, h0, hs, cs, acts, n_hs, rstd_hs = res
   (dc_last, dh_last), dhs = cotangents
   w_hT = w_h.T
-  c_prev = jnp.concatenate([c0[None], cs[:-1]], 0)
 
   def body(carry, inputs):
     dc_next, dh_next = carry
     dh_out, a, c, cp, n_h, rstd_h = inputs
-    i, f, g, o = jnp.split(a, 4, axis=-1)
+    _, f, _, o = jnp.split(a, 4, axis=-1)
     n_c, rstd_c = normalize(c)
     tl = jnp.tanh(n_c * gain_c + bias_c)
     dh = dh_out + dh_next
     dln_c = dh * o * (1.0 - tl * tl)
     dc = dc_next + _normalize_bwd(dln_c * gain_c, n_c, rstd_c)
-    dz = jnp.concatenate([dc * g * i * (1.0 - i), dc * cp * f * (1.0 - f), dc * i * (1.0 - g * g),
-                          dh * tl * o * (1.0 - o)], -1)
+    dz = _gate_grads(a, dc, cp, dh * tl)
     dr = _normalize_bwd(dz.reshape(n_h.shape) * gain_h, n_h, rstd_h).reshape(dz.shape)
     return (dc * f, dr @ w_hT), (dz, dr, dln_c)
 
-  (dc0, dh0), (dz, dr, dln_c) = jax.lax.scan(body, (dc_last, dh_last), (dhs, acts, cs, c_prev, n_hs, rstd_hs),
-                                              reverse=True)
-  h_prev = jnp.concatenate([h0[None], hs[:-1]], 0)
-  dw_h = jnp.einsum("tbh,tbg->hg", h_prev, dr)
+  (dc0, dh0), (dz, dr, dln_c) = jax.lax.scan(
+      body, (dc_last, dh_last), (dhs, acts, cs, _previous(c0, cs), n_hs, rstd_hs), reverse=True)
+  dw_h = jnp.einsum("tbh,tbg->hg", _previous(h0, hs), dr)
   dgain_h = jnp.einsum("tbkh,tbkh->kh", dz.reshape(n_hs.shape), n_hs)
   dgain_c = jnp.einsum("tbh,tbh->h", dln_c, normalize(cs)[0])
   return dw_h, dgain_h, dgain_c, dln_c.sum((0, 1)), dz, dc0, dh0
@@ -205,7 +214,7 @@ def _gru_scan_bwd(res, cotangents):
   w_h, h0, hs, parts = res
   (dh_last,), dhs = cotangents
   w_hT = w_h.T
-  h_prev = jnp.concatenate([h0[None], hs[:-1]], 0)
+  h_prev = _previous(h0, hs)
 
   def body(dh_next, inputs):
     dh_out, p, hp = inputs
