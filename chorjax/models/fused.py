@@ -63,11 +63,11 @@ def lstm_gates(z_Bx4H):
   return jax.nn.sigmoid(z_Bx4H * m) * m - (m - 1.0)
 
 
-def lstm_update(a_Bx4H, c_BxH):
-  """The new ``(c, h)`` from gate activations and the previous cell state."""
+def lstm_update(a_Bx4H, c_BxH, squash=jnp.tanh):
+  """The new ``(c, h)`` from gate activations and the previous cell state: ``h = o * squash(c)``."""
   i, f, g, o = jnp.split(a_Bx4H, 4, axis=-1)
   c = f * c_BxH + i * g
-  return c, o * jnp.tanh(c)
+  return c, o * squash(c)
 
 
 def _forward(w_h, xp_TxBx4H, c0, h0):
@@ -122,9 +122,8 @@ def lnlstm_step(gain_h, gain_c, bias_c, xp_Bx4H, r_Bx4H, c_BxH):
   hidden = c_BxH.shape[-1]
   n_h, rstd_h = normalize(r_Bx4H.reshape(r_Bx4H.shape[:-1] + (4, hidden)))
   a = lstm_gates(xp_Bx4H + (n_h * gain_h).reshape(xp_Bx4H.shape))
-  i, f, g, o = jnp.split(a, 4, axis=-1)
-  c = f * c_BxH + i * g
-  return c, o * jnp.tanh(layer_norm(c, gain_c, bias_c)), (a, n_h, rstd_h)
+  c, h = lstm_update(a, c_BxH, lambda c: jnp.tanh(layer_norm(c, gain_c, bias_c)))
+  return c, h, (a, n_h, rstd_h)
 
 
 def _ln_forward(w_h, gain_h, gain_c, bias_c, xp_TxBx4H, c0, h0):
