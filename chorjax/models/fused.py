@@ -58,8 +58,8 @@ def dense(x, w):
   Differentiated by JAX's own rule, the weight gradient leaves XLA:CPU free to choose layouts, and in
   the train step it transposes the large output gradient (``[T*B, G]``) into a copy, multiplies, and
   transposes the result back. The backward pass here transposes only ``x`` (:func:`weight_grad`): the
-  same numbers (identical losses over training steps), an LSTM train step ~8-16% faster
-  (BENCHMARKS.md). Reverse mode only, like the fused layers."""
+  same numbers (identical losses over training steps), train steps 3-13% faster (BENCHMARKS.md).
+  Reverse mode only, like the fused layers."""
   return x @ w
 
 
