@@ -249,19 +249,6 @@ def test_fused_layer_equals_the_plain_scan_in_outputs_and_gradients(real_batch, 
   assert all(float(jnp.abs(g).max()) > 0 for g in jax.tree.leaves(got[1]))
 
 
-def test_dense_equals_the_plain_matmul_in_outputs_and_gradients(real_batch):
-  from chorjax.models.fused import dense
-  batch, _ = real_batch
-  x = jnp.swapaxes(jnp.asarray(batch["inputs"]), 0, 1)  # [T, B, 48] real frames, time-major as in training
-  w = 0.3 * jax.random.normal(jax.random.key(4), (48, 64))
-  probe = jax.random.normal(jax.random.key(5), (40, 6, 64))
-
-  def value_and_grads(matmul):
-    return jax.value_and_grad(lambda x, w: jnp.sum(jnp.tanh(matmul(x, w)) * probe), argnums=(0, 1))(x, w)
-
-  _close(value_and_grads(dense), value_and_grads(lambda x, w: x @ w))
-
-
 @pytest.mark.parametrize("cell_name", CELLS)
 def test_model_gradients_through_the_fused_layer_equal_the_plain_scan(real_batch, monkeypatch, cell_name):
   from chorjax.models.cells import CELLS, _Cell
@@ -275,8 +262,6 @@ def test_model_gradients_through_the_fused_layer_equal_the_plain_scan(real_batch
                                     has_aux=True))
   fused = grad(params)
   monkeypatch.setattr(CELLS[cell_name], "scan", _Cell.scan)  # lax.scan of the step, differentiated by JAX
-  for module in ("chorjax.models.cells", "chorjax.models.heads"):  # and the plain matmul for fused.dense
-    monkeypatch.setattr(f"{module}.dense", lambda x, w: x @ w)
   plain = jax.jit(jax.value_and_grad(lambda p: _loss_fn(graphdef, p, batch, num_motions, jax.random.key(3), 0.01, 0.2),
                                      has_aux=True))(params)
   _close(fused[0][0], plain[0][0])

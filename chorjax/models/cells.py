@@ -4,8 +4,7 @@ Every cell splits one frame's work in three so that training and sampling share 
 training can be fast:
 
 * ``project(x_...xD) -> xp_...xG``: everything that depends on the input only. Training applies it
-  to a whole window at once (one large matmul, :func:`chorjax.models.fused.dense`, hoisted out of the time
-  loop).
+  to a whole window at once (one large matmul, hoisted out of the time loop).
 * the recurrent matmul ``r = h @ w_h`` (the only work that must stay inside the loop);
 * ``post(small, xp_BxG, r_BxG, carry) -> (carry, h_BxH)``: pure elementwise work (gates, layer
   norms), with ``small`` the cell's small parameters.
@@ -23,8 +22,8 @@ import jax
 import jax.numpy as jnp
 from flax import nnx
 
-from chorjax.models.fused import (dense, gru_scan, gru_step, layer_norm, lnlstm_scan, lnlstm_step, lstm_gates,
-                                  lstm_scan, lstm_update)
+from chorjax.models.fused import (gru_scan, gru_step, layer_norm, lnlstm_scan, lnlstm_step, lstm_gates, lstm_scan,
+                                  lstm_update)
 
 
 def _kernel(rngs, shape, init):
@@ -57,7 +56,7 @@ class LSTMCell(_Cell):
     self.b = nnx.Param(jnp.zeros((4 * hidden,)).at[hidden:2 * hidden].set(forget_bias))
 
   def project(self, x):
-    return dense(x, self.w_x[...]) + self.b[...]
+    return x @ self.w_x[...] + self.b[...]
 
   @staticmethod
   def post(small, xp_Bx4H, r_Bx4H, carry):
@@ -87,7 +86,7 @@ class LNLSTMCell(_Cell):
     self.bias_c = nnx.Param(jnp.zeros((hidden,)))
 
   def project(self, x):
-    z = dense(x, self.w_x[...]).reshape(x.shape[:-1] + (4, self.hidden))
+    z = (x @ self.w_x[...]).reshape(x.shape[:-1] + (4, self.hidden))
     return layer_norm(z, self.gain_x[...], self.b[...]).reshape(x.shape[:-1] + (4 * self.hidden,))
 
   def small(self):
@@ -117,7 +116,7 @@ class GRUCell(_Cell):
     self.b_h = nnx.Param(jnp.zeros((3 * hidden,)))
 
   def project(self, x):
-    return dense(x, self.w_x[...]) + self.b_x[...]
+    return x @ self.w_x[...] + self.b_x[...]
 
   def small(self):
     return {"b_h": self.b_h[...]}

@@ -10,9 +10,6 @@ large matmul. :func:`lnlstm_scan` does the same for the layer-normalized LSTM, w
 also get their gradients after the loop, and :func:`gru_scan` for the GRU. Tests check them against
 the straightforward scan (outputs and gradients to 1e-5); BENCHMARKS.md has the timings.
 
-:func:`dense` is the large matmul of the input projections and the output heads, with a backward pass
-that keeps XLA:CPU from transposing the large output gradient (same numbers, faster).
-
 Being ``jax.custom_vjp`` functions they support reverse-mode differentiation (``jax.grad``,
 ``jax.vjp``, ``jax.jacrev``) and ``vmap``, not forward mode (``jax.jvp``, ``jax.jacfwd``); the cells'
 plain scan (``chorjax.models.cells._Cell.scan``) does both.
@@ -42,37 +39,6 @@ def layer_norm(x, gain, bias=None):
 def _normalize_bwd(dn, n, rstd):
   """The gradient of :func:`normalize`'s input from the gradient of its output ``n``."""
   return rstd * (dn - dn.mean(-1, keepdims=True) - n * (dn * n).mean(-1, keepdims=True))
-
-
-def weight_grad(a, d):
-  """``a^T d`` summed over every leading axis: the weight gradient of ``a @ w`` from the gradient ``d``
-  of its output, as one row-major matmul on the transposed ``a``."""
-  return a.reshape(-1, a.shape[-1]).T @ d.reshape(-1, d.shape[-1])
-
-
-@jax.custom_vjp
-def dense(x, w):
-  """``x @ w`` (``x``: ``[..., D]``, ``w``: ``[D, G]``), for the large matmuls of training: the input
-  projections of the recurrent layers and the output heads.
-
-  Differentiated by JAX's own rule, the weight gradient leaves XLA:CPU free to choose layouts, and in
-  the train step it transposes the large output gradient (``[T*B, G]``) into a copy, multiplies, and
-  transposes the result back. The backward pass here transposes only ``x`` (:func:`weight_grad`): the
-  same numbers (identical losses over training steps), train steps 3-13% faster (BENCHMARKS.md).
-  Reverse mode only, like the fused layers."""
-  return x @ w
-
-
-def _dense_fwd(x, w):
-  return x @ w, (x, w)
-
-
-def _dense_bwd(res, d):
-  x, w = res
-  return d @ w.T, weight_grad(x, d)
-
-
-dense.defvjp(_dense_fwd, _dense_bwd)
 
 
 def _previous(first_BxH, stack_TxBxH):

@@ -14,13 +14,6 @@ import jax
 import jax.numpy as jnp
 from flax import nnx
 
-from chorjax.models.fused import dense
-
-
-def _apply(linear: nnx.Linear, h):
-  """``linear(h)`` through :func:`chorjax.models.fused.dense` (the faster weight gradient)."""
-  return dense(h, linear.kernel[...]) + linear.bias[...]
-
 
 class MSEHead(nnx.Module):
   """Dense layer to the frame; loss = mean squared error over every coordinate."""
@@ -34,7 +27,7 @@ class MSEHead(nnx.Module):
     return self.dim
 
   def __call__(self, h):
-    return _apply(self.out, h)
+    return self.out(h)
 
   def loss(self, raw_xD, target_xD):
     mse = jnp.mean(jnp.square(raw_xD - target_xD))
@@ -106,7 +99,7 @@ class MDNHead(nnx.Module):
     return k + k * self.dim + k * (1 if self.isotropic else self.dim)
 
   def __call__(self, h):
-    return _apply(self.out, h)
+    return self.out(h)
 
   def params(self, raw):
     return mdn_params(raw, self.num_mixtures, self.dim, self.isotropic, self.min_scale)
