@@ -49,12 +49,12 @@ def alternate(pairs, reps):
 
 def jax_train_step(cell, head):
   from chorjax.config import load_config
-  from chorjax.train import init_state, make_train_step
+  from chorjax.run import create_train_state
+  from chorjax.train import train_step
   cfg = load_config(None, [f"model.cell={cell}", f"model.head={head}", f"model.num_layers={L}",
                            f"model.hidden_size={H}", f"model.num_mixtures={K}", f"train.batch_size={B}",
                            f"data.seq_length={T}"])
-  graphdef, state, tx, schedule = init_state(cfg, D, 10)
-  step = make_train_step(graphdef, tx, schedule, cfg, 10)
+  state, spec = create_train_state(cfg, D, 10)
   rng = np.random.default_rng(0)
   batch = {"inputs": rng.normal(size=(B, T, D)).astype(np.float32),
            "targets": rng.normal(size=(B, T, D)).astype(np.float32),
@@ -62,7 +62,7 @@ def jax_train_step(cell, head):
   key = jax.random.key(0)
   box = {"state": state}
   t = time.perf_counter()
-  step = step.lower(box["state"], batch, key).compile()  # trace + XLA compile, timed apart from running
+  step = train_step.lower(box["state"], batch, key, spec).compile()  # trace + XLA compile, timed apart from running
   compile_s = time.perf_counter() - t
   box["state"], m = step(box["state"], batch, key)
   jax.block_until_ready(m)

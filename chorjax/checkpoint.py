@@ -1,9 +1,13 @@
 """Orbax checkpoints that hold everything a run needs to resume and to sample.
 
-Each checkpoint step has two items:
-  ``state``: the pytree ``{params, opt_state, step}`` (arrays);
+Each checkpoint step has three items:
+  ``params``: the model parameters, on their own, so sampling and evaluation restore them without
+  building an optimizer (as big_vision loads params);
+  ``train``: ``{opt_state, step}``, what resuming needs besides the params;
   ``meta``: JSON with the resolved config, the feature pipeline (normalization statistics,
   representation, skeleton), the motion-id map, the RNG seed and the data-sampler position.
+Runs written before 2026-11-22 hold one ``state`` item ``{params, opt_state, step}`` instead; they
+restore the same way (their params alone by a partial restore).
 The manager keeps the latest ``keep`` steps plus the best one by validation loss.
 """
 
@@ -33,11 +37,30 @@ def create_manager(workdir, keep: int = 3, read_only: bool = False) -> ocp.Check
 
 
 def save(manager: ocp.CheckpointManager, step: int, state, meta: dict, val_loss: float | None) -> None:
-  """Saves asynchronously; ``manager.wait_until_finished()`` must run before the process exits."""
+  """Saves ``state = {params, opt_state, step}`` and ``meta`` asynchronously;
+  ``manager.wait_until_finished()`` must run before the process exits."""
   metrics = {"val_loss": float(val_loss)} if val_loss is not None else None
   meta = {**meta, "val_loss": metrics and metrics["val_loss"]}
-  manager.save(step, args=ocp.args.Composite(state=ocp.args.StandardSave(state), meta=ocp.args.JsonSave(meta)),
+  train = {"opt_state": state["opt_state"], "step": state["step"]}
+  manager.save(step, args=ocp.args.Composite(params=ocp.args.StandardSave(state["params"]),
+                                             train=ocp.args.StandardSave(train), meta=ocp.args.JsonSave(meta)),
                metrics=metrics)
+
+
+def _is_legacy(manager: ocp.CheckpointManager, step: int) -> bool:
+  """A checkpoint written before params had their own item (one ``state`` item)."""
+  return (Path(manager.directory) / str(step) / "state").is_dir()
+
+
+def _abstract(template, sharding=None):
+  if sharding is None:
+    return jax.tree.map(ocp.utils.to_shape_dtype_struct, template)
+  return jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=sharding), template)
+
+
+def _mismatch(manager, step, e: Exception) -> UserError:
+  return UserError(f"{manager.directory}/{step}: checkpoint does not match this model config "
+                   f"({str(e).splitlines()[0][:160]})")
 
 
 def step_meta(manager, step) -> dict:
@@ -53,22 +76,40 @@ def best_step(manager) -> int | None:
 
 
 def restore(manager: ocp.CheckpointManager, step: int, template, sharding=None):
-  """Restores the state of ``step`` into the structure of ``template`` (its meta: ``step_meta``).
+  """Restores ``{params, opt_state, step}`` of ``step`` into the structure of ``template`` (to resume).
 
   With ``sharding`` every array is restored with it (e.g. replicated over the current mesh), so a
   checkpoint written by one process count resumes on another.
   """
-  if sharding is None:
-    abstract = jax.tree.map(ocp.utils.to_shape_dtype_struct, template)
-  else:
-    abstract = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=sharding), template)
+  abstract = _abstract(template, sharding)
   try:
-    r = manager.restore(step, args=ocp.args.Composite(state=ocp.args.StandardRestore(abstract)))
+    if _is_legacy(manager, step):
+      state = manager.restore(step, args=ocp.args.Composite(state=ocp.args.StandardRestore(abstract)))["state"]
+    else:
+      train = {"opt_state": abstract["opt_state"], "step": abstract["step"]}
+      r = manager.restore(step, args=ocp.args.Composite(params=ocp.args.StandardRestore(abstract["params"]),
+                                                        train=ocp.args.StandardRestore(train)))
+      state = {"params": r["params"], **r["train"]}
   except (ValueError, KeyError, TypeError) as e:
-    raise UserError(f"{manager.directory}/{step}: checkpoint does not match this model config "
-                    f"({str(e).splitlines()[0][:160]})") from None
+    raise _mismatch(manager, step, e) from None
   # Re-impose the template's tree (optax states are namedtuples; keep their types exactly).
-  return jax.tree.unflatten(jax.tree.structure(template), jax.tree.leaves(r["state"]))
+  return jax.tree.unflatten(jax.tree.structure(template), jax.tree.leaves(state))
+
+
+def restore_params(manager: ocp.CheckpointManager, step: int, template):
+  """Restores only the params of ``step`` into the structure of ``template`` (no optimizer needed)."""
+  abstract = _abstract(template, jax.sharding.SingleDeviceSharding(jax.devices()[0]))
+  try:
+    if _is_legacy(manager, step):  # a partial restore of the old single ``state`` item
+      item = {"params": abstract}
+      args = ocp.args.PyTreeRestore(item=item, restore_args=ocp.checkpoint_utils.construct_restore_args(item),
+                                    partial_restore=True)
+      params = manager.restore(step, args=ocp.args.Composite(state=args))["state"]["params"]
+    else:
+      params = manager.restore(step, args=ocp.args.Composite(params=ocp.args.StandardRestore(abstract)))["params"]
+  except (ValueError, KeyError, TypeError) as e:
+    raise _mismatch(manager, step, e) from None
+  return jax.tree.unflatten(jax.tree.structure(template), jax.tree.leaves(params))
 
 
 def open_run(workdir) -> ocp.CheckpointManager:

@@ -51,7 +51,7 @@ def _data_plot(args) -> int:
 
 def _data_convert(args) -> int:
   import numpy as np
-  from chorjax.data import transforms as tf
+  from chorjax.data import transforms
   from chorjax.data.csv import write_csv
   from chorjax.data.dataset import read_motions, read_takes, resolve_files, to_up_axis
   from chorjax.data.skeletons import to_mpii16
@@ -65,14 +65,14 @@ def _data_convert(args) -> int:
     motions = [to_mpii16(m) for m in motions]
   if args.like:
     ref = read_takes([args.like])
-    canon = lambda m: np.asarray(tf.to_y_up(m.positions, m.up_axis))
+    canon = lambda m: np.asarray(transforms.to_y_up(m.positions, m.up_axis))
     ref_size = np.mean([body_size(canon(r), r.skeleton) for r in ref])
     motions = [to_up_axis(m, ref[0].up_axis) for m in motions]
     motions = [m.replace(positions=m.positions * np.float32(ref_size / body_size(canon(m), m.skeleton)),
                          units=ref[0].units) for m in motions]
     # same frame rate, and the same average place of the root (the root is absolute in the features)
     motions = [m if m.fps == ref[0].fps else m.replace(
-        positions=np.asarray(tf.resample(m.positions, m.fps, ref[0].fps), np.float32), fps=ref[0].fps) for m in motions]
+        positions=np.asarray(transforms.resample(m.positions, m.fps, ref[0].fps), np.float32), fps=ref[0].fps) for m in motions]
     ref_root = np.mean([r.positions[:, r.skeleton.root].mean(0) for r in ref], axis=0)
     motions = [m.replace(positions=m.positions - m.positions[:, m.skeleton.root].mean(0) + ref_root) for m in motions]
   if args.up_axis:
@@ -136,34 +136,30 @@ def _train(args) -> int:
 
 def _sample(args) -> int:
   import jax
-  import jax.numpy as jnp
   import numpy as np
-  from chorjax.config import config_from_dict
-  from chorjax.data.features import Features
-  from chorjax.sample import generate, load_run, motion_weight_vector, read_prime, sampling_settings
+  from chorjax.models import motion_weight_vector
+  from chorjax.run import load_run
+  from chorjax.sample import generate, read_prime
 
   out, suffix = _output(args.output, (".csv", ".npz", ".bvh", ".html"))
   paths = _sample_paths(out, args.num)
   _refuse_existing(paths, args.force)  # the files really written (OUT_k.csv for several dancers)
-  graphdef, params, meta = load_run(args.workdir, args.checkpoint)
-  features = Features.from_dict(meta["features"])
-  num_motions = len(meta["id_map"])
-  w = jnp.tile(jnp.asarray(motion_weight_vector(num_motions, args.motion, args.mix))[None], (args.num, 1))
+  run = load_run(args.workdir, args.checkpoint)
+  features = run.features
+  motion_BxM = np.tile(motion_weight_vector(run.num_motions, args.motion, args.mix)[None], (args.num, 1))
   prime = phrase = None
   if args.prime:
-    phrase = read_prime(args.prime, features, config_from_dict(meta["config"]).data)
-    prime = jnp.tile(jnp.asarray(phrase)[None], (args.num, 1, 1))
-  sampling = sampling_settings(meta, args.pi_temperature, args.sigma_temperature, True if args.greedy else None)
-  z = generate(graphdef, params, w, jax.random.key(args.seed), num_frames=args.frames, prime_BxPxD=prime,
-               **sampling)
+    phrase = read_prime(args.prime, features, run.config.data)
+    prime = np.tile(phrase[None], (args.num, 1, 1))
+  sampling = run.sampling(args.pi_temperature, args.sigma_temperature, True if args.greedy else None)
+  z = generate(run.graphdef, run.params, motion_BxM, jax.random.key(args.seed), num_frames=args.frames,
+               prime_BxPxD=prime, **sampling)
   pos = np.asarray(features.decode(z))
   if phrase is not None:  # the phrase the dancer gave, then the machine's continuation
     pos = np.concatenate([np.tile(np.asarray(features.decode(phrase))[None], (args.num, 1, 1, 1)), pos], axis=1)
-  fps = meta["config"]["data"]["fps"]
-  settings = {"workdir": str(args.workdir), "checkpoint_step": meta["step"], "frames": args.frames,
+  settings = {"workdir": str(args.workdir), "checkpoint_step": run.step, "frames": args.frames,
               "motion": args.motion, "mix": args.mix, "prime": args.prime, "seed": args.seed, **sampling}
-  sk, up = features.skeleton, features.up_axis
-  written = _write_sample(out, paths, pos, fps, sk, up, settings)
+  written = _write_sample(out, paths, pos, run.fps, features.skeleton, features.up_axis, settings)
   print("wrote " + ", ".join(map(str, written)))
   return 0
 

@@ -19,8 +19,11 @@ from typing import Any, Sequence
 from chorjax.errors import UserError
 
 
-def _field(default, help: str, choices: Sequence | None = None, minimum: float | None = None):
-  meta = {"help": help, "choices": tuple(choices) if choices else None, "minimum": minimum}
+def _field(default, help: str, choices: Sequence | None = None, minimum: float | None = None,
+           resumable: bool = False) -> Any:
+  """A config field: its default, help text and checks. ``choices`` of a list field apply to each of its
+  elements; ``resumable`` keys may change when a run is continued without --force (e.g. to train longer)."""
+  meta = {"help": help, "choices": tuple(choices) if choices else None, "minimum": minimum, "resumable": resumable}
   if isinstance(default, (list, tuple)):
     return dataclasses.field(default_factory=lambda: tuple(default), metadata=meta)
   return dataclasses.field(default=default, metadata=meta)
@@ -40,7 +43,8 @@ class DataConfig:
                                choices=("absolute", "bone_relative", "root_relative"))
   seq_length: int = _field(100, "frames per training window (inputs; targets are shifted by one)", minimum=1)
   val_takes: tuple = _field(("auto",), "held-out take names; 'auto' = the last take by name; [] = none")
-  augment: tuple = _field((), "training augmentations: 'reverse' (time) and/or 'mirror' (left/right)")
+  augment: tuple = _field((), "training augmentations: 'reverse' (time) and/or 'mirror' (left/right)",
+                          choices=("reverse", "mirror"))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,13 +79,13 @@ class OptimConfig:
 @dataclasses.dataclass(frozen=True)
 class TrainConfig:
   batch_size: int = _field(50, "windows per step (global, over all devices)", minimum=1)
-  num_steps: int = _field(1000, "total optimizer steps", minimum=0)
+  num_steps: int = _field(1000, "total optimizer steps", minimum=0, resumable=True)
   seed: int = _field(0, "seed of parameters, batches, dropout and noise")
   checkpoint_every: int = _field(500, "steps between checkpoints", minimum=1)
   keep_checkpoints: int = _field(3, "latest checkpoints kept (the best by val loss is kept too)", minimum=1)
-  eval_every: int = _field(250, "steps between validation passes (0 = only at the end)", minimum=0)
-  log_every: int = _field(50, "steps between log lines / metrics.jsonl rows", minimum=1)
-  figure_every: int = _field(0, "steps between sample figures in TensorBoard (0 = off)", minimum=0)
+  eval_every: int = _field(250, "steps between validation passes (0 = only at the end)", minimum=0, resumable=True)
+  log_every: int = _field(50, "steps between log lines / metrics.jsonl rows", minimum=1, resumable=True)
+  figure_every: int = _field(0, "steps between sample figures in TensorBoard (0 = off)", minimum=0, resumable=True)
   input_noise: float = _field(0.0, "std of Gaussian noise on inputs (normalized units), against exposure bias",
                               minimum=0.0)
   val_windows: int = _field(64, "most validation windows evaluated", minimum=1)
@@ -89,29 +93,29 @@ class TrainConfig:
 
 @dataclasses.dataclass(frozen=True)
 class SampleConfig:
-  frames: int = _field(600, "frames written by the sample at the end of training", minimum=1)
-  num: int = _field(1, "dancers sampled in parallel", minimum=1)
+  frames: int = _field(600, "frames written by the sample at the end of training", minimum=1, resumable=True)
+  num: int = _field(1, "dancers sampled in parallel", minimum=1, resumable=True)
   motion: int = _field(0, "motion id that conditions the sample")
   pi_temperature: float = _field(1.0, "MDN mixture-weight temperature (0 = most likely component)", minimum=0.0)
   sigma_temperature: float = _field(1.0, "MDN scale multiplier", minimum=0.0)
   greedy: bool = _field(False, "take the mean of the most likely component (no noise)")
-  seed: int = _field(0, "sampling seed")
+  seed: int = _field(0, "sampling seed", resumable=True)
 
 
 @dataclasses.dataclass(frozen=True)
 class LogConfig:
-  tensorboard: bool = _field(True, "write tensorboardX event files into the workdir")
-  progress: str = _field("auto", "progress display", choices=("auto", "bar", "lines", "none"))
+  tensorboard: bool = _field(True, "write tensorboardX event files into the workdir", resumable=True)
+  progress: str = _field("auto", "progress display", choices=("auto", "bar", "lines", "none"), resumable=True)
 
 
 @dataclasses.dataclass(frozen=True)
 class ParallelConfig:
-  data_parallel: bool = _field(False, "shard every batch over a 'data' mesh axis of all devices")
-  num_devices: int = _field(0, "devices in the mesh (0 = all devices of all processes)", minimum=0)
-  distributed: bool = _field(False, "call jax.distributed.initialize (multi-host / multi-process)")
-  coordinator_address: str = _field("", "HOST:PORT of process 0 ('' = detect from the cluster environment)")
-  num_processes: int = _field(0, "processes in the job (0 = detect from the environment)", minimum=0)
-  process_id: int = _field(-1, "this process's index (-1 = detect from the environment)", minimum=-1)
+  data_parallel: bool = _field(False, "shard every batch over a 'data' mesh axis of all devices", resumable=True)
+  num_devices: int = _field(0, "devices in the mesh (0 = all devices of all processes)", minimum=0, resumable=True)
+  distributed: bool = _field(False, "call jax.distributed.initialize (multi-host / multi-process)", resumable=True)
+  coordinator_address: str = _field("", "HOST:PORT of process 0 ('' = detect from the cluster environment)", resumable=True)
+  num_processes: int = _field(0, "processes in the job (0 = detect from the environment)", minimum=0, resumable=True)
+  process_id: int = _field(-1, "this process's index (-1 = detect from the environment)", minimum=-1, resumable=True)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -129,17 +133,19 @@ class Config:
     d = dataclasses.asdict(self)
     return json.loads(json.dumps(d))  # tuples -> lists, a plain JSON tree
 
-  def replace(self, **sections) -> "Config":
-    return dataclasses.replace(self, **sections)
 
-
-SECTIONS = {f.name: f.type for f in dataclasses.fields(Config) if f.name != "name"}
 _SECTION_CLASSES = {"data": DataConfig, "model": ModelConfig, "optim": OptimConfig, "train": TrainConfig,
                     "sample": SampleConfig, "log": LogConfig, "parallel": ParallelConfig}
 
 
 def valid_keys() -> list[str]:
   return [f"{s}.{f.name}" for s, cls in _SECTION_CLASSES.items() for f in dataclasses.fields(cls)]
+
+
+def resumable_keys() -> list[str]:
+  """Dotted keys that may change when a run is continued without --force (a field flag in the schema)."""
+  return [f"{s}.{f.name}" for s, cls in _SECTION_CLASSES.items() for f in dataclasses.fields(cls)
+          if f.metadata["resumable"]]
 
 
 def _suggest(key: str, options: Sequence[str]) -> str:
@@ -169,15 +175,12 @@ def _check_value(where: str, key: str, field: dataclasses.Field, value: Any):
   if not ok:
     tname = {tuple: "list"}.get(hint, hint.__name__)
     raise UserError(f"{where}: key {key!r}: expected {tname}, got {type(value).__name__} {value!r}")
-  if meta.get("choices") and value not in meta["choices"]:
-    raise UserError(f"{where}: key {key!r}: {value!r} is not one of {', '.join(map(repr, meta['choices']))}"
-                    + _suggest(str(value), [str(c) for c in meta["choices"]]))
+  for item in value if hint is tuple else (value,):  # a list's choices apply to each element
+    if meta.get("choices") and item not in meta["choices"]:
+      raise UserError(f"{where}: key {key!r}: {item!r} is not one of {', '.join(map(repr, meta['choices']))}"
+                      + _suggest(str(item), [str(c) for c in meta["choices"]]))
   if meta.get("minimum") is not None and value < meta["minimum"]:
     raise UserError(f"{where}: key {key!r}: {value!r} is below the minimum {meta['minimum']}")
-  if key == "data.augment":
-    bad = [a for a in value if a not in ("reverse", "mirror")]
-    if bad:
-      raise UserError(f"{where}: key {key!r}: unknown augmentation {bad[0]!r}; use 'reverse' and/or 'mirror'")
   return value
 
 

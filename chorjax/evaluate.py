@@ -7,17 +7,15 @@ from pathlib import Path
 from typing import Sequence
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
-from chorjax import metrics as M
-from chorjax.config import config_from_dict
+from chorjax import metrics
 from chorjax.data.dataset import conform, eval_windows, read_takes
 from chorjax.data.transforms import to_y_up
-from chorjax.data.features import Features
 from chorjax.errors import UserError, atomic_write
-from chorjax.sample import generate, load_run, sampling_settings
-from chorjax.train import make_eval_step
+from chorjax.run import load_run
+from chorjax.sample import generate
+from chorjax.train import eval_step
 
 
 def evaluate(workdir, data: Sequence[str], *, frames: int = 10_000, num: int = 4, checkpoint="latest",
@@ -35,66 +33,65 @@ def evaluate(workdir, data: Sequence[str], *, frames: int = 10_000, num: int = 4
   Returns:
     A flat dict of metrics (JSON-ready); see the README for each entry.
   """
-  graphdef, params, meta = load_run(workdir, checkpoint)
-  cfg, feats = meta["config"], Features.from_dict(meta["features"])
-  sk, fps = feats.skeleton, float(cfg["data"]["fps"])
-  sampling = sampling_settings(meta, pi_temperature, sigma_temperature, greedy)
-  data_cfg = config_from_dict(cfg).data
+  run = load_run(workdir, checkpoint)
+  feats = run.features
+  sk, fps = feats.skeleton, run.fps
+  sampling = run.sampling(pi_temperature, sigma_temperature, greedy)
+  data_cfg = run.config.data
   real = conform(read_takes(list(data), data_cfg), data_cfg)  # read exactly as training read its takes
   if not real:
     raise UserError(f"--data {' '.join(data)}: no takes")
   train = conform(read_takes([data_cfg.dataset], data_cfg), data_cfg)
-  train = [m for m in train if m.name in set(meta.get("train_takes", []))] or train
+  train = [m for m in train if m.name in set(run.train_takes)] or train
   if frames < 2 * window:
     raise UserError(f"--frames {frames}: need at least {2 * window} frames")
 
   # held-out likelihood of the given takes under the model (teacher forced)
-  seq = cfg["data"]["seq_length"]
-  enc = [(meta["id_map"].get(m.name, 0), np.asarray(feats.encode(m.positions))) for m in real]
-  win = eval_windows(enc, seq, max_windows=256)
-  loss = float(make_eval_step(graphdef, len(meta["id_map"]))(params, win)) if win else float("nan")
+  enc = [(run.id_map.get(m.name, 0), np.asarray(feats.encode(m.positions))) for m in real]
+  win = eval_windows(enc, run.config.data.seq_length, max_windows=256)
+  loss = float(eval_step(run.params, win, run.graphdef)) if win else float("nan")
 
   # generation
-  ids = [meta["id_map"][m.name] for m in train] or [0]
-  w = jax.nn.one_hot(jnp.array([ids[k % len(ids)] for k in range(num)]), len(meta["id_map"]))
-  z = generate(graphdef, params, w, jax.random.key(seed), num_frames=frames, **sampling)
+  ids = [run.id_map[m.name] for m in train] or [0]
+  motion = np.array([ids[k % len(ids)] for k in range(num)])
+  z = generate(run.graphdef, run.params, motion, jax.random.key(seed), num_frames=frames, **sampling)
   y_up = lambda pos: np.asarray(to_y_up(pos, feats.up_axis))  # data space -> y-up: what the metrics measure
   gen = [y_up(p) for p in np.asarray(feats.decode(z))]
   real_c = [y_up(m.positions) for m in real]
   train_c = [y_up(m.positions) for m in train]
 
-  size = np.mean([M.body_size(p, sk) for p in train_c])
-  data_speed = float(np.mean(np.concatenate([M.joint_speed(p) for p in train_c])))
-  curves = np.stack([M.freeze_curve(g, data_speed, 100) for g in gen])
+  size = np.mean([metrics.body_size(p, sk) for p in train_c])
+  data_speed = float(np.mean(np.concatenate([metrics.joint_speed(p) for p in train_c])))
+  curves = np.stack([metrics.freeze_curve(g, data_speed, 100) for g in gen])
   last = min(1000, frames // 2)
-  cv_gen = [M.bone_cv(g, sk) for g in gen]
-  cv_real = [M.bone_cv(p, sk) for p in real_c]
+  cv_gen = [metrics.bone_cv(g, sk) for g in gen]
+  cv_real = [metrics.bone_cv(p, sk) for p in real_c]
 
   def kin(wins):
-    return np.stack([M.kinetic_features(x / size, fps) for x in wins])
-  gen_w = np.concatenate([M.windows(g, window, window) for g in gen])
-  real_w = np.concatenate([M.windows(p, window, window // 4) for p in real_c])
-  train_w = np.concatenate([M.windows(p, window, window // 4) for p in train_c])
+    return np.stack([metrics.kinetic_features(x / size, fps) for x in wins])
+  gen_w = np.concatenate([metrics.windows(g, window, window) for g in gen])
+  real_w = np.concatenate([metrics.windows(p, window, window // 4) for p in real_c])
+  train_w = np.concatenate([metrics.windows(p, window, window // 4) for p in train_c])
   if len(real_w) < 2:
     raise UserError(f"--data: the takes give {len(real_w)} windows of {window} frames; need at least 2")
-  fid = M.fid_k(kin(real_w), kin(gen_w))
-  ref = M.fid_k(kin(real_w), kin(train_w))
+  fid = metrics.fid_k(kin(real_w), kin(gen_w))
+  ref = metrics.fid_k(kin(real_w), kin(train_w))
   return {
-      "run": str(workdir), "checkpoint_step": meta["step"], "frames": frames, "num": num, "data": list(data),
+      "run": str(workdir), "checkpoint_step": run.step, "frames": frames, "num": num, "data": list(data),
       "sampling": {**sampling, "seed": seed},
-      "loss_kind": "nll" if cfg["model"]["head"] == "mdn" else "mse", "heldout_loss": loss,
-      "freeze_ratio_first_1000": float(np.mean([M.freeze_ratio(g[:last + 1], data_speed) for g in gen])),
-      "freeze_ratio_last_1000": float(np.mean([M.freeze_ratio(g[-last - 1:], data_speed) for g in gen])),
+      "loss_kind": "nll" if run.config.model.head == "mdn" else "mse", "heldout_loss": loss,
+      "freeze_ratio_first_1000": float(np.mean([metrics.freeze_ratio(g[:last + 1], data_speed) for g in gen])),
+      "freeze_ratio_last_1000": float(np.mean([metrics.freeze_ratio(g[-last - 1:], data_speed) for g in gen])),
       "freeze_curve": curves.mean(0).tolist(),
       "bone_cv_median": float(np.mean([c["median"] for c in cv_gen])),
       "bone_cv_max": float(np.mean([c["max"] for c in cv_gen])),
       "data_bone_cv_median": float(np.mean([c["median"] for c in cv_real])),
-      "foot_sliding": float(np.mean([M.foot_sliding(g, sk, fps, size) for g in gen])),
-      "data_foot_sliding": float(np.mean([M.foot_sliding(p, sk, fps, size) for p in real_c])),
+      "foot_sliding": float(np.mean([metrics.foot_sliding(g, sk, fps, size) for g in gen])),
+      "data_foot_sliding": float(np.mean([metrics.foot_sliding(p, sk, fps, size) for p in real_c])),
       "fid_k": fid["fid_k"], "div_k": fid["div_k"], "data_div_k": fid["real_div_k"],
       "real_fid_k": ref["fid_k"], "real_train_div_k": ref["div_k"],
-      "novelty": M.novelty(gen_w / size, train_w / size, sk.root),
-      "real_novelty": M.novelty(real_w / size, train_w / size, sk.root),
+      "novelty": metrics.novelty(gen_w / size, train_w / size, sk.root),
+      "real_novelty": metrics.novelty(real_w / size, train_w / size, sk.root),
       "body_size": float(size), "window": window,
   }
 

@@ -1,20 +1,29 @@
-"""Training: a pure jitted ``train_step``, ``eval_step``, and the driver ``train_and_evaluate``.
+"""Training: the pure jitted ``train_step`` and ``eval_step``, a loop driven by hooks, and the driver
+``train_and_evaluate``.
 
 The state is a plain pytree ``{params, opt_state, step}``. Randomness comes from
 ``fold_in(key(seed), step)`` and batches from ``WindowSampler.batch(step)``, so a run resumed from a
 checkpoint at step s repeats exactly what the uninterrupted run did after s.
+
+The loop (:class:`Loop`) only runs steps; everything periodic is a hook with a ``due(step, every,
+total)`` rule: evaluation, checkpoints, TensorBoard figures, and at the end the sample. Metrics reach
+the host one step late and go to listeners (``metrics.jsonl``, TensorBoard, progress). A new training
+mode brings a step function and hooks, not a new loop.
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import fcntl
+import functools
 import json
 import math
 import os
 import sys
 import time
 from pathlib import Path
+from typing import Any, Callable
 
 import jax
 import jax.numpy as jnp
@@ -23,96 +32,139 @@ import optax
 from flax import nnx
 
 from chorjax import checkpoint as ckpt
-from chorjax.config import Config, config_diff, config_from_dict
+from chorjax.config import Config, config_diff, config_from_dict, resumable_keys
 from chorjax.data.dataset import Dataset, WindowSampler, eval_windows, load_dataset
 from chorjax.errors import UserError, atomic_write
-from chorjax.models import create_model, motion_weights
-
-# Keys that may change when a run is continued without --force (e.g. to train longer).
-RESUMABLE_CHANGES = ("train.num_steps", "train.eval_every", "train.log_every", "train.figure_every",
-                     "log.progress", "log.tensorboard", "sample.frames", "sample.num", "sample.seed",
-                     # a run may resume on another number of devices or processes
-                     "parallel.data_parallel", "parallel.num_devices", "parallel.distributed",
-                     "parallel.coordinator_address", "parallel.num_processes", "parallel.process_id")
+from chorjax.models import motion_weight_vector
+from chorjax.run import StepSpec, create_train_state, run_meta
+from chorjax.sample import generate
 
 
 class TrainingDiverged(UserError):
   """A non-finite loss; the message names the step and the last good checkpoint."""
 
 
-def create_optimizer(cfg) -> tuple[optax.GradientTransformation, optax.Schedule]:
-  """The optax chain of ``cfg.optim``: optional global-norm clipping, then the optimizer."""
-  o = cfg.optim
-  if o.schedule == "warmup_cosine":
-    schedule = optax.warmup_cosine_decay_schedule(0.0, o.lr, o.warmup_steps, max(cfg.train.num_steps, o.warmup_steps + 1),
-                                                  end_value=o.lr * o.final_lr_ratio)
-  else:
-    schedule = optax.constant_schedule(o.lr)
-  if o.name == "adam":
-    opt = optax.adam(schedule, b1=o.b1, b2=o.b2)
-  elif o.name == "adamw":
-    opt = optax.adamw(schedule, b1=o.b1, b2=o.b2, weight_decay=o.weight_decay)
-  else:
-    opt = optax.amsgrad(schedule, b1=o.b1, b2=o.b2)
-  chain = [optax.clip_by_global_norm(o.clip_norm)] if o.clip_norm > 0 else []
-  return optax.chain(*chain, opt), schedule
-
-
-def init_state(cfg: Config, dim: int, num_motions: int):
-  """``(graphdef, state, tx, schedule)`` for a fresh run."""
-  model = create_model(cfg.model, dim, num_motions, cfg.train.seed)
-  graphdef, params = nnx.split(model, nnx.Param)
-  params = nnx.to_pure_dict(params)
-  tx, schedule = create_optimizer(cfg)
-  state = {"params": params, "opt_state": tx.init(params), "step": jnp.zeros((), jnp.int32)}
-  return graphdef, state, tx, schedule
-
-
-def _loss_fn(graphdef, params, batch, num_motions, key, input_noise, dropout):
-  model = nnx.merge(graphdef, params)
+def _loss_fn(params, batch, key, spec: StepSpec):
+  model = nnx.merge(spec.graphdef, params)
   x = batch["inputs"]
   noise_key, dropout_key = jax.random.split(key)
-  if input_noise > 0:
-    x = x + input_noise * jax.random.normal(noise_key, x.shape, x.dtype)
-  raw = model(x, motion_weights(batch["motion_ids"], num_motions), dropout_key if dropout > 0 else None)
-  return model.loss(raw, batch["targets"])
+  if spec.input_noise > 0:
+    x = x + spec.input_noise * jax.random.normal(noise_key, x.shape, x.dtype)
+  out = model(x, batch["motion_ids"], dropout_key if spec.dropout > 0 else None)
+  return model.loss(out, batch["targets"])
 
 
-def make_train_step(graphdef, tx, schedule, cfg: Config, num_motions: int, wrap=lambda f: f, parallel=None):
-  """The jitted ``train_step(state, batch, key) -> (state, metrics)``; ``state`` is donated.
+def _train_step(state, batch, key, spec: StepSpec):
+  if not jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key):
+    key = jax.random.wrap_key_data(key)  # raw uint32 key data (replicated across processes)
+  key = jax.random.fold_in(key, state["step"])
+  grad_fn = jax.value_and_grad(_loss_fn, has_aux=True)
+  (loss, aux), grads = grad_fn(state["params"], batch, key, spec)
+  updates, opt_state = spec.tx.update(grads, state["opt_state"], state["params"])
+  params = optax.apply_updates(state["params"], updates)
+  metrics = {"loss": loss, **aux, "grad_norm": optax.tree.norm(grads), "param_norm": optax.tree.norm(params),
+             "update_norm": optax.tree.norm(updates), "lr": spec.schedule(state["step"])}
+  return {"params": params, "opt_state": opt_state, "step": state["step"] + 1}, metrics
 
-  ``wrap`` decorates the Python function before jit (tests pass ``chex.assert_max_traces(n=1)``).
-  With ``parallel`` the batch is sharded over the mesh's data axis and everything else replicated.
-  """
-  noise, dropout = cfg.train.input_noise, cfg.model.dropout
 
-  def train_step(state, batch, key):
-    if not jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key):
-      key = jax.random.wrap_key_data(key)  # raw uint32 key data (replicated across processes)
-    key = jax.random.fold_in(key, state["step"])
-    grad_fn = jax.value_and_grad(_loss_fn, argnums=1, has_aux=True)
-    (loss, aux), grads = grad_fn(graphdef, state["params"], batch, num_motions, key, noise, dropout)
-    updates, opt_state = tx.update(grads, state["opt_state"], state["params"])
-    params = optax.apply_updates(state["params"], updates)
-    metrics = {"loss": loss, **aux, "grad_norm": optax.tree.norm(grads), "param_norm": optax.tree.norm(params),
-               "update_norm": optax.tree.norm(updates), "lr": schedule(state["step"])}
-    return {"params": params, "opt_state": opt_state, "step": state["step"] + 1}, metrics
+train_step = functools.partial(jax.jit, static_argnums=3, donate_argnums=0)(_train_step)
+train_step.__doc__ = """``train_step(state, batch, key, spec) -> (state, metrics)``; ``state`` is donated,
+``spec`` (a :class:`chorjax.run.StepSpec`) is static."""
 
-  if parallel is None:
-    return jax.jit(wrap(train_step), donate_argnums=0)
+
+def sharded_train_step(parallel):
+  """``train_step`` for a data-parallel run: the batch sharded over the mesh's data axis, the rest
+  replicated."""
   repl, data = parallel.replicated, parallel.batch_sharding
-  return jax.jit(wrap(train_step), donate_argnums=0, in_shardings=(repl, data, repl), out_shardings=(repl, repl))
+  return jax.jit(_train_step, static_argnums=3, donate_argnums=0, in_shardings=(repl, data, repl),
+                 out_shardings=(repl, repl))
 
 
-def make_eval_step(graphdef, num_motions: int):
-  """The jitted ``eval_step(params, batch) -> loss`` (no noise, no dropout)."""
+@functools.partial(jax.jit, static_argnums=2)
+def eval_step(params, batch, graphdef):
+  """The model's loss on ``batch`` (no noise, no dropout)."""
+  model = nnx.merge(graphdef, params)
+  return model.loss(model(batch["inputs"], batch["motion_ids"]), batch["targets"])[0]
 
-  def eval_step(params, batch):
-    model = nnx.merge(graphdef, params)
-    raw = model(batch["inputs"], motion_weights(batch["motion_ids"], num_motions))
-    return model.loss(raw, batch["targets"])[0]
 
-  return jax.jit(eval_step)
+# ---------------------------------------------------------------- the loop
+
+
+def due(step: int, every: int, total: int) -> bool:
+  """Whether a periodic action runs after ``step`` of ``total`` steps: every ``every`` steps and at
+  the last step (``every = 0``: at the last step only)."""
+  return step == total or (every > 0 and step % every == 0)
+
+
+@dataclasses.dataclass
+class Hook:
+  """``fn(loop)`` after every ``every`` steps, and after the last step when ``at_last``."""
+
+  fn: Callable[["Loop"], None]
+  every: int
+  at_last: bool = True
+
+  def is_due(self, step: int, total: int) -> bool:
+    if not self.at_last and step == total:
+      return self.every > 0 and step % self.every == 0
+    return due(step, self.every, total)
+
+
+class Loop:
+  """Runs ``step_fn`` from ``start`` to ``total``; hooks do the rest.
+
+  After each step the loop publishes the previous step's metrics (pulled to the host one step late,
+  so the device stays busy) to the listeners, then runs the hooks that are due. A hook that needs the
+  current step's metrics checked first (a checkpoint must not save a diverged state) calls
+  :meth:`flush`. ``loop.val_loss`` holds the current step's validation loss once an evaluation hook
+  has set it.
+  """
+
+  def __init__(self, step_fn, get_batch, key, state, start: int, total: int):
+    self.step_fn, self.get_batch, self.key = step_fn, get_batch, key
+    self.state, self.step, self.total = state, start, total
+    self.hooks: list[Hook] = []
+    self.listeners: list[Callable[[int, float, dict, float | None], None]] = []
+    self.end_hooks: list[Callable[[Loop], None]] = []
+    self.pending: tuple[int, dict] | None = None
+    self.val_loss: float | None = None
+    self.last_good: int | None = start if start > 0 else None
+    self.losses: dict[int, float] = {}
+    self.compile_s: float | None = None
+
+  def add_hook(self, fn, every: int, at_last: bool = True) -> None:
+    self.hooks.append(Hook(fn, every, at_last))
+
+  def publish(self, step: int, metrics: dict, val_loss: float | None = None) -> None:
+    loss = float(metrics["loss"])
+    if not math.isfinite(loss):
+      where = f"step {self.last_good}" if self.last_good is not None else "none (no checkpoint was written yet)"
+      raise TrainingDiverged(f"non-finite loss ({loss}) at step {step}; training stopped; last good checkpoint: {where}")
+    self.losses[step] = loss
+    for listener in self.listeners:
+      listener(step, loss, metrics, val_loss)
+
+  def flush(self) -> None:
+    """Publishes the current step's metrics now (with ``val_loss`` if an evaluation set it)."""
+    if self.pending is not None:
+      pending, self.pending = self.pending, None
+      self.publish(*pending, val_loss=self.val_loss if pending[0] == self.step else None)
+
+  def run(self) -> None:
+    for step in range(self.step, self.total):
+      t0 = time.time()
+      self.state, metrics = self.step_fn(self.state, self.get_batch(step), self.key)
+      if self.compile_s is None:
+        jax.block_until_ready(metrics["loss"])
+        self.compile_s = time.time() - t0
+      self.flush()  # the previous step's metrics, one step late
+      self.step, self.pending, self.val_loss = step + 1, (step + 1, metrics), None
+      for hook in self.hooks:
+        if hook.is_due(self.step, self.total):
+          hook.fn(self)
+    self.flush()
+    for fn in self.end_hooks:
+      fn(self)
 
 
 # ---------------------------------------------------------------- run directory
@@ -150,7 +202,7 @@ def _check_saved_config(workdir: Path, cfg: Config, force: bool, may_write: bool
     if not force:
       raise UserError(f"{path}: unreadable saved config ({e}); use --force to replace it") from None
     return
-  diff = config_diff(saved, cfg, ignore=RESUMABLE_CHANGES)
+  diff = config_diff(saved, cfg, ignore=resumable_keys())
   if diff and not force:
     raise UserError(f"{workdir}: holds a run with a different config ({'; '.join(diff[:3])}"
                     f"{' ...' if len(diff) > 3 else ''}); use another --workdir, or --force to continue it")
@@ -170,13 +222,6 @@ def _truncate_metrics(path: Path, upto_step: int) -> None:
   kept = [l for l in rows if json.loads(l).get("step", 0) <= upto_step]
   if len(kept) != len(rows):
     atomic_write(path, lambda p: p.write_text("".join(l + "\n" for l in kept)))
-
-
-def make_meta(cfg: Config, ds: Dataset, step: int) -> dict:
-  return {"config": cfg.to_dict(), "features": ds.features.to_dict(), "id_map": ds.id_map,
-          "train_takes": list(ds.train_names), "val_takes": list(ds.val_names),
-          "rng": {"seed": cfg.train.seed, "fold_in": "step"},
-          "sampler": {"seed": cfg.train.seed, "position": step}, "step": step}
 
 
 class _Progress:
@@ -206,176 +251,98 @@ class _Progress:
       self.bar.stop()
 
 
-def _finite_or_raise(metrics: dict, step: int, last_good: int | None):
-  loss = float(metrics["loss"])
-  if not math.isfinite(loss):
-    where = f"step {last_good}" if last_good is not None else "none (no checkpoint was written yet)"
-    raise TrainingDiverged(f"non-finite loss ({loss}) at step {step}; training stopped; last good checkpoint: {where}")
-  return loss
+# ---------------------------------------------------------------- listeners and hooks
 
 
-def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=None) -> dict:
-  """Trains ``cfg`` in ``workdir``, resuming from its latest checkpoint; returns a summary.
+class MetricsLog:
+  """Writes a row to ``metrics.jsonl`` and TensorBoard, and updates the progress display, every
+  ``log_every`` steps, at the last step, and whenever a validation loss was measured."""
 
-  Writes ``config.json``, ``metrics.jsonl``, TensorBoard events, ``checkpoints/`` and, at the end,
-  ``samples/`` (a short sample and its HTML player). With ``parallel`` (see ``chorjax.parallel``)
-  every process trains its share and only process 0 writes anything but checkpoints.
-  """
-  workdir = Path(workdir).absolute()
-  is_main = parallel is None or parallel.is_main
-  with workdir_lock(workdir) if is_main else contextlib.nullcontext():
-    _check_saved_config(workdir, cfg, force, may_write=is_main)
-    return _train_locked(cfg, workdir, parallel)
-
-
-def _train_locked(cfg: Config, workdir: Path, parallel) -> dict:
-  t_start = time.time()
-  ds = load_dataset(cfg.data)
-  if cfg.sample.frames > 0:  # fail now, not after hours of training, if the end sample cannot be drawn
-    from chorjax.sample import motion_weight_vector
-    motion_weight_vector(ds.num_motions, cfg.sample.motion, source="sample.motion =")
-  graphdef, state, tx, schedule = init_state(cfg, ds.features.dim, ds.num_motions)
-  is_main = parallel is None or parallel.is_main
-  manager = ckpt.create_manager(workdir, keep=cfg.train.keep_checkpoints)
-  writer = None
-  progress = None
-  try:
-    start = 0
-    if manager.latest_step() is not None:
-      start = manager.latest_step()
-      meta = ckpt.step_meta(manager, start)
-      if meta["id_map"] != ds.id_map:
-        raise UserError(f"{workdir}: its checkpoints were trained on other takes ({list(meta['id_map'])[:3]}...)")
-      state = ckpt.restore(manager, start, state, None if parallel is None else parallel.replicated)
-    if is_main:
-      _write_config(workdir, cfg)
-      _truncate_metrics(workdir / "metrics.jsonl", start)
-    if cfg.log.tensorboard and is_main:
+  def __init__(self, workdir: Path, cfg: Config, start: int):
+    self.path, self.log_every, self.total = workdir / "metrics.jsonl", cfg.train.log_every, cfg.train.num_steps
+    self.writer = None
+    if cfg.log.tensorboard:
       from tensorboardX import SummaryWriter
-      writer = SummaryWriter(str(workdir), flush_secs=10)
+      self.writer = SummaryWriter(str(workdir), flush_secs=10)
+    self.progress = _Progress(cfg.log.progress, self.total, start)
+    self.t_last, self.step_last = time.time(), start
 
-    sampler = WindowSampler(ds.train, cfg.data.seq_length, cfg.train.batch_size, cfg.train.seed)
-    val = eval_windows(ds.val, cfg.data.seq_length, cfg.train.val_windows)
-    train_step = make_train_step(graphdef, tx, schedule, cfg, ds.num_motions, parallel=parallel)
-    eval_step = make_eval_step(graphdef, ds.num_motions)
-    base_key = jax.random.key(cfg.train.seed)
-    get_batch = sampler.batch
-    host_params = lambda params: params
-    if parallel is not None:
-      state = parallel.replicate(state)
-      val = parallel.replicate(val)
-      base_key = parallel.replicate(jax.random.key_data(base_key))
-      get_batch = lambda s: parallel.global_batch(sampler, s)
-      host_params = parallel.local_copy
+  def __call__(self, step: int, loss: float, metrics: dict, val_loss: float | None) -> None:
+    if not due(step, self.log_every, self.total) and val_loss is None:
+      return
+    now = time.time()
+    sps = (step - self.step_last) / max(now - self.t_last, 1e-9)
+    self.t_last, self.step_last = now, step
+    row = {"step": step, "train_loss": loss, **{k: float(v) for k, v in metrics.items() if k != "loss"},
+           "steps_per_s": sps}
+    if val_loss is not None:
+      row["val_loss"] = val_loss
+    with open(self.path, "a") as f:
+      f.write(json.dumps(row) + "\n")
+    if self.writer is not None:
+      for k, v in row.items():
+        if k != "step":
+          self.writer.add_scalar(("val/" if k == "val_loss" else "train/") + k.removeprefix("train_"), v, step)
+    self.progress.update(step, row, (self.total - step) / max(sps, 1e-9))
 
-    total = cfg.train.num_steps
-    progress = _Progress(cfg.log.progress if is_main else "none", total, start)
-    last_good = start if start > 0 else None
-    pending = None  # (step, metrics) pulled to the host one step late
-    t_last, steps_since = time.time(), 0
-    summary = {"start_step": start, "final_step": start, "train_losses": {}}
-    compile_s = None
-
-    def log(step, metrics, val_loss=None):
-      nonlocal t_last, steps_since
-      loss = _finite_or_raise(metrics, step, last_good)
-      summary["train_losses"][step] = loss
-      summary["final_train_loss"] = loss
-      if not is_main or (step % cfg.train.log_every and val_loss is None and step != total):
-        return
-      now = time.time()
-      sps = steps_since / max(now - t_last, 1e-9)
-      t_last, steps_since = now, 0
-      row = {"step": step, "train_loss": loss, **{k: float(v) for k, v in metrics.items() if k != "loss"},
-             "steps_per_s": sps}
-      if val_loss is not None:
-        row["val_loss"] = val_loss
-      with open(workdir / "metrics.jsonl", "a") as f:  # process 0 only
-        f.write(json.dumps(row) + "\n")
-      if writer is not None:
-        for k, v in row.items():
-          if k != "step":
-            writer.add_scalar(("val/" if k == "val_loss" else "train/") + k.removeprefix("train_"), v, step)
-      progress.update(step, row, (total - step) / max(sps, 1e-9))
-      if val_loss is not None:
-        summary["final_val_loss"] = val_loss
-
-    for step in range(start, total):
-      t0 = time.time()
-      state, metrics = train_step(state, get_batch(step), base_key)
-      if compile_s is None:
-        jax.block_until_ready(metrics["loss"])
-        compile_s = time.time() - t0
-      steps_since += 1
-      if pending is not None:
-        log(*pending)
-      pending = (step + 1, metrics)
-      done = step + 1
-      eval_due = cfg.train.eval_every and done % cfg.train.eval_every == 0
-      ckpt_due = done % cfg.train.checkpoint_every == 0 or done == total
-      if eval_due or ckpt_due:
-        val_loss = float(eval_step(state["params"], val)) if val and (eval_due or done == total) else None
-        log(*pending, val_loss=val_loss)  # checks the loss is finite before anything is saved
-        pending = None
-        if ckpt_due:
-          ckpt.save(manager, done, state, make_meta(cfg, ds, done), val_loss)
-          last_good = done
-        if writer is not None and cfg.train.figure_every and done % cfg.train.figure_every == 0:
-          _figure(writer, graphdef, host_params(state["params"]), ds, cfg, done)
-      summary["final_step"] = done
-    if pending is not None:
-      log(*pending)
-    manager.wait_until_finished()
-    summary.update(seconds=time.time() - t_start, compile_s=compile_s)
-    if is_main and cfg.sample.frames > 0 and total > 0:
-      summary["samples"] = _write_end_sample(workdir, graphdef, host_params(state["params"]), ds, cfg)
-    return summary
-  finally:
-    if progress is not None:
-      progress.close()
-    manager.wait_until_finished()
-    manager.close()
-    if writer is not None:
-      writer.close()
+  def close(self) -> None:
+    self.progress.close()
+    if self.writer is not None:
+      self.writer.close()
 
 
-def _figure(writer, graphdef, params, ds, cfg, step):
-  """A short generated sample beside a real one, as a TensorBoard figure."""
+def evaluation_hook(val, graphdef):
+  """Measures the validation loss (``loop.val_loss``) and publishes it with the step's metrics."""
+  def evaluate(loop: Loop) -> None:
+    if val:
+      loop.val_loss = float(eval_step(loop.state["params"], val, graphdef))
+    loop.flush()
+  return evaluate
+
+
+def checkpoint_hook(manager, meta_of: Callable[[int], dict]):
+  """Saves the state once the step's loss is known to be finite (``meta_of(step)`` is its meta)."""
+  def save(loop: Loop) -> None:
+    loop.flush()
+    ckpt.save(manager, loop.step, loop.state, meta_of(loop.step), loop.val_loss)
+    loop.last_good = loop.step
+  return save
+
+
+def figure_hook(writer, graphdef, host_params, ds: Dataset, cfg: Config):
+  """A short generated sample beside a real one, as a TensorBoard figure (needs matplotlib)."""
+  from chorjax.render.plot import require_matplotlib
   try:
-    from chorjax.render.plot import require_matplotlib
     plt = require_matplotlib()
   except UserError:
-    return
-  from chorjax.sample import generate
-  n = 120
-  w = motion_weights(jnp.array([ds.val[0][0] if ds.val else ds.train[0][0]]), ds.num_motions)
-  s = cfg.sample  # drawn as the run's own samples are
-  z = generate(graphdef, params, w, jax.random.key(step), num_frames=n, pi_temperature=s.pi_temperature,
-               sigma_temperature=s.sigma_temperature, greedy=s.greedy)
-  gen = np.asarray(ds.features.decode(z[0]))
-  real_z = (ds.val or ds.train)[0][1][:n]
-  real = np.asarray(ds.features.decode(real_z))
-  sk = ds.features.skeleton
-  fig, axes = plt.subplots(1, 2, figsize=(10, 3), sharey=True)
-  for ax, pos, title in ((axes[0], real, "real"), (axes[1], gen, "generated")):
-    for j in sk.end_joints:
-      ax.plot(pos[:, j, 1], lw=1, label=sk.joint_names[j])
-    ax.set_title(f"{title}: end joints, vertical axis")
-  axes[0].legend(fontsize=6)
-  writer.add_figure("sample/end_joints", fig, step)
-  plt.close(fig)
+    return lambda loop: None
+
+  def draw(loop: Loop) -> None:
+    n, s, sk = 120, cfg.sample, ds.features.skeleton
+    real_id, real_z = (ds.val or ds.train)[0]
+    z = generate(graphdef, host_params(loop.state["params"]), np.array([real_id]), jax.random.key(loop.step),
+                 num_frames=n, pi_temperature=s.pi_temperature, sigma_temperature=s.sigma_temperature,
+                 greedy=s.greedy)  # drawn as the run's own samples are
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3), sharey=True)
+    for ax, z_TxD, title in ((axes[0], real_z[:n], "real"), (axes[1], z[0], "generated")):
+      pos_TxJx3 = np.asarray(ds.features.decode(z_TxD))
+      for j in sk.end_joints:
+        ax.plot(pos_TxJx3[:, j, 1], lw=1, label=sk.joint_names[j])
+      ax.set_title(f"{title}: end joints, vertical axis")
+    axes[0].legend(fontsize=6)
+    writer.add_figure("sample/end_joints", fig, loop.step)
+    plt.close(fig)
+  return draw
 
 
-def _write_end_sample(workdir: Path, graphdef, params, ds: Dataset, cfg: Config) -> dict:
+def write_end_sample(workdir: Path, graphdef, params, ds: Dataset, cfg: Config) -> dict:
   """``samples/sample.csv`` and ``samples/player.html``: the dance the run ends with."""
-  from chorjax.sample import generate
-  from chorjax.render.html import write_player
   from chorjax.data.csv import write_csv
   from chorjax.data.motion import Motion
+  from chorjax.render.html import write_player
 
   s = cfg.sample
-  w = jnp.tile(motion_weights(jnp.array([s.motion]), ds.num_motions), (s.num, 1))
-  z = generate(graphdef, params, w, jax.random.key(s.seed), num_frames=s.frames,
+  z = generate(graphdef, params, np.full((s.num,), s.motion), jax.random.key(s.seed), num_frames=s.frames,
                pi_temperature=s.pi_temperature, sigma_temperature=s.sigma_temperature, greedy=s.greedy)
   pos = np.asarray(ds.features.decode(z))
   out = workdir / "samples"
@@ -390,3 +357,84 @@ def _write_end_sample(workdir: Path, graphdef, params, ds: Dataset, cfg: Config)
   html = write_player(motions, out / "player.html", title=f"chorjax: {cfg.name}", columns=max(s.num, 1),
                       rows=[0] + [1] * s.num)
   return {"csv": str(csv), "html": str(html)}
+
+
+# ---------------------------------------------------------------- the driver
+
+
+def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=None) -> dict:
+  """Trains ``cfg`` in ``workdir``, resuming from its latest checkpoint; returns a summary.
+
+  Writes ``config.json``, ``metrics.jsonl``, TensorBoard events, ``checkpoints/`` and, at the end,
+  ``samples/`` (a short sample and its HTML player). With ``parallel`` (see ``chorjax.parallel``)
+  every process trains its share and only process 0 writes anything but checkpoints.
+  """
+  workdir = Path(workdir).absolute()
+  is_main = parallel is None or parallel.is_main
+  with workdir_lock(workdir) if is_main else contextlib.nullcontext():
+    _check_saved_config(workdir, cfg, force, may_write=is_main)
+    ds = load_dataset(cfg.data)
+    if cfg.sample.frames > 0:  # fail now, not after hours of training, if the end sample cannot be drawn
+      motion_weight_vector(ds.num_motions, cfg.sample.motion, source="sample.motion =")
+    manager = ckpt.create_manager(workdir, keep=cfg.train.keep_checkpoints)
+    with contextlib.ExitStack() as cleanup:
+      cleanup.callback(manager.close)
+      cleanup.callback(manager.wait_until_finished)
+      return _train(cfg, workdir, ds, manager, parallel, cleanup)
+
+
+def _restore_or_init(cfg: Config, workdir: Path, ds: Dataset, manager, parallel) -> tuple[dict, StepSpec, int]:
+  """The latest checkpoint's state (checked to be of these takes), or a fresh one."""
+  state, spec = create_train_state(cfg, ds.features.dim, ds.num_motions)
+  start = manager.latest_step()
+  if start is None:
+    return state, spec, 0
+  meta = ckpt.step_meta(manager, start)
+  if meta["id_map"] != ds.id_map:
+    raise UserError(f"{workdir}: its checkpoints were trained on other takes ({list(meta['id_map'])[:3]}...)")
+  return ckpt.restore(manager, start, state, None if parallel is None else parallel.replicated), spec, start
+
+
+def _train(cfg: Config, workdir: Path, ds: Dataset, manager, parallel, cleanup: contextlib.ExitStack) -> dict:
+  t_start = time.time()
+  is_main = parallel is None or parallel.is_main
+  state, spec, start = _restore_or_init(cfg, workdir, ds, manager, parallel)
+  if is_main:
+    _write_config(workdir, cfg)
+    _truncate_metrics(workdir / "metrics.jsonl", start)
+  sampler = WindowSampler(ds.train, cfg.data.seq_length, cfg.train.batch_size, cfg.train.seed)
+  val = eval_windows(ds.val, cfg.data.seq_length, cfg.train.val_windows)
+  key: Any = jax.random.key(cfg.train.seed)
+  jitted, get_batch, host_params = train_step, sampler.batch, lambda p: p
+  if parallel is not None:
+    state, val, key = parallel.replicate(state), parallel.replicate(val), parallel.replicate(jax.random.key_data(key))
+    jitted = sharded_train_step(parallel)
+    get_batch, host_params = (lambda s: parallel.global_batch(sampler, s)), parallel.local_copy
+  step_fn = lambda state, batch, key: jitted(state, batch, key, spec)  # noqa: E731
+  total = cfg.train.num_steps
+  loop = Loop(step_fn, get_batch, key, state, start, total)
+  log = None
+  if is_main:
+    log = MetricsLog(workdir, cfg, start)
+    cleanup.callback(log.close)
+    loop.listeners.append(log)
+  meta_of = lambda step: run_meta(cfg, ds.features, ds.id_map, ds.train_names, ds.val_names, step)
+  loop.add_hook(evaluation_hook(val, spec.graphdef), cfg.train.eval_every)
+  loop.add_hook(checkpoint_hook(manager, meta_of), cfg.train.checkpoint_every)
+  if log is not None and log.writer is not None and cfg.train.figure_every:
+    loop.add_hook(figure_hook(log.writer, spec.graphdef, host_params, ds, cfg), cfg.train.figure_every, at_last=False)
+  loop.end_hooks.append(lambda loop: manager.wait_until_finished())
+  samples: dict = {}
+  if is_main and cfg.sample.frames > 0 and total > 0:
+    loop.end_hooks.append(lambda loop: samples.update(
+        write_end_sample(workdir, spec.graphdef, host_params(loop.state["params"]), ds, cfg)))
+  loop.run()
+  summary = {"start_step": start, "final_step": loop.step, "train_losses": loop.losses,
+             "seconds": time.time() - t_start, "compile_s": loop.compile_s}
+  if loop.losses:
+    summary["final_train_loss"] = loop.losses[max(loop.losses)]
+  if loop.val_loss is not None:
+    summary["final_val_loss"] = loop.val_loss
+  if samples:
+    summary["samples"] = samples
+  return summary

@@ -11,7 +11,7 @@ from scipy.special import logsumexp
 from scipy.stats import norm
 
 from chorjax.config import load_config
-from chorjax.models import create_model, motion_weights
+from chorjax.models import as_weights, create_model
 from chorjax.models.heads import mdn_log_prob, mdn_params, mdn_sample
 from chorjax.models.rnn import RecurrentCore, dropout_mask
 from helpers import tiny_config
@@ -27,7 +27,7 @@ def make(cell, head, **kw):
 
 def inputs(b=3, t=7, seed=0):
   x = jax.random.normal(jax.random.key(seed), (b, t, 48))
-  return x, motion_weights(jnp.arange(b) % 10, 10)
+  return x, jnp.arange(b) % 10  # motion ids
 
 
 @pytest.mark.parametrize("cell, head", GRID)
@@ -70,8 +70,9 @@ def test_step_reproduces_the_scan(cell, head):
 def test_motion_weights_choose_the_initial_state_and_blends_interpolate():
   m = make("lstm", "mse")
   x, _ = inputs(b=1)
-  w4, w5 = motion_weights(jnp.array([4]), 10), motion_weights(jnp.array([5]), 10)
+  w4, w5 = as_weights(jnp.array([4]), 10), as_weights(jnp.array([5]), 10)
   assert not np.allclose(m(x, w4), m(x, w5))
+  np.testing.assert_array_equal(m(x, w4), m(x, jnp.array([4])))  # ids are one-hot weights
   blend = 0.5 * w4 + 0.5 * w5
   c4, c5, cb = m.initial_carry(w4), m.initial_carry(w5), m.initial_carry(blend)
   np.testing.assert_allclose(cb[0][1], (c4[0][1] + c5[0][1]) / 2, atol=1e-6)  # dense layer is affine
@@ -197,7 +198,7 @@ def test_golden_one_step_loss(head):
   ds = load_dataset(cfg.data)
   batch = WindowSampler(ds.train, cfg.data.seq_length, cfg.train.batch_size, seed=0).batch(0)
   m = create_model(cfg.model, 48, ds.num_motions, seed=0)
-  loss, _ = m.loss(m(jnp.asarray(batch["inputs"]), motion_weights(batch["motion_ids"], 10)), batch["targets"])
+  loss, _ = m.loss(m(jnp.asarray(batch["inputs"]), batch["motion_ids"]), batch["targets"])
   assert float(loss) == pytest.approx(GOLDEN[head], rel=1e-5)
 
 
@@ -229,14 +230,14 @@ def test_fused_layer_equals_the_plain_scan_in_outputs_and_gradients(real_batch, 
   carry = tuple(0.5 * jax.random.normal(k[j], (6, 32)) for j in range(cls.num_carries))
   probe_h, probe_c = jax.random.normal(k[2], (40, 6, 32)), jax.random.normal(k[3], (6, 32))
   # the small parameters away from their initial values, so that their gradients matter
-  params = {"w_h": cell.w_h[...], **{name: v + 0.3 * jax.random.normal(k[4], v.shape) for name, v in cell.small().items()}}
+  params = {"w_h": cell.w_h[...], **{name: v + 0.3 * jax.random.normal(k[4], v.shape) for name, v in cell.loop_params().items()}}
   fused = {"lstm": lambda p, xp, carry: lstm_scan(p["w_h"], xp, *carry),
            "lnlstm": lambda p, xp, carry: lnlstm_scan(p["w_h"], p["gain_h"], p["gain_c"], p["bias_c"], xp, *carry),
            "gru": lambda p, xp, carry: gru_scan(p["w_h"], p["b_h"], xp, *carry)}[cell_name]
 
   def plain(p, xp, carry):  # lax.scan of the cell's step, differentiated by JAX
-    small = {k: v for k, v in p.items() if k != "w_h"}
-    return jax.lax.scan(lambda c, xp_t: cls.post(small, xp_t, c[-1] @ p["w_h"], c), carry, xp)
+    loop_params = {k: v for k, v in p.items() if k != "w_h"}
+    return jax.lax.scan(lambda c, xp_t: cls.recurrent_update(loop_params, xp_t, c[-1] @ p["w_h"], c), carry, xp)
 
   def objective(scan, p, xp, carry):
     last, hs = scan(p, xp, carry)
@@ -251,18 +252,19 @@ def test_fused_layer_equals_the_plain_scan_in_outputs_and_gradients(real_batch, 
 
 @pytest.mark.parametrize("cell_name", CELLS)
 def test_model_gradients_through_the_fused_layer_equal_the_plain_scan(real_batch, monkeypatch, cell_name):
-  from chorjax.models.cells import CELLS, _Cell
+  from chorjax.models.cells import CELLS
+  from chorjax.run import StepSpec
   from chorjax.train import _loss_fn
   from flax import nnx
   batch, num_motions = real_batch
   cfg = tiny_config(f"model.cell={cell_name}", "model.head=mdn", "model.num_layers=3", "model.hidden_size=32",
                     "model.dropout=0.2")
   graphdef, params = nnx.split(create_model(cfg.model, 48, num_motions, 0), nnx.Param)
-  grad = jax.jit(jax.value_and_grad(lambda p: _loss_fn(graphdef, p, batch, num_motions, jax.random.key(3), 0.01, 0.2),
-                                    has_aux=True))
-  fused = grad(params)
-  monkeypatch.setattr(CELLS[cell_name], "scan", _Cell.scan)  # lax.scan of the step, differentiated by JAX
-  plain = jax.jit(jax.value_and_grad(lambda p: _loss_fn(graphdef, p, batch, num_motions, jax.random.key(3), 0.01, 0.2),
-                                     has_aux=True))(params)
+  spec = StepSpec(graphdef, None, None, input_noise=0.01, dropout=0.2)
+  grad = lambda: jax.jit(jax.value_and_grad(lambda p: _loss_fn(p, batch, jax.random.key(3), spec), has_aux=True))
+  fused = grad()(params)
+  # lax.scan of the step, differentiated by JAX
+  monkeypatch.setattr(CELLS[cell_name], "scan", lambda self, carry, xp: jax.lax.scan(self.step, carry, xp))
+  plain = grad()(params)
   _close(fused[0][0], plain[0][0])
   _close(nnx.to_pure_dict(fused[1]), nnx.to_pure_dict(plain[1]))

@@ -18,8 +18,9 @@ from chorjax.data.csv import read_csv
 from chorjax.data.dataset import bundled_path, load_dataset
 from chorjax.data.features import Features
 from chorjax.data.npz import read_npz
-from chorjax.models import motion_weights
-from chorjax.sample import generate, load_run, parse_mix, prime_state
+from chorjax.models import as_weights, parse_mix
+from chorjax.run import load_run
+from chorjax.sample import generate
 from chorjax.train import train_and_evaluate
 from helpers import tiny_config
 
@@ -40,8 +41,8 @@ def loaded(run_dir):
 
 
 def test_shapes_seeds_and_greedy(loaded):
-  graphdef, params, meta = loaded
-  w = jnp.tile(motion_weights(jnp.array([3]), 10), (4, 1))
+  graphdef, params = loaded.graphdef, loaded.params
+  w = jnp.tile(as_weights(jnp.array([3]), 10), (4, 1))
   gen = lambda seed, **kw: np.asarray(generate(graphdef, params, w, jax.random.key(seed), num_frames=50, **kw))
   a, b, c = gen(0), gen(0), gen(1)
   assert a.shape == (4, 50, 48) and np.isfinite(a).all()
@@ -53,29 +54,27 @@ def test_shapes_seeds_and_greedy(loaded):
 
 
 def test_long_generation_works(loaded):
-  graphdef, params, _ = loaded
-  z = generate(graphdef, params, motion_weights(jnp.array([0]), 10), jax.random.key(0), num_frames=10_000)
+  z = generate(loaded.graphdef, loaded.params, jnp.array([0]), jax.random.key(0), num_frames=10_000)
   assert z.shape == (1, 10_000, 48) and bool(jnp.isfinite(z).all())
 
 
 def test_priming_reproduces_the_teacher_forced_states(loaded):
-  graphdef, params, meta = loaded
-  feats = Features.from_dict(meta["features"])
-  prime = jnp.asarray(feats.encode(read_csv(TAKE).positions[:30]))[None]
-  w = motion_weights(jnp.array([6]), 10)
+  graphdef, params = loaded.graphdef, loaded.params
+  prime = jnp.asarray(loaded.features.encode(read_csv(TAKE).positions[:30]))[None]
+  w = jnp.array([6])
   model = nnx.merge(graphdef, params)
   carry = model.initial_carry(w)
   for t in range(30):
     carry, _ = model.step(carry, prime[:, t])
-  forced = prime_state(graphdef, params, w, prime)
+  forced = model.teacher_force(prime, model.initial_carry(w))[1]
   for a, b in zip(jax.tree.leaves(carry), jax.tree.leaves(forced)):
     np.testing.assert_allclose(a, b, atol=1e-5)
   # and generation continues from that state: greedy continuation equals stepping on from it
   cont = generate(graphdef, params, w, jax.random.key(0), num_frames=3, prime_BxPxD=prime, greedy=True)
   carry = model.initial_carry(w)
   for t in range(30):
-    carry, raw = model.step(carry, prime[:, t])
-  np.testing.assert_allclose(cont[:, 0], model.sample(raw, None, greedy=True), atol=1e-5)
+    carry, out = model.step(carry, prime[:, t])
+  np.testing.assert_allclose(cont[:, 0], model.sample(out, None, greedy=True), atol=1e-5)
 
 
 class EchoModel(nnx.Module):
@@ -85,17 +84,17 @@ class EchoModel(nnx.Module):
     self.dim = dim
     self.unused = nnx.Param(jnp.zeros(()))
 
-  def initial_carry(self, w):
-    return (jnp.zeros((w.shape[0], 1)),)
+  def initial_carry(self, motion):
+    return (jnp.zeros((motion.shape[0], 1)),)
 
-  def run(self, x, carry):
+  def teacher_force(self, x, carry):
     return x, carry
 
   def step(self, carry, x):
     return carry, x
 
-  def sample(self, raw, key, *a):
-    return raw
+  def sample(self, out, key, *a):
+    return out
 
 
 def test_samples_come_back_in_data_units_and_axes(run_dir):
@@ -103,7 +102,7 @@ def test_samples_come_back_in_data_units_and_axes(run_dir):
   graphdef, params = nnx.split(EchoModel(48), nnx.Param)
   take = read_csv(TAKE).positions
   prime = jnp.asarray(ds.features.encode(take[100:110]))[None]
-  z = generate(graphdef, nnx.to_pure_dict(params), motion_weights(jnp.array([0]), 10), jax.random.key(0),
+  z = generate(graphdef, nnx.to_pure_dict(params), jnp.array([0]), jax.random.key(0),
                num_frames=5, prime_BxPxD=prime)
   pos = np.asarray(ds.features.decode(z))[0]
   np.testing.assert_allclose(pos, np.broadcast_to(take[109], pos.shape), rtol=1e-4, atol=1e-3)

@@ -3,6 +3,7 @@ locking, and kill -9 + resume == uninterrupted (bit for bit)."""
 
 import json
 import os
+import shutil
 import signal
 import struct
 import subprocess
@@ -10,7 +11,6 @@ import sys
 import time
 from pathlib import Path
 
-import chex
 import jax
 import numpy as np
 import pytest
@@ -18,9 +18,11 @@ import pytest
 from chorjax import checkpoint as ckpt
 from chorjax import cli
 from chorjax.config import load_config, to_toml
+from chorjax.data.csv import read_csv
 from chorjax.data.dataset import WindowSampler, eval_windows, load_dataset
 from chorjax.errors import UserError
-from chorjax.train import init_state, make_eval_step, make_train_step, train_and_evaluate, workdir_lock
+from chorjax.run import create_train_state, load_run
+from chorjax.train import due, eval_step, train_and_evaluate, train_step, workdir_lock
 from helpers import TINY, tiny_config
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -81,19 +83,17 @@ def tiny_setup():
 def test_a_few_steps_lower_the_loss_and_the_step_compiles_once(tiny_setup, head):
   cfg, ds = tiny_setup
   cfg = load_config(None, [*TINY, "optim.lr=3e-3", f"model.head={head}"])
-  graphdef, state, tx, schedule = init_state(cfg, 48, ds.num_motions)
-  chex.clear_trace_counter()  # counts are per function code; the other parametrization traced it too
-  step = make_train_step(graphdef, tx, schedule, cfg, ds.num_motions, wrap=chex.assert_max_traces(n=1))
-  evaluate = make_eval_step(graphdef, ds.num_motions)
+  state, spec = create_train_state(cfg, 48, ds.num_motions)
   sampler = WindowSampler(ds.train, cfg.data.seq_length, 16, seed=0)
   held = sampler.batch(10_000)
-  before = float(evaluate(state["params"], held))
+  before = float(eval_step(state["params"], held, spec.graphdef))
   key = jax.random.key(0)
+  traces = train_step._cache_size()
   for s in range(40):
-    state, metrics = step(state, sampler.batch(s), key)
-  after = float(evaluate(state["params"], held))
+    state, metrics = train_step(state, sampler.batch(s), key, spec)
+  after = float(eval_step(state["params"], held, spec.graphdef))
   assert after < 0.9 * before if head == "mse" else after < before - 5.0
-  assert step._cache_size() == 1  # no silent recompiles
+  assert train_step._cache_size() == traces + 1  # one compile for this spec: no silent recompiles
   assert set(metrics) >= {"loss", "grad_norm", "param_norm", "update_norm", "lr"}
   assert int(state["step"]) == 40
 
@@ -143,20 +143,48 @@ def test_run_directory_holds_config_metrics_events_checkpoints_and_sample(tmp_pa
   assert images["sample/end_joints"][0][1][:4] == b"\x89PNG"  # a generated sample beside a real one
   assert [s for s, _ in scalars["train/loss"]] == [2, 3, 4, 6]
   assert scalars["val/val_loss"][-1][1] == pytest.approx(rows[-1]["val_loss"])
-  from chorjax.sample import load_run
-  meta = load_run(tmp_path, "latest")[2]
-  assert meta["step"] == 6
-  assert set(meta) >= {"config", "features", "id_map", "rng", "sampler", "step"}
-  assert len(meta["features"]["mean"]) == 48 and meta["sampler"]["position"] == 6
+  run = load_run(tmp_path, "latest")
+  assert run.step == 6 and run.config == cfg and run.num_motions == 10
+  assert run.features.mean.shape == (48,) and run.val_loss == pytest.approx(rows[-1]["val_loss"])
+  assert len(run.train_takes) == 9 and run.val_takes == ("94_10_skeleton_3d",)
+  manager = ckpt.open_run(tmp_path)
+  meta = ckpt.step_meta(manager, 6)  # resuming reads the data sampler's position from it
+  manager.close()
+  assert meta["sampler"]["position"] == 6 and meta["rng"] == {"seed": 0, "fold_in": "step"}
   assert Path(summary["samples"]["csv"]).exists() and Path(summary["samples"]["html"]).exists()
   # resume: continue the same run to 8 steps
   cfg2 = tiny_config("train.num_steps=8", "train.checkpoint_every=3", "train.eval_every=3", "train.log_every=2")
   assert train_and_evaluate(cfg2, tmp_path)["start_step"] == 6
 
 
+def test_periodic_actions_follow_one_due_rule():
+  assert [s for s in range(1, 11) if due(s, 4, 10)] == [4, 8, 10]  # every 4 steps and at the last
+  assert [s for s in range(1, 11) if due(s, 0, 10)] == [10]  # 0: only at the last
+
+
+def test_params_are_their_own_checkpoint_item_and_a_run_written_before_that_still_samples(tmp_path, capsys):
+  cfg = tiny_config("train.num_steps=2", "log.tensorboard=false")
+  train_and_evaluate(cfg, tmp_path / "new")
+  assert sorted(p.name for p in (tmp_path / "new" / "checkpoints" / "2").iterdir() if p.is_dir()) == [
+      "meta", "params", "train"]
+  # tests/fixtures/legacy_run: written by chorjax 539c1f4 (one 'state' item holding params and optimizer)
+  legacy = shutil.copytree(ROOT / "tests" / "fixtures" / "legacy_run", tmp_path / "legacy")
+  assert (legacy / "checkpoints" / "6" / "state").is_dir() and not (legacy / "checkpoints" / "6" / "params").exists()
+  run = load_run(legacy)
+  assert (run.step, run.config.model.cell, run.num_motions) == (6, "lstm", 10)
+  out = tmp_path / "s.csv"
+  assert cli.main(["sample", str(legacy), "-o", str(out), "--frames", "30", "--seed", "3"]) == 0
+  then = read_csv(legacy / "sample_seed3_30frames.csv").positions  # what chorjax 539c1f4 sampled
+  np.testing.assert_allclose(read_csv(out).positions, then, rtol=1e-5, atol=1e-3)
+  # and training continues it (state restored from the old item, new checkpoints in the new layout)
+  more = load_config(legacy / "tiny.toml", ["train.num_steps=8", "sample.frames=1"])
+  assert train_and_evaluate(more, legacy)["start_step"] == 6
+  assert (legacy / "checkpoints" / "8" / "params").is_dir()
+
+
 def test_best_checkpoint_is_kept_beside_the_latest(tmp_path):
   m = ckpt.create_manager(tmp_path, keep=1)
-  state = {"x": np.zeros(3, np.float32)}
+  state = {"params": {"x": np.zeros(3, np.float32)}, "opt_state": (), "step": np.zeros((), np.int32)}
   for step, val in [(1, 0.5), (2, 0.1), (3, 0.9), (4, 0.7)]:
     ckpt.save(m, step, state, {"step": step}, val)
   m.wait_until_finished()
@@ -204,8 +232,7 @@ def test_resume_after_sigkill_is_bit_identical(tmp_path):
   assert subprocess.run(cmd + [str(straight)], env=env, capture_output=True).returncode == 0
 
   def final_params(w):
-    from chorjax.sample import load_run
-    return load_run(w, 400)[1]
+    return load_run(w, 400).params
   a, b = final_params(killed), final_params(straight)
   for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)):
     np.testing.assert_array_equal(np.asarray(x), np.asarray(y))

@@ -13,7 +13,7 @@ from typing import Sequence
 
 import numpy as np
 
-from chorjax.data import transforms as tf
+from chorjax.data import transforms
 from chorjax.data.csv import read_csv
 from chorjax.data.features import Features
 from chorjax.data.motion import Motion
@@ -83,8 +83,8 @@ def to_up_axis(motion: Motion, up_axis: str) -> Motion:
   """The same motion expressed with another up axis (a rotation; exact)."""
   if motion.up_axis == up_axis:
     return motion
-  m = tf.up_axis_matrix(up_axis).T @ tf.up_axis_matrix(motion.up_axis)
-  return motion.replace(positions=np.asarray(tf.rotate(motion.positions, m), np.float32), up_axis=up_axis)
+  m = transforms.up_axis_matrix(up_axis).T @ transforms.up_axis_matrix(motion.up_axis)
+  return motion.replace(positions=np.asarray(transforms.rotate(motion.positions, m), np.float32), up_axis=up_axis)
 
 
 def conform(motions: Sequence[Motion], data_cfg) -> list[Motion]:
@@ -170,14 +170,14 @@ def load_dataset(data_cfg) -> Dataset:
     canon = np.asarray(proto.canonical(m.positions))
     out = [canon]
     if "mirror" in data_cfg.augment:
-      out.append(np.asarray(tf.mirror(canon, skeleton.twins, lateral_axis=0)))
+      out.append(np.asarray(transforms.mirror(canon, skeleton.twins, lateral_axis=0)))
     if "reverse" in data_cfg.augment:
-      out += [np.asarray(tf.reverse_time(c)) for c in out]
+      out += [np.asarray(transforms.reverse_time(c)) for c in out]
     return out
 
   train_raw = [(id_map[n], np.asarray(proto.represent(c))) for n in train_names for c in canon_versions(by_name[n])]
   val_raw = [(id_map[n], np.asarray(proto.represent(proto.canonical(by_name[n].positions)))) for n in val_names]
-  stats = tf.merged_stats([x for _, x in train_raw])
+  stats = transforms.merged_stats([x for _, x in train_raw])
   features = dataclasses.replace(proto, mean=stats.mean.astype(np.float32), std=stats.std(ddof=1).astype(np.float32))
   enc = lambda x: ((x - features.mean) / features.std).astype(np.float32)
   return Dataset(id_map, tuple(motions), tuple(train_names), tuple(val_names), features,

@@ -12,7 +12,7 @@ import dataclasses
 import jax.numpy as jnp
 import numpy as np
 
-from chorjax.data import transforms as tf
+from chorjax.data import transforms
 from chorjax.data.motion import Skeleton
 
 REPRESENTATIONS = ("absolute", "bone_relative", "root_relative")
@@ -43,10 +43,10 @@ class Features:
 
   def canonical(self, pos_TxJx3):
     """Data space -> y-up, scaled positions (before the representation)."""
-    return tf.scale_units(tf.to_y_up(pos_TxJx3, self.up_axis), self.scale)
+    return transforms.scale_units(transforms.to_y_up(pos_TxJx3, self.up_axis), self.scale)
 
   def uncanonical(self, pos_TxJx3):
-    return tf.rotate(tf.scale_units(pos_TxJx3, 1.0 / self.scale), tf.up_axis_matrix(self.up_axis).T)
+    return transforms.rotate(transforms.scale_units(pos_TxJx3, 1.0 / self.scale), transforms.up_axis_matrix(self.up_axis).T)
 
   def represent(self, canon_TxJx3):
     """Canonical positions -> un-normalized flat features ``[T, D]``."""
@@ -55,11 +55,11 @@ class Features:
 
   def encode(self, pos_TxJx3):
     """Data-space positions ``[..., T, J, 3]`` -> normalized features ``[..., T, D]``."""
-    return tf.normalize(self.represent(self.canonical(pos_TxJx3)), self.mean, self.std)
+    return transforms.normalize(self.represent(self.canonical(pos_TxJx3)), self.mean, self.std)
 
   def decode(self, z_TxD):
     """Normalized features ``[..., T, D]`` -> data-space positions ``[..., T, J, 3]``."""
-    rep = tf.denormalize(z_TxD, self.mean, self.std)
+    rep = transforms.denormalize(z_TxD, self.mean, self.std)
     rep = rep.reshape(rep.shape[:-1] + (self.skeleton.num_joints, 3))
     return self.uncanonical(_unrepresent(rep, self.skeleton, self.representation))
 
@@ -78,9 +78,9 @@ def _represent(pos, skeleton: Skeleton, representation: str):
   if representation == "absolute":
     return jnp.asarray(pos)
   if representation == "bone_relative":
-    return tf.to_bone_relative(pos, skeleton.parents)
+    return transforms.to_bone_relative(pos, skeleton.parents)
   if representation == "root_relative":
-    return tf.to_root_relative(pos, skeleton.root)
+    return transforms.to_root_relative(pos, skeleton.root)
   raise ValueError(f"unknown representation {representation!r}; one of {REPRESENTATIONS}")
 
 
@@ -88,7 +88,7 @@ def _unrepresent(rep, skeleton: Skeleton, representation: str):
   if representation == "absolute":
     return rep
   if representation == "bone_relative":
-    return tf.from_bone_relative(rep, skeleton.parents)
+    return transforms.from_bone_relative(rep, skeleton.parents)
   if representation == "root_relative":
-    return tf.from_root_relative(rep, skeleton.root)
+    return transforms.from_root_relative(rep, skeleton.root)
   raise ValueError(f"unknown representation {representation!r}; one of {REPRESENTATIONS}")

@@ -104,7 +104,6 @@ def from_root_relative(rel_TxJx3, root: int):
 
 # ---------------------------------------------------------------- axes, units, time
 
-_AXES = {"x": 0, "y": 1, "z": 2}
 
 
 def up_axis_matrix(up_axis: str) -> np.ndarray:

@@ -6,19 +6,19 @@ training can be fast:
 * ``project(x_...xD) -> xp_...xG``: everything that depends on the input only. Training applies it
   to a whole window at once (one large matmul, hoisted out of the time loop).
 * the recurrent matmul ``r = h @ w_h`` (the only work that must stay inside the loop);
-* ``post(small, xp_BxG, r_BxG, carry) -> (carry, h_BxH)``: pure elementwise work (gates, layer
-  norms), with ``small`` the cell's small parameters.
+* ``recurrent_update(loop_params, xp_BxG, r_BxG, carry) -> (carry, h_BxH)``: pure elementwise work
+  (gates, layer norms), with ``loop_params`` the cell's biases and gains used inside the time loop.
 
-``step(carry, xp)`` = ``post(small, xp, h @ w_h, carry)`` is what sampling calls once per frame.
-``scan(carry, xp_TxBxG)`` runs a whole (time-major) window; training runs it through the fused
-layers of :mod:`chorjax.models.fused` (the same numbers as ``lax.scan`` of ``step``, faster gradients).
+``step(carry, xp)`` = ``recurrent_update(loop_params, xp, h @ w_h, carry)`` is what sampling calls
+once per frame. ``scan(carry, xp_TxBxG)`` runs a whole (time-major) window through the fused layers of
+:mod:`chorjax.models.fused` (the same numbers as ``lax.scan`` of ``step``, faster gradients; the tests
+compare the two).
 A carry is a tuple of ``[B, H]`` arrays whose LAST entry is h: ``(c, h)`` for the LSTMs, ``(h,)``
 for the GRU.
 """
 
 from __future__ import annotations
 
-import jax
 import jax.numpy as jnp
 from flax import nnx
 
@@ -31,17 +31,18 @@ def _kernel(rngs, shape, init):
 
 
 class _Cell(nnx.Module):
-  def small(self) -> dict:
-    """The small parameters ``post`` needs (biases and gains inside the loop)."""
+  w_h: nnx.Param
+
+  def loop_params(self) -> dict:
+    """The biases and gains ``recurrent_update`` needs inside the time loop."""
     return {}
 
   def step(self, carry, xp_BxG):
-    return self.post(self.small(), xp_BxG, carry[-1] @ self.w_h[...], carry)
+    return self.recurrent_update(self.loop_params(), xp_BxG, carry[-1] @ self.w_h[...], carry)
 
-  def scan(self, carry, xp_TxBxG):
-    """``(final carry, h_TxBxH)`` over a time-major window of input projections. Here, the plain
-    ``lax.scan`` of ``step``; every cell overrides it with its fused layer, and tests compare the two."""
-    return jax.lax.scan(self.step, carry, xp_TxBxG)
+  @staticmethod
+  def recurrent_update(loop_params, xp_BxG, r_BxG, carry):
+    raise NotImplementedError
 
 
 class LSTMCell(_Cell):
@@ -59,7 +60,7 @@ class LSTMCell(_Cell):
     return x @ self.w_x[...] + self.b[...]
 
   @staticmethod
-  def post(small, xp_Bx4H, r_Bx4H, carry):
+  def recurrent_update(loop_params, xp_Bx4H, r_Bx4H, carry):
     c, h = lstm_update(lstm_gates(xp_Bx4H + r_Bx4H), carry[0])
     return (c, h), h
 
@@ -89,12 +90,12 @@ class LNLSTMCell(_Cell):
     z = (x @ self.w_x[...]).reshape(x.shape[:-1] + (4, self.hidden))
     return layer_norm(z, self.gain_x[...], self.b[...]).reshape(x.shape[:-1] + (4 * self.hidden,))
 
-  def small(self):
+  def loop_params(self):
     return {"gain_h": self.gain_h[...], "gain_c": self.gain_c[...], "bias_c": self.bias_c[...]}
 
   @staticmethod
-  def post(small, xp_Bx4H, r_Bx4H, carry):
-    c, h, _ = lnlstm_step(small["gain_h"], small["gain_c"], small["bias_c"], xp_Bx4H, r_Bx4H, carry[0])
+  def recurrent_update(loop_params, xp_Bx4H, r_Bx4H, carry):
+    c, h, _ = lnlstm_step(loop_params["gain_h"], loop_params["gain_c"], loop_params["bias_c"], xp_Bx4H, r_Bx4H, carry[0])
     return (c, h), h
 
   def scan(self, carry, xp_TxBx4H):
@@ -118,12 +119,12 @@ class GRUCell(_Cell):
   def project(self, x):
     return x @ self.w_x[...] + self.b_x[...]
 
-  def small(self):
+  def loop_params(self):
     return {"b_h": self.b_h[...]}
 
   @staticmethod
-  def post(small, xp_Bx3H, r_Bx3H, carry):
-    h, _ = gru_step(small["b_h"], xp_Bx3H, r_Bx3H, carry[0])
+  def recurrent_update(loop_params, xp_Bx3H, r_Bx3H, carry):
+    h, _ = gru_step(loop_params["b_h"], xp_Bx3H, r_Bx3H, carry[0])
     return (h,), h
 
   def scan(self, carry, xp_TxBx3H):

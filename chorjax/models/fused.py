@@ -11,8 +11,8 @@ also get their gradients after the loop, and :func:`gru_scan` for the GRU. Tests
 the straightforward scan (outputs and gradients to 1e-5); BENCHMARKS.md has the timings.
 
 Being ``jax.custom_vjp`` functions they support reverse-mode differentiation (``jax.grad``,
-``jax.vjp``, ``jax.jacrev``) and ``vmap``, not forward mode (``jax.jvp``, ``jax.jacfwd``); the cells'
-plain scan (``chorjax.models.cells._Cell.scan``) does both.
+``jax.vjp``, ``jax.jacrev``) and ``vmap``, not forward mode (``jax.jvp``, ``jax.jacfwd``); a
+``lax.scan`` of a cell's ``step`` does both.
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """Output heads: MSE (a point estimate) and MDN (a mixture of Gaussians over the whole frame).
 
-Both heads have the same interface: ``head(h_...xH) -> raw_...xP`` (the raw numbers),
-``head.loss(raw, target) -> (loss, aux)`` and ``head.sample(raw, key, ...) -> frame``. For the MDN,
-one pure function (``mdn_params``) turns raw numbers into (mixture log-weights, means, scales):
+Both heads have the same interface: ``head(h_...xH) -> out_...xP`` (the head's unconstrained
+outputs), ``head.loss(out, target) -> (loss, aux)`` and ``head.sample(out, key, ...) -> frame``. For
+the MDN, one pure function (``mdn_params``) turns those outputs into (mixture log-weights, means, scales):
 scales pass through softplus and are floored at ``min_scale`` so the likelihood stays finite.
 """
 
@@ -22,28 +22,24 @@ class MSEHead(nnx.Module):
     self.dim = dim
     self.out = nnx.Linear(hidden, dim, rngs=rngs)
 
-  @property
-  def num_outputs(self) -> int:
-    return self.dim
-
   def __call__(self, h):
     return self.out(h)
 
-  def loss(self, raw_xD, target_xD):
-    mse = jnp.mean(jnp.square(raw_xD - target_xD))
+  def loss(self, out_xD, target_xD):
+    mse = jnp.mean(jnp.square(out_xD - target_xD))
     return mse, {"mse": mse}
 
-  def sample(self, raw_BxD, key, pi_temperature=1.0, sigma_temperature=1.0, greedy=False):
+  def sample(self, out_BxD, key, pi_temperature=1.0, sigma_temperature=1.0, greedy=False):
     del key, pi_temperature, sigma_temperature, greedy  # a point estimate has nothing to draw
-    return raw_BxD
+    return out_BxD
 
 
-def mdn_params(raw_xP, num_mixtures: int, dim: int, isotropic: bool, min_scale: float):
+def mdn_params(out_xP, num_mixtures: int, dim: int, isotropic: bool, min_scale: float):
   """Raw head outputs -> ``(logpi_xK, mu_xKxD, scale_xKxS)`` with S = 1 (isotropic) or D."""
   k, s = num_mixtures, 1 if isotropic else dim
-  assert raw_xP.shape[-1] == k + k * dim + k * s, (raw_xP.shape, k, dim, s)
-  lead = raw_xP.shape[:-1]
-  logits, mu, scale = jnp.split(raw_xP, [k, k + k * dim], axis=-1)
+  assert out_xP.shape[-1] == k + k * dim + k * s, (out_xP.shape, k, dim, s)
+  lead = out_xP.shape[:-1]
+  logits, mu, scale = jnp.split(out_xP, [k, k + k * dim], axis=-1)
   logpi = jax.nn.log_softmax(logits, axis=-1)
   mu = mu.reshape(lead + (k, dim))
   scale = jnp.maximum(jax.nn.softplus(scale.reshape(lead + (k, s))), min_scale)
@@ -101,17 +97,17 @@ class MDNHead(nnx.Module):
   def __call__(self, h):
     return self.out(h)
 
-  def params(self, raw):
-    return mdn_params(raw, self.num_mixtures, self.dim, self.isotropic, self.min_scale)
+  def params(self, out):
+    return mdn_params(out, self.num_mixtures, self.dim, self.isotropic, self.min_scale)
 
-  def loss(self, raw_xP, target_xD):
-    logpi, mu, scale = self.params(raw_xP)
+  def loss(self, out_xP, target_xD):
+    logpi, mu, scale = self.params(out_xP)
     nll = -jnp.mean(mdn_log_prob(logpi, mu, scale, target_xD))
     # The MSE of the mixture mean: comparable with the MSE head.
     mean = jnp.sum(jnp.exp(logpi)[..., None] * mu, axis=-2)
     return nll, {"nll": nll, "mse": jnp.mean(jnp.square(mean - target_xD)),
                  "min_scale": jnp.min(scale)}
 
-  def sample(self, raw_BxP, key, pi_temperature=1.0, sigma_temperature=1.0, greedy=False):
-    logpi, mu, scale = self.params(raw_BxP)
+  def sample(self, out_BxP, key, pi_temperature=1.0, sigma_temperature=1.0, greedy=False):
+    logpi, mu, scale = self.params(out_BxP)
     return mdn_sample(key, logpi, mu, scale, pi_temperature, sigma_temperature, greedy)

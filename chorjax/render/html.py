@@ -20,13 +20,13 @@ from typing import Sequence
 
 import numpy as np
 
-from chorjax.data import transforms as tf
+from chorjax.data import transforms
 from chorjax.data.motion import Motion
 from chorjax.errors import atomic_write
 
 
 def _payload(m: Motion) -> dict:
-  pos = np.asarray(tf.to_y_up(m.positions, m.up_axis), np.float32)  # the viewer is y-up
+  pos = np.asarray(transforms.to_y_up(m.positions, m.up_axis), np.float32)  # the viewer is y-up
   height = float(np.ptp(pos[..., 1])) or 1.0
   return {
       "title": m.name, "fps": m.fps, "frames": int(pos.shape[0]), "joints": int(pos.shape[1]),

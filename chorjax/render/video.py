@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from chorjax.data import transforms as tf
+from chorjax.data import transforms
 from chorjax.data.motion import Motion
 from chorjax.errors import UserError, atomic_write
 from chorjax.render.plot import require_matplotlib
@@ -17,7 +17,7 @@ from chorjax.render.plot import require_matplotlib
 
 def _frames_rgb(motion: Motion, size: int = 400, max_frames: int | None = None):
   plt = require_matplotlib()
-  pos = np.asarray(tf.to_y_up(motion.positions, motion.up_axis))
+  pos = np.asarray(transforms.to_y_up(motion.positions, motion.up_axis))
   if max_frames:
     pos = pos[:max_frames]
   # matplotlib's 3D axes are z-up: plot (x, z, y)

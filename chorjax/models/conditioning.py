@@ -1,0 +1,53 @@
+"""Motion-id conditioning: which choreography the model dances, as ids or as a blend of ids.
+
+The model takes ``motion`` as integer ids ``[B]`` (one take each) or as weights ``[B, M]`` over the
+dataset's ``M`` motions (a blend such as ``4:0.5,5:0.5``); :func:`as_weights` turns either into the
+weights its initial-state layer reads.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from chorjax.errors import UserError
+
+
+def as_weights(motion, num_motions: int):
+  """Motion-id weights ``[B, M]`` from ids ``[B]`` (one-hot) or weights ``[B, M]`` (unchanged)."""
+  motion = jnp.asarray(motion)
+  if motion.ndim == 1 and jnp.issubdtype(motion.dtype, jnp.integer):
+    return jax.nn.one_hot(motion, num_motions, dtype=jnp.float32)
+  if motion.ndim != 2 or motion.shape[-1] != num_motions:
+    raise ValueError(f"motion: expected ids [B] or weights [B, {num_motions}], got shape {motion.shape}")
+  return motion
+
+
+def parse_mix(text: str, num_motions: int) -> np.ndarray:
+  """``'4:0.5,5:0.5'`` -> a weight vector over the motions (normalized to sum 1)."""
+  w = np.zeros(num_motions, np.float32)
+  for part in text.split(","):
+    try:
+      i_text, v_text = part.split(":")
+      i, v = int(i_text), float(v_text)
+    except ValueError:
+      raise UserError(f"--mix {text!r}: expected ID:WEIGHT,ID:WEIGHT (e.g. 4:0.5,5:0.5)") from None
+    if not 0 <= i < num_motions:
+      raise UserError(f"--mix {text!r}: motion id {i} out of range (0..{num_motions - 1})")
+    w[i] += v
+  if w.sum() <= 0:
+    raise UserError(f"--mix {text!r}: weights must sum to a positive number")
+  return w / w.sum()
+
+
+def motion_weight_vector(num_motions: int, motion: int | None = None, mix: str | None = None,
+                         source: str = "--motion") -> np.ndarray:
+  """One-hot weights ``[M]`` of ``motion`` (default 0), or the blend ``mix``; ``source`` names the
+  setting in errors."""
+  if mix:
+    return parse_mix(mix, num_motions)
+  motion = 0 if motion is None else motion
+  if not 0 <= motion < num_motions:
+    raise UserError(f"{source} {motion}: out of range (0..{num_motions - 1})")
+  return np.eye(num_motions, dtype=np.float32)[motion]

@@ -1,0 +1,157 @@
+"""A run's state: the optimizer, a fresh train state, the meta saved with it, and a run loaded back.
+
+Training and sampling both stand on this module and it imports neither: data -> models -> run ->
+train, sample -> cli.
+
+* :func:`create_train_state` builds ``{params, opt_state, step}`` and the static :class:`StepSpec`
+  the jitted train step needs (graph, optimizer, schedule, noise, dropout).
+* :func:`run_meta` is the JSON that every checkpoint carries (config, features, motion ids, takes).
+* :func:`load_run` reads a run directory back as a typed :class:`Run` with its params restored on
+  their own (no optimizer is built), for sampling and evaluation.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+import jax.numpy as jnp
+import optax
+from flax import nnx
+
+from chorjax import checkpoint as ckpt
+from chorjax.config import Config, config_from_dict
+from chorjax.data.features import Features
+from chorjax.errors import UserError
+from chorjax.models import create_model
+
+
+@dataclasses.dataclass(frozen=True)
+class StepSpec:
+  """What the train step needs besides its arrays; hashable, so it is a static jit argument.
+
+  Attributes:
+    graphdef: the model's static graph (``nnx.split``).
+    tx: the optax optimizer chain.
+    schedule: learning rate as a function of the step (logged).
+    input_noise: std of Gaussian noise added to the inputs (normalized units).
+    dropout: the model's dropout rate (0 = no dropout key is drawn).
+  """
+
+  graphdef: Any
+  tx: optax.GradientTransformation
+  schedule: optax.Schedule
+  input_noise: float
+  dropout: float
+
+
+def create_optimizer(cfg: Config) -> tuple[optax.GradientTransformation, optax.Schedule]:
+  """The optax chain of ``cfg.optim``: optional global-norm clipping, then the optimizer."""
+  o = cfg.optim
+  if o.schedule == "warmup_cosine":
+    schedule = optax.warmup_cosine_decay_schedule(0.0, o.lr, o.warmup_steps, max(cfg.train.num_steps, o.warmup_steps + 1),
+                                                  end_value=o.lr * o.final_lr_ratio)
+  else:
+    schedule = optax.constant_schedule(o.lr)
+  if o.name == "adam":
+    opt = optax.adam(schedule, b1=o.b1, b2=o.b2)
+  elif o.name == "adamw":
+    opt = optax.adamw(schedule, b1=o.b1, b2=o.b2, weight_decay=o.weight_decay)
+  else:
+    opt = optax.amsgrad(schedule, b1=o.b1, b2=o.b2)
+  chain = [optax.clip_by_global_norm(o.clip_norm)] if o.clip_norm > 0 else []
+  return optax.chain(*chain, opt), schedule
+
+
+def create_train_state(cfg: Config, dim: int, num_motions: int) -> tuple[dict, StepSpec]:
+  """``({params, opt_state, step}, spec)`` for a fresh run of ``cfg`` on ``dim`` features."""
+  model = create_model(cfg.model, dim, num_motions, cfg.train.seed)
+  graphdef, params = nnx.split(model, nnx.Param)
+  params = nnx.to_pure_dict(params)
+  tx, schedule = create_optimizer(cfg)
+  state = {"params": params, "opt_state": tx.init(params), "step": jnp.zeros((), jnp.int32)}
+  return state, StepSpec(graphdef, tx, schedule, cfg.train.input_noise, cfg.model.dropout)
+
+
+def model_template(cfg: Config, dim: int, num_motions: int) -> tuple[Any, dict]:
+  """``(graphdef, abstract params)`` of ``cfg``'s model, without computing any parameter."""
+  model = nnx.eval_shape(lambda: create_model(cfg.model, dim, num_motions, cfg.train.seed))
+  graphdef, params = nnx.split(model, nnx.Param)
+  return graphdef, nnx.to_pure_dict(params)
+
+
+def run_meta(cfg: Config, features: Features, id_map: dict, train_takes, val_takes, step: int) -> dict:
+  """The JSON meta every checkpoint carries: what sampling needs, and what resuming checks."""
+  return {"config": cfg.to_dict(), "features": features.to_dict(), "id_map": id_map,
+          "train_takes": list(train_takes), "val_takes": list(val_takes),
+          "rng": {"seed": cfg.train.seed, "fold_in": "step"},
+          "sampler": {"seed": cfg.train.seed, "position": step}, "step": step}
+
+
+@dataclasses.dataclass(frozen=True)
+class Run:
+  """A trained run loaded from its directory.
+
+  Attributes:
+    workdir: the run directory.
+    config: the run's resolved config.
+    features: the fitted feature pipeline (data space <-> model features).
+    id_map: take name -> motion id.
+    train_takes, val_takes: the split it was trained on.
+    graphdef, params: the model (``nnx.merge(graphdef, params)``).
+    step: the checkpoint's step.
+    val_loss: the validation loss saved with that checkpoint (None without held-out takes).
+  """
+
+  workdir: Path
+  config: Config
+  features: Features
+  id_map: dict
+  train_takes: tuple
+  val_takes: tuple
+  graphdef: Any
+  params: dict
+  step: int
+  val_loss: float | None
+
+  @property
+  def num_motions(self) -> int:
+    return len(self.id_map)
+
+  @property
+  def fps(self) -> float:
+    return self.config.data.fps
+
+  def sampling(self, pi_temperature=None, sigma_temperature=None, greedy=None) -> dict:
+    """Sampling controls: the ones given, else the run's ``[sample]`` config."""
+    s = self.config.sample
+    return {"pi_temperature": s.pi_temperature if pi_temperature is None else pi_temperature,
+            "sigma_temperature": s.sigma_temperature if sigma_temperature is None else sigma_temperature,
+            "greedy": bool(s.greedy if greedy is None else greedy)}
+
+
+def load_run(workdir, which: str | int = "latest") -> Run:
+  """The run in ``workdir`` at checkpoint ``which`` (``latest``, ``best`` or a step number).
+
+  Raises:
+    UserError: no such directory, no checkpoints, no such step, or a checkpoint that does not
+      match its own config.
+  """
+  workdir = Path(workdir)
+  if not workdir.is_dir():
+    raise UserError(f"{workdir}: no such run directory")
+  manager = ckpt.open_run(workdir)
+  try:
+    step = ckpt.resolve_step(manager, which, workdir)
+    meta = ckpt.step_meta(manager, step)
+    cfg = config_from_dict(meta["config"])
+    features = Features.from_dict(meta["features"])
+    graphdef, template = model_template(cfg, features.dim, len(meta["id_map"]))
+    params = ckpt.restore_params(manager, step, template)
+  finally:
+    manager.close()
+  return Run(workdir=workdir, config=cfg, features=features, id_map=dict(meta["id_map"]),
+             train_takes=tuple(meta.get("train_takes", ())), val_takes=tuple(meta.get("val_takes", ())),
+             graphdef=graphdef, params=params, step=int(meta["step"]), val_loss=meta.get("val_loss"))
+
