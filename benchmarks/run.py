@@ -15,7 +15,6 @@ import argparse
 import json
 import os
 import platform
-import resource
 import subprocess
 import sys
 import time
@@ -51,14 +50,26 @@ def jax_train_step(cell, head):
   from chorjax.config import load_config
   from chorjax.run import create_train_state
   from chorjax.train import train_step
-  cfg = load_config(None, [f"model.cell={cell}", f"model.head={head}", f"model.num_layers={L}",
-                           f"model.hidden_size={H}", f"model.num_mixtures={K}", f"train.batch_size={B}",
-                           f"data.seq_length={T}"])
+
+  cfg = load_config(
+    None,
+    [
+      f"model.cell={cell}",
+      f"model.head={head}",
+      f"model.num_layers={L}",
+      f"model.hidden_size={H}",
+      f"model.num_mixtures={K}",
+      f"train.batch_size={B}",
+      f"data.seq_length={T}",
+    ],
+  )
   state, spec = create_train_state(cfg, D, 10)
   rng = np.random.default_rng(0)
-  batch = {"inputs": rng.normal(size=(B, T, D)).astype(np.float32),
-           "targets": rng.normal(size=(B, T, D)).astype(np.float32),
-           "motion_ids": rng.integers(0, 10, B).astype(np.int32)}
+  batch = {
+    "inputs": rng.normal(size=(B, T, D)).astype(np.float32),
+    "targets": rng.normal(size=(B, T, D)).astype(np.float32),
+    "motion_ids": rng.integers(0, 10, B).astype(np.int32),
+  }
   key = jax.random.key(0)
   box = {"state": state}
   t = time.perf_counter()
@@ -71,12 +82,15 @@ def jax_train_step(cell, head):
   def run():
     box["state"], m = step(box["state"], batch, key)
     return m["loss"]
+
   return run, compile_s, first_step_s
 
 
 def torch_train_step(cell, head):
   import torch
+
   from benchmarks.torch_peer import Model, make_train_step
+
   torch.manual_seed(0)
   model = Model(cell, head, D, H, L, K)
   step = make_train_step(model)
@@ -109,12 +123,16 @@ def matmul_peak():
 
 
 def jax_sampler(batch):
+  from flax import nnx
+
   from chorjax.config import load_config
   from chorjax.models import create_model
   from chorjax.sample import generate
-  from flax import nnx
-  cfg = load_config(None, ["model.cell=lstm", "model.head=mdn", f"model.num_layers={L}", f"model.hidden_size={H}",
-                           f"model.num_mixtures={K}"])
+
+  cfg = load_config(
+    None,
+    ["model.cell=lstm", "model.head=mdn", f"model.num_layers={L}", f"model.hidden_size={H}", f"model.num_mixtures={K}"],
+  )
   graphdef, params = nnx.split(create_model(cfg.model, D, 10, 0), nnx.Param)
   w = jax.nn.one_hot(jnp.zeros(batch, jnp.int32), 10)
   run = lambda: generate(graphdef, params, w, jax.random.key(0), num_frames=1000)
@@ -125,7 +143,9 @@ def jax_sampler(batch):
 def torch_samplers(batch):
   import torch
   from torch import nn
+
   from benchmarks.torch_peer import sample_lstm_loop, sample_lstmcell_loop
+
   torch.manual_seed(0)
   cells = nn.ModuleList([nn.LSTMCell(D if l == 0 else H, H) for l in range(L)])
   lstm, out = nn.LSTM(D, H, L, batch_first=True), nn.Linear(H, K + 2 * K * D)
@@ -136,12 +156,15 @@ def peak_rss_of_default_training() -> float:
   """Peak resident memory (MB) of `chorjax train configs/quickstart.toml` for 20 steps (a checkpoint,
   TensorBoard, the end sample and its player), in a child process."""
   import tempfile
+
   # VmHWM, not ru_maxrss: Linux carries ru_maxrss across fork+exec, so a child would report this
   # (large) benchmark process's high-water mark. VmHWM belongs to the new address space.
-  code = ("import sys; from chorjax.cli import main; "
-          "rc = main(['train', 'configs/quickstart.toml', '--workdir', sys.argv[1], 'train.num_steps=20', "
-          "'log.progress=none']); "
-          "print('RSS', [l.split()[1] for l in open('/proc/self/status') if l.startswith('VmHWM')][0])")
+  code = (
+    "import sys; from chorjax.cli import main; "
+    "rc = main(['train', 'configs/quickstart.toml', '--workdir', sys.argv[1], 'train.num_steps=20', "
+    "'log.progress=none']); "
+    "print('RSS', [l.split()[1] for l in open('/proc/self/status') if l.startswith('VmHWM')][0])"
+  )
   with tempfile.TemporaryDirectory() as d:
     out = subprocess.run([sys.executable, "-c", code, d], capture_output=True, text=True, cwd=HERE.parent)
   line = [l for l in out.stdout.splitlines() if l.startswith("RSS")]
@@ -154,16 +177,32 @@ def main(argv=None):
   ap.add_argument("--out", default=str(HERE / "results.json"))
   args = ap.parse_args(argv)
   from chorjax.runtime import keep_freed_memory
+
   tuned = keep_freed_memory()  # as the chorjax command does; the PyTorch peer in this process gains too
   import torch
+
   torch.set_num_threads(os.cpu_count() or 1)
   reps = 5 if args.quick else 15
   from chorjax.experiments import machine_info
-  res = {"machine": {"description": machine_info(), "platform": platform.platform(), "cpus": os.cpu_count(),
-                     "python": platform.python_version(), "jax": jax.__version__, "torch": torch.__version__,
-                     "device": str(jax.devices()[0]), "glibc_keep_freed_memory": tuned},
-         "config": {"batch": B, "seq": T, "features": D, "hidden": H, "layers": L, "mixtures": K, "reps": reps},
-         "train_step_s": {}, "compile_s": {}, "first_step_s": {}, "ratio_torch_over_chorjax": {}, "sample_1000_s": {}}
+
+  res = {
+    "machine": {
+      "description": machine_info(),
+      "platform": platform.platform(),
+      "cpus": os.cpu_count(),
+      "python": platform.python_version(),
+      "jax": jax.__version__,
+      "torch": torch.__version__,
+      "device": str(jax.devices()[0]),
+      "glibc_keep_freed_memory": tuned,
+    },
+    "config": {"batch": B, "seq": T, "features": D, "hidden": H, "layers": L, "mixtures": K, "reps": reps},
+    "train_step_s": {},
+    "compile_s": {},
+    "first_step_s": {},
+    "ratio_torch_over_chorjax": {},
+    "sample_1000_s": {},
+  }
   peak = matmul_peak()
   kept = {}  # chorjax steps whose ratios are measured against each other, alternating in one group
   res["matmul_peak_gflops"] = peak / 1e9
@@ -175,15 +214,19 @@ def main(argv=None):
         kept[name] = jrun
       trun = torch_train_step(cell, head)
       sync_j, sync_t = (lambda x: jax.block_until_ready(x)), (lambda x: x.item())
-      med = alternate([("chorjax", jrun, sync_j), ("torch", trun, sync_t)], reps if cell != "lnlstm" else max(3, reps // 3))
+      med = alternate(
+        [("chorjax", jrun, sync_j), ("torch", trun, sync_t)], reps if cell != "lnlstm" else max(3, reps // 3)
+      )
       res["train_step_s"][f"chorjax_{name}"] = med["chorjax"]
       res["train_step_s"][f"torch_{name}"] = med["torch"]
       res["compile_s"][name] = compile_s
       res["first_step_s"][name] = first_step_s
       res["ratio_torch_over_chorjax"][f"train_{name}"] = med["torch"] / med["chorjax"]
-      print(f"train {name:12s} chorjax {med['chorjax'] * 1e3:7.1f} ms  torch {med['torch'] * 1e3:7.1f} ms  "
-            f"speed-up {med['torch'] / med['chorjax']:.2f}x  (compile {compile_s:.1f} s, first step {first_step_s:.1f} s)",
-            flush=True)
+      print(
+        f"train {name:12s} chorjax {med['chorjax'] * 1e3:7.1f} ms  torch {med['torch'] * 1e3:7.1f} ms  "
+        f"speed-up {med['torch'] / med['chorjax']:.2f}x  (compile {compile_s:.1f} s, first step {first_step_s:.1f} s)",
+        flush=True,
+      )
   ts = res["train_step_s"]
   # The LN-LSTM / LSTM and MDN / MSE ratios from one alternating group of the three chorjax steps, so
   # that the machine's drift between the groups above does not enter them.
@@ -197,20 +240,31 @@ def main(argv=None):
   for batch in (1, 64):
     jrun = jax_sampler(batch)
     cell_loop, lstm_loop = torch_samplers(batch)
-    med = alternate([("chorjax", jrun, jax.block_until_ready), ("lstmcell", cell_loop, lambda x: None),
-                     ("lstm", lstm_loop, lambda x: None)], max(3, reps // 2))
+    med = alternate(
+      [
+        ("chorjax", jrun, jax.block_until_ready),
+        ("lstmcell", cell_loop, lambda x: None),
+        ("lstm", lstm_loop, lambda x: None),
+      ],
+      max(3, reps // 2),
+    )
     best = min(med["lstmcell"], med["lstm"])
     for k, v in med.items():
       res["sample_1000_s"][f"{k}_b{batch}"] = v
     res["ratio_torch_over_chorjax"][f"sample_b{batch}"] = best / med["chorjax"]
-    print(f"sample 1000 frames, batch {batch:2d}: chorjax {med['chorjax'] * 1e3:7.1f} ms  torch LSTMCell loop "
-          f"{med['lstmcell'] * 1e3:7.1f} ms  nn.LSTM loop {med['lstm'] * 1e3:7.1f} ms  speed-up {best / med['chorjax']:.2f}x",
-          flush=True)
+    print(
+      f"sample 1000 frames, batch {batch:2d}: chorjax {med['chorjax'] * 1e3:7.1f} ms  torch LSTMCell loop "
+      f"{med['lstmcell'] * 1e3:7.1f} ms  nn.LSTM loop {med['lstm'] * 1e3:7.1f} ms  "
+      f"speed-up {best / med['chorjax']:.2f}x",
+      flush=True,
+    )
   res["peak_rss_mb_default_training"] = peak_rss_of_default_training()
-  print(f"LN-LSTM / LSTM step {res['ln_over_lstm']:.2f}x; MDN / MSE head {res['mdn_over_mse']:.2f}x; "
-        f"train step {res['train_gflops']:.1f} GFLOP/s = {100 * res['train_fraction_of_peak']:.0f}% of the "
-        f"{res['matmul_peak_gflops']:.0f} GFLOP/s matmul peak; default training peak RSS "
-        f"{res['peak_rss_mb_default_training']:.0f} MB")
+  print(
+    f"LN-LSTM / LSTM step {res['ln_over_lstm']:.2f}x; MDN / MSE head {res['mdn_over_mse']:.2f}x; "
+    f"train step {res['train_gflops']:.1f} GFLOP/s = {100 * res['train_fraction_of_peak']:.0f}% of the "
+    f"{res['matmul_peak_gflops']:.0f} GFLOP/s matmul peak; default training peak RSS "
+    f"{res['peak_rss_mb_default_training']:.0f} MB"
+  )
   Path(args.out).write_text(json.dumps(res, indent=2))
   print(f"wrote {args.out}")
 

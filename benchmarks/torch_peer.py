@@ -16,7 +16,11 @@ class LNLSTMCell(nn.Module):
     super().__init__()
     self.h = h
     self.wx, self.wh = nn.Linear(d_in, 4 * h), nn.Linear(h, 4 * h, bias=False)
-    self.ln_x, self.ln_h, self.ln_c = nn.LayerNorm([4, h]), nn.LayerNorm([4, h], elementwise_affine=True), nn.LayerNorm(h)
+    self.ln_x, self.ln_h, self.ln_c = (
+      nn.LayerNorm([4, h]),
+      nn.LayerNorm([4, h], elementwise_affine=True),
+      nn.LayerNorm(h),
+    )
 
   def forward(self, xp_t, state):
     c, h = state
@@ -81,6 +85,7 @@ def make_train_step(model):
     torch.nn.utils.clip_grad_norm_(model.parameters(), 10.0)
     opt.step()
     return loss
+
   return step
 
 

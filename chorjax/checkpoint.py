@@ -27,12 +27,15 @@ def checkpoint_dir(workdir) -> Path:
 
 
 def create_manager(workdir, keep: int = 3, read_only: bool = False) -> ocp.CheckpointManager:
-  policy = pp.AnyPreservationPolicy([
+  policy = pp.AnyPreservationPolicy(
+    [
       pp.LatestN(keep),
       pp.BestN(get_metric_fn=lambda m: m["val_loss"], reverse=True, n=1, keep_checkpoints_without_metrics=False),
-  ])
-  options = ocp.CheckpointManagerOptions(preservation_policy=policy, cleanup_tmp_directories=not read_only,
-                                         create=not read_only, read_only=read_only)
+    ]
+  )
+  options = ocp.CheckpointManagerOptions(
+    preservation_policy=policy, cleanup_tmp_directories=not read_only, create=not read_only, read_only=read_only
+  )
   return ocp.CheckpointManager(checkpoint_dir(workdir), options=options)
 
 
@@ -42,9 +45,13 @@ def save(manager: ocp.CheckpointManager, step: int, state, meta: dict, val_loss:
   metrics = {"val_loss": float(val_loss)} if val_loss is not None else None
   meta = {**meta, "val_loss": metrics and metrics["val_loss"]}
   train = {"opt_state": state["opt_state"], "step": state["step"]}
-  manager.save(step, args=ocp.args.Composite(params=ocp.args.StandardSave(state["params"]),
-                                             train=ocp.args.StandardSave(train), meta=ocp.args.JsonSave(meta)),
-               metrics=metrics)
+  manager.save(
+    step,
+    args=ocp.args.Composite(
+      params=ocp.args.StandardSave(state["params"]), train=ocp.args.StandardSave(train), meta=ocp.args.JsonSave(meta)
+    ),
+    metrics=metrics,
+  )
 
 
 def _is_legacy(manager: ocp.CheckpointManager, step: int) -> bool:
@@ -59,8 +66,9 @@ def _abstract(template, sharding=None):
 
 
 def _mismatch(manager, step, e: Exception) -> UserError:
-  return UserError(f"{manager.directory}/{step}: checkpoint does not match this model config "
-                   f"({str(e).splitlines()[0][:160]})")
+  return UserError(
+    f"{manager.directory}/{step}: checkpoint does not match this model config ({str(e).splitlines()[0][:160]})"
+  )
 
 
 def step_meta(manager, step) -> dict:
@@ -87,8 +95,12 @@ def restore(manager: ocp.CheckpointManager, step: int, template, sharding=None):
       state = manager.restore(step, args=ocp.args.Composite(state=ocp.args.StandardRestore(abstract)))["state"]
     else:
       train = {"opt_state": abstract["opt_state"], "step": abstract["step"]}
-      r = manager.restore(step, args=ocp.args.Composite(params=ocp.args.StandardRestore(abstract["params"]),
-                                                        train=ocp.args.StandardRestore(train)))
+      r = manager.restore(
+        step,
+        args=ocp.args.Composite(
+          params=ocp.args.StandardRestore(abstract["params"]), train=ocp.args.StandardRestore(train)
+        ),
+      )
       state = {"params": r["params"], **r["train"]}
   except (ValueError, KeyError, TypeError) as e:
     raise _mismatch(manager, step, e) from None
@@ -102,8 +114,9 @@ def restore_params(manager: ocp.CheckpointManager, step: int, template):
   try:
     if _is_legacy(manager, step):  # a partial restore of the old single ``state`` item
       item = {"params": abstract}
-      args = ocp.args.PyTreeRestore(item=item, restore_args=ocp.checkpoint_utils.construct_restore_args(item),
-                                    partial_restore=True)
+      args = ocp.args.PyTreeRestore(
+        item=item, restore_args=ocp.checkpoint_utils.construct_restore_args(item), partial_restore=True
+      )
       params = manager.restore(step, args=ocp.args.Composite(state=args))["state"]["params"]
     else:
       params = manager.restore(step, args=ocp.args.Composite(params=ocp.args.StandardRestore(abstract)))["params"]

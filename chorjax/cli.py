@@ -17,13 +17,24 @@ def _data_info(args) -> int:
   import numpy as np
   from rich.console import Console
   from rich.table import Table
+
   from chorjax.data.dataset import read_takes
   from chorjax.data.motion import bone_length_cv
 
   motions = read_takes(args.inputs)
   table = Table(title="takes", show_lines=False)
-  for col in ("take", "frames", "joints", "fps", "x range", "y range", "z range", "bone len (mean)",
-              "bone CV median", "bone CV max"):
+  for col in (
+    "take",
+    "frames",
+    "joints",
+    "fps",
+    "x range",
+    "y range",
+    "z range",
+    "bone len (mean)",
+    "bone CV median",
+    "bone CV max",
+  ):
     table.add_column(col, justify="left" if col == "take" else "right")
   for m in motions:
     lo, hi = m.positions.min(axis=(0, 1)), m.positions.max(axis=(0, 1))
@@ -31,8 +42,14 @@ def _data_info(args) -> int:
     if m.skeleton.bones:
       cv = bone_length_cv(m.positions, m.skeleton) * 100
       bones = [f"{m.bone_lengths().mean():.4g}", f"{np.median(cv):.2f}%", f"{cv.max():.2f}%"]
-    table.add_row(m.name, str(m.num_frames), str(m.skeleton.num_joints), f"{m.fps:g}",
-                  *[f"{lo[i]:.4g}..{hi[i]:.4g}" for i in range(3)], *bones)
+    table.add_row(
+      m.name,
+      str(m.num_frames),
+      str(m.skeleton.num_joints),
+      f"{m.fps:g}",
+      *[f"{lo[i]:.4g}..{hi[i]:.4g}" for i in range(3)],
+      *bones,
+    )
   Console(width=200).print(table)
   return 0
 
@@ -51,14 +68,19 @@ def _data_plot(args) -> int:
 
 def _data_convert(args) -> int:
   import numpy as np
+
   from chorjax.data import transforms
   from chorjax.data.csv import write_csv
   from chorjax.data.dataset import read_motions, read_takes, resolve_files, to_up_axis
   from chorjax.data.skeletons import to_mpii16
   from chorjax.metrics import body_size
 
-  motions = [m for spec in args.inputs for f in resolve_files(spec)
-             for m in read_motions(f, fps=args.fps, asf=args.asf, amc_fps=args.amc_fps)]
+  motions = [
+    m
+    for spec in args.inputs
+    for f in resolve_files(spec)
+    for m in read_motions(f, fps=args.fps, asf=args.asf, amc_fps=args.amc_fps)
+  ]
   if args.drop_first_frame:
     motions = [m.replace(positions=m.positions[1:]) for m in motions]
   if args.joints == "mpii16":
@@ -68,11 +90,19 @@ def _data_convert(args) -> int:
     canon = lambda m: np.asarray(transforms.to_y_up(m.positions, m.up_axis))
     ref_size = np.mean([body_size(canon(r), r.skeleton) for r in ref])
     motions = [to_up_axis(m, ref[0].up_axis) for m in motions]
-    motions = [m.replace(positions=m.positions * np.float32(ref_size / body_size(canon(m), m.skeleton)),
-                         units=ref[0].units) for m in motions]
+    motions = [
+      m.replace(positions=m.positions * np.float32(ref_size / body_size(canon(m), m.skeleton)), units=ref[0].units)
+      for m in motions
+    ]
     # same frame rate, and the same average place of the root (the root is absolute in the features)
-    motions = [m if m.fps == ref[0].fps else m.replace(
-        positions=np.asarray(transforms.resample(m.positions, m.fps, ref[0].fps), np.float32), fps=ref[0].fps) for m in motions]
+    motions = [
+      m
+      if m.fps == ref[0].fps
+      else m.replace(
+        positions=np.asarray(transforms.resample(m.positions, m.fps, ref[0].fps), np.float32), fps=ref[0].fps
+      )
+      for m in motions
+    ]
     ref_root = np.mean([r.positions[:, r.skeleton.root].mean(0) for r in ref], axis=0)
     motions = [m.replace(positions=m.positions - m.positions[:, m.skeleton.root].mean(0) + ref_root) for m in motions]
   if args.up_axis:
@@ -84,6 +114,7 @@ def _data_convert(args) -> int:
     if len(motions) != 1:
       raise UserError(f"{out}: one .bvh holds one motion; give one input or an output folder")
     from chorjax.data.bvh import write_bvh
+
     _refuse_existing([out], args.force)
     written = [write_bvh(motions[0], out, exact=not args.rigid)]
   else:
@@ -97,6 +128,7 @@ def _data_convert(args) -> int:
 
 def _config_show(args) -> int:
   from chorjax.config import load_config, to_toml
+
   config, overrides = args.config, list(args.overrides)
   if config and "=" in config and not Path(config).exists():  # only overrides of the defaults
     config, overrides = None, [config, *overrides]
@@ -111,24 +143,32 @@ def _train(args) -> int:
   overrides = list(args.overrides)
   if args.distributed:
     overrides.append("parallel.distributed=true")
-  for flag, key in (("coordinator", "coordinator_address"), ("num_processes", "num_processes"),
-                    ("process_id", "process_id")):
+  for flag, key in (
+    ("coordinator", "coordinator_address"),
+    ("num_processes", "num_processes"),
+    ("process_id", "process_id"),
+  ):
     if getattr(args, flag) is not None:
       value = getattr(args, flag)
       overrides.append(f"parallel.{key}={value!r}" if isinstance(value, str) else f"parallel.{key}={value}")
   cfg = load_config(args.config, overrides)
   workdir = Path(args.workdir) if args.workdir else default_workdir(cfg)
   from chorjax.parallel import setup_parallel
+
   parallel = setup_parallel(cfg)
   summary = train_and_evaluate(cfg, workdir, force=args.force, parallel=parallel)
   if parallel is not None and not parallel.is_main:
-    print(f"process {parallel.process_index}/{parallel.process_count}: steps {summary['start_step']}->"
-          f"{summary['final_step']}, final train loss {summary.get('final_train_loss', float('nan')):.6g}")
+    print(
+      f"process {parallel.process_index}/{parallel.process_count}: steps {summary['start_step']}->"
+      f"{summary['final_step']}, final train loss {summary.get('final_train_loss', float('nan')):.6g}"
+    )
     return 0
-  print(f"trained {cfg.name}: steps {summary['start_step']}->{summary['final_step']}"
-          + (f", train loss {summary['final_train_loss']:.4g}" if "final_train_loss" in summary else "")
-          + (f", val loss {summary['final_val_loss']:.4g}" if "final_val_loss" in summary else "")
-          + f", {summary['seconds']:.0f} s; workdir {workdir}")
+  print(
+    f"trained {cfg.name}: steps {summary['start_step']}->{summary['final_step']}"
+    + (f", train loss {summary['final_train_loss']:.4g}" if "final_train_loss" in summary else "")
+    + (f", val loss {summary['final_val_loss']:.4g}" if "final_val_loss" in summary else "")
+    + f", {summary['seconds']:.0f} s; workdir {workdir}"
+  )
   if "samples" in summary:
     print(f"sample: {summary['samples']['csv']}\nwatch it: {summary['samples']['html']}")
   return 0
@@ -137,11 +177,12 @@ def _train(args) -> int:
 def _sample(args) -> int:
   import jax
   import numpy as np
+
   from chorjax.models import motion_weight_vector
   from chorjax.run import load_run
   from chorjax.sample import generate, read_prime
 
-  out, suffix = _output(args.output, (".csv", ".npz", ".bvh", ".html"))
+  out, _ = _output(args.output, (".csv", ".npz", ".bvh", ".html"))
   paths = _sample_paths(out, args.num)
   _refuse_existing(paths, args.force)  # the files really written (OUT_k.csv for several dancers)
   run = load_run(args.workdir, args.checkpoint)
@@ -152,13 +193,28 @@ def _sample(args) -> int:
     phrase = read_prime(args.prime, features, run.config.data)
     prime = np.tile(phrase[None], (args.num, 1, 1))
   sampling = run.sampling(args.pi_temperature, args.sigma_temperature, True if args.greedy else None)
-  z = generate(run.graphdef, run.params, motion_BxM, jax.random.key(args.seed), num_frames=args.frames,
-               prime_BxPxD=prime, **sampling)
+  z = generate(
+    run.graphdef,
+    run.params,
+    motion_BxM,
+    jax.random.key(args.seed),
+    num_frames=args.frames,
+    prime_BxPxD=prime,
+    **sampling,
+  )
   pos = np.asarray(features.decode(z))
   if phrase is not None:  # the phrase the dancer gave, then the machine's continuation
     pos = np.concatenate([np.tile(np.asarray(features.decode(phrase))[None], (args.num, 1, 1, 1)), pos], axis=1)
-  settings = {"workdir": str(args.workdir), "checkpoint_step": run.step, "frames": args.frames,
-              "motion": args.motion, "mix": args.mix, "prime": args.prime, "seed": args.seed, **sampling}
+  settings = {
+    "workdir": str(args.workdir),
+    "checkpoint_step": run.step,
+    "frames": args.frames,
+    "motion": args.motion,
+    "mix": args.mix,
+    "prime": args.prime,
+    "seed": args.seed,
+    **sampling,
+  }
   written = _write_sample(out, paths, pos, run.fps, features.skeleton, features.up_axis, settings)
   print("wrote " + ", ".join(map(str, written)))
   return 0
@@ -200,6 +256,7 @@ def _write_sample(out: Path, paths, pos, fps, sk, up, settings) -> list:
     return [write_player(ms, out, title=f"chorjax sample ({settings['workdir']})")]
   if suffix == ".bvh":
     from chorjax.data.bvh import write_bvh
+
     return [write_bvh(Motion(p, fps, sk, up, name=out.stem), path) for p, path in zip(pos, paths)]
   return [write_csv(p, path) for p, path in zip(pos, paths)]
 
@@ -214,15 +271,18 @@ def _render(args) -> int:
     motions = [m.replace(positions=m.positions[: args.frames]) for m in motions]
   if suffix == ".html":
     from chorjax.render.html import write_player
+
     written = write_player(motions, out, title=args.title or out.stem, columns=args.columns)
   else:
     if len(motions) > 1:
       print(f"note: {suffix} shows one motion; rendering {motions[0].name}", file=sys.stderr)
     if suffix == ".png":
       from chorjax.render.plot import plot_trajectories
+
       written = plot_trajectories(motions[0], out)
     else:
       from chorjax.render.video import write_animation
+
       written = write_animation(motions[0], out)
   print(f"wrote {written}")
   return 0
@@ -230,14 +290,33 @@ def _render(args) -> int:
 
 def _eval(args) -> int:
   from chorjax.evaluate import evaluate, metrics_path, write_metrics
+
   out = Path(args.output) if args.output else metrics_path(args.workdir)
   _refuse_existing([out], args.force)
-  result = evaluate(args.workdir, args.data, frames=args.frames, num=args.num, checkpoint=args.checkpoint,
-                    seed=args.seed, pi_temperature=args.pi_temperature, sigma_temperature=args.sigma_temperature,
-                    greedy=True if args.greedy else None)
+  result = evaluate(
+    args.workdir,
+    args.data,
+    frames=args.frames,
+    num=args.num,
+    checkpoint=args.checkpoint,
+    seed=args.seed,
+    pi_temperature=args.pi_temperature,
+    sigma_temperature=args.sigma_temperature,
+    greedy=True if args.greedy else None,
+  )
   write_metrics(result, out)
-  for k in ("heldout_loss", "freeze_ratio_first_1000", "freeze_ratio_last_1000", "bone_cv_median", "foot_sliding",
-            "fid_k", "real_fid_k", "div_k", "novelty", "real_novelty"):
+  for k in (
+    "heldout_loss",
+    "freeze_ratio_first_1000",
+    "freeze_ratio_last_1000",
+    "bone_cv_median",
+    "foot_sliding",
+    "fid_k",
+    "real_fid_k",
+    "div_k",
+    "novelty",
+    "real_novelty",
+  ):
     print(f"{k:26s} {result[k]:.4g}")
   print(f"wrote {out}")
   return 0
@@ -245,6 +324,7 @@ def _eval(args) -> int:
 
 def _sweep(args) -> int:
   from chorjax.experiments import run_sweep
+
   workdirs = run_sweep(args.sweep)
   print("points: " + " ".join(map(str, workdirs)))
   return 0
@@ -252,6 +332,7 @@ def _sweep(args) -> int:
 
 def _compare(args) -> int:
   from chorjax.experiments import compare
+
   _refuse_existing([args.output], args.force)
   print(f"wrote {compare(args.workdirs, args.output)}")
   return 0
@@ -259,28 +340,28 @@ def _compare(args) -> int:
 
 def _add_sampling_args(p) -> None:
   """Sampling controls shared by `sample` and `eval`; unset ones come from the run's [sample] config."""
-  p.add_argument("--pi-temperature", type=float,
-                 help="mixture-weight temperature, 0 = most likely component (default: the run's sample.pi_temperature)")
-  p.add_argument("--sigma-temperature", type=float,
-                 help="MDN scale multiplier (default: the run's sample.sigma_temperature)")
+  p.add_argument(
+    "--pi-temperature",
+    type=float,
+    help="mixture-weight temperature, 0 = most likely component (default: the run's sample.pi_temperature)",
+  )
+  p.add_argument(
+    "--sigma-temperature", type=float, help="MDN scale multiplier (default: the run's sample.sigma_temperature)"
+  )
   p.add_argument("--greedy", action="store_true", help="mean of the most likely component (no noise)")
   p.add_argument("--seed", type=int, default=0)
   p.add_argument("--checkpoint", default="latest", metavar="STEP|best|latest")
   p.add_argument("--force", action="store_true", help="overwrite the output if it exists")
 
 
-def build_parser() -> argparse.ArgumentParser:
-  parser = argparse.ArgumentParser(prog="chorjax", description=(
-      "Learn a dancer's movement language from motion capture and write new dance in it."), epilog=(
-      "environment: CHORJAX_MALLOC=system keeps glibc's malloc defaults (by default chorjax keeps freed "
-      "memory for reuse, which saves page faults on every CPU training step)"))
-  sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-
+def _add_data_commands(sub) -> None:
+  """`chorjax data info|plot|convert` and `chorjax config show`."""
   data = sub.add_parser("data", help="inspect and plot motion data")
   dsub = data.add_subparsers(dest="data_command", required=True, metavar="DATA_COMMAND")
   info = dsub.add_parser("info", help="per take: frames, joints, fps, value ranges, bone lengths and CV")
-  info.add_argument("inputs", nargs="+", metavar="PATH_OR_NAME",
-                    help="a bundled dataset (cmu94), a folder of takes, or a file")
+  info.add_argument(
+    "inputs", nargs="+", metavar="PATH_OR_NAME", help="a bundled dataset (cmu94), a folder of takes, or a file"
+  )
   info.set_defaults(func=_data_info)
   plot = dsub.add_parser("plot", help="pelvis and end joints over time (first 200 frames, the rest) as PNG")
   plot.add_argument("input", metavar="PATH", help="one motion file")
@@ -289,21 +370,36 @@ def build_parser() -> argparse.ArgumentParser:
   plot.set_defaults(func=_data_plot)
   conv = dsub.add_parser("convert", help="convert BVH, ASF/AMC, C3D or CSV takes to the training CSV layout or to BVH")
   conv.add_argument("inputs", nargs="+", metavar="IN", help="motion files or folders")
-  conv.add_argument("-o", "--output", required=True, metavar="DIR|OUT.bvh",
-                    help="a folder (one CSV per take: 3*J columns, no header) or one .bvh file")
-  conv.add_argument("--joints", choices=("mpii16", "native"), default="native",
-                    help="map onto the 16-joint training layout (known CMU and Bandai skeletons), or keep all joints")
-  conv.add_argument("--like", metavar="DATASET",
-                    help="match DATASET's body size, up axis, frame rate and average root position (e.g. cmu94), "
-                         "so the takes can join it")
+  conv.add_argument(
+    "-o",
+    "--output",
+    required=True,
+    metavar="DIR|OUT.bvh",
+    help="a folder (one CSV per take: 3*J columns, no header) or one .bvh file",
+  )
+  conv.add_argument(
+    "--joints",
+    choices=("mpii16", "native"),
+    default="native",
+    help="map onto the 16-joint training layout (known CMU and Bandai skeletons), or keep all joints",
+  )
+  conv.add_argument(
+    "--like",
+    metavar="DATASET",
+    help="match DATASET's body size, up axis, frame rate and average root position (e.g. cmu94), "
+    "so the takes can join it",
+  )
   conv.add_argument("--up-axis", choices=("y", "-y", "z", "-z", "x", "-x"), help="rotate to this up axis")
   conv.add_argument("--scale", type=float, default=1.0, help="multiply lengths (after --like)")
   conv.add_argument("--asf", metavar="PATH", help="the skeleton of AMC inputs (default: found in the AMC's folder)")
   conv.add_argument("--amc-fps", type=float, default=120.0, help="frame rate of AMC inputs (default 120)")
   conv.add_argument("--fps", type=float, default=30.0, help="frame rate of CSV inputs (default 30)")
   conv.add_argument("--drop-first-frame", action="store_true", help="drop frame 0 (a converter's T-pose frame)")
-  conv.add_argument("--rigid", action="store_true",
-                    help="BVH: rigid bones of mean length (rotations only) instead of exact per-frame offsets")
+  conv.add_argument(
+    "--rigid",
+    action="store_true",
+    help="BVH: rigid bones of mean length (rotations only) instead of exact per-frame offsets",
+  )
   conv.add_argument("--force", action="store_true", help="overwrite outputs that exist")
   conv.set_defaults(func=_data_convert)
 
@@ -314,14 +410,23 @@ def build_parser() -> argparse.ArgumentParser:
   show.add_argument("overrides", nargs="*", metavar="KEY=VALUE", help="dotted overrides, e.g. model.cell=gru")
   show.set_defaults(func=_config_show)
 
+
+def _add_run_commands(sub) -> None:
+  """`chorjax train`, `sample` and `render`."""
   train = sub.add_parser("train", help="train a model from a config; resumes from the workdir's latest checkpoint")
   train.add_argument("config", metavar="CONFIG", help="a TOML config, e.g. configs/quickstart.toml")
   train.add_argument("overrides", nargs="*", metavar="KEY=VALUE", help="dotted overrides, e.g. optim.lr=3e-4")
   train.add_argument("--workdir", help="run directory (default: runs/<config name>)")
-  train.add_argument("--force", action="store_true",
-                     help="continue a workdir whose saved config differs (the old config is kept beside it)")
-  train.add_argument("--distributed", action="store_true",
-                     help="multi-process run: jax.distributed.initialize (same as parallel.distributed=true)")
+  train.add_argument(
+    "--force",
+    action="store_true",
+    help="continue a workdir whose saved config differs (the old config is kept beside it)",
+  )
+  train.add_argument(
+    "--distributed",
+    action="store_true",
+    help="multi-process run: jax.distributed.initialize (same as parallel.distributed=true)",
+  )
   train.add_argument("--coordinator", metavar="HOST:PORT", help="coordinator address (parallel.coordinator_address)")
   train.add_argument("--num-processes", type=int, help="processes in the job (parallel.num_processes)")
   train.add_argument("--process-id", type=int, help="this process's index (parallel.process_id)")
@@ -329,21 +434,29 @@ def build_parser() -> argparse.ArgumentParser:
 
   sample = sub.add_parser("sample", help="generate new dance from a trained run")
   sample.add_argument("workdir", metavar="WORKDIR", help="a run directory with checkpoints")
-  sample.add_argument("-o", "--output", required=True, metavar="OUT",
-                      help="OUT.csv (data layout; K>1 writes OUT_k.csv), OUT.bvh (for Blender; K>1: OUT_k.bvh), "
-                           "OUT.npz (all dancers + settings) or OUT.html")
+  sample.add_argument(
+    "-o",
+    "--output",
+    required=True,
+    metavar="OUT",
+    help="OUT.csv (data layout; K>1 writes OUT_k.csv), OUT.bvh (for Blender; K>1: OUT_k.bvh), "
+    "OUT.npz (all dancers + settings) or OUT.html",
+  )
   sample.add_argument("--frames", type=int, default=1000, help="frames to generate (default 1000)")
   sample.add_argument("--num", type=int, default=1, help="dancers generated in parallel (default 1)")
   ids = sample.add_mutually_exclusive_group()
   ids.add_argument("--motion", type=int, help="motion id that conditions the dance (default 0)")
   ids.add_argument("--mix", metavar="ID:W,ID:W", help="blend motion ids, e.g. 4:0.5,5:0.5")
-  sample.add_argument("--prime", metavar="FILE[:START:LEN]", help="continue a real phrase (chor-rnn's collaboration mode)")
+  sample.add_argument(
+    "--prime", metavar="FILE[:START:LEN]", help="continue a real phrase (chor-rnn's collaboration mode)"
+  )
   _add_sampling_args(sample)
   sample.set_defaults(func=_sample)
 
   render = sub.add_parser("render", help="draw motion files or samples as PNG, GIF, MP4 or an HTML player")
-  render.add_argument("inputs", nargs="+", metavar="INPUT",
-                      help="motion files (.csv, .npz, .bvh, .amc, .c3d), folders or cmu94")
+  render.add_argument(
+    "inputs", nargs="+", metavar="INPUT", help="motion files (.csv, .npz, .bvh, .amc, .c3d), folders or cmu94"
+  )
   render.add_argument("-o", "--output", required=True, metavar="OUT.(png|gif|mp4|html)")
   render.add_argument("--frames", type=int, help="render only the first N frames")
   render.add_argument("--fps", type=float, default=30.0, help="frame rate of CSV inputs (default 30)")
@@ -352,10 +465,18 @@ def build_parser() -> argparse.ArgumentParser:
   render.add_argument("--force", action="store_true", help="overwrite OUT if it exists")
   render.set_defaults(func=_render)
 
+
+def _add_report_commands(sub) -> None:
+  """`chorjax eval`, `sweep` and `compare`."""
   ev = sub.add_parser("eval", help="held-out likelihood and generation metrics of a trained run")
   ev.add_argument("workdir", metavar="WORKDIR")
-  ev.add_argument("--data", nargs="+", required=True, metavar="PATH_OR_NAME",
-                  help="real takes to compare with, e.g. cmu94/94_10_skeleton_3d.csv (the held-out take)")
+  ev.add_argument(
+    "--data",
+    nargs="+",
+    required=True,
+    metavar="PATH_OR_NAME",
+    help="real takes to compare with, e.g. cmu94/94_10_skeleton_3d.csv (the held-out take)",
+  )
   ev.add_argument("--frames", type=int, default=10_000, help="frames per generated sequence (default 10000)")
   ev.add_argument("--num", type=int, default=4, help="generated sequences (default 4)")
   ev.add_argument("-o", "--output", metavar="metrics.json", help="default: WORKDIR/eval/metrics.json")
@@ -371,6 +492,21 @@ def build_parser() -> argparse.ArgumentParser:
   cmp_.add_argument("-o", "--output", required=True, metavar="report.md")
   cmp_.add_argument("--force", action="store_true", help="overwrite the report if it exists")
   cmp_.set_defaults(func=_compare)
+
+
+def build_parser() -> argparse.ArgumentParser:
+  parser = argparse.ArgumentParser(
+    prog="chorjax",
+    description=("Learn a dancer's movement language from motion capture and write new dance in it."),
+    epilog=(
+      "environment: CHORJAX_MALLOC=system keeps glibc's malloc defaults (by default chorjax keeps freed "
+      "memory for reuse, which saves page faults on every CPU training step)"
+    ),
+  )
+  sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+  _add_data_commands(sub)
+  _add_run_commands(sub)
+  _add_report_commands(sub)
   return parser
 
 

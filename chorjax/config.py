@@ -13,14 +13,16 @@ import json
 import re
 import tomllib
 import typing
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 from chorjax.errors import UserError
 
 
-def _field(default, help: str, choices: Sequence | None = None, minimum: float | None = None,
-           resumable: bool = False) -> Any:
+def _field(
+  default, help: str, choices: Sequence | None = None, minimum: float | None = None, resumable: bool = False
+) -> Any:
   """A config field: its default, help text and checks. ``choices`` of a list field apply to each of its
   elements; ``resumable`` keys may change when a run is continued without --force (e.g. to train longer)."""
   meta = {"help": help, "choices": tuple(choices) if choices else None, "minimum": minimum, "resumable": resumable}
@@ -33,18 +35,24 @@ def _field(default, help: str, choices: Sequence | None = None, minimum: float |
 class DataConfig:
   dataset: str = _field("cmu94", "a bundled dataset name (cmu94), a folder of takes, or one file")
   skeleton: str = _field("mpii16", "joint layout of CSV takes", choices=("mpii16",))
-  joints: str = _field("mpii16", "train on the 16-joint layout (BVH/ASF/AMC takes are mapped by joint name) "
-                       "or on the files' own skeleton", choices=("mpii16", "native"))
+  joints: str = _field(
+    "mpii16",
+    "train on the 16-joint layout (BVH/ASF/AMC takes are mapped by joint name) or on the files' own skeleton",
+    choices=("mpii16", "native"),
+  )
   fps: float = _field(30.0, "frame rate of CSV takes (CSV files do not record it)", minimum=1e-3)
-  up_axis: str = _field("-y", "signed up axis of the files (cmu94: -y, y points down)",
-                        choices=("y", "-y", "z", "-z", "x", "-x"))
+  up_axis: str = _field(
+    "-y", "signed up axis of the files (cmu94: -y, y points down)", choices=("y", "-y", "z", "-z", "x", "-x")
+  )
   scale: float = _field(0.01, "multiplies lengths before training (cmu94 units: thigh ~94)", minimum=1e-12)
-  representation: str = _field("bone_relative", "features the model sees",
-                               choices=("absolute", "bone_relative", "root_relative"))
+  representation: str = _field(
+    "bone_relative", "features the model sees", choices=("absolute", "bone_relative", "root_relative")
+  )
   seq_length: int = _field(100, "frames per training window (inputs; targets are shifted by one)", minimum=1)
   val_takes: tuple = _field(("auto",), "held-out take names; 'auto' = the last take by name; [] = none")
-  augment: tuple = _field((), "training augmentations: 'reverse' (time) and/or 'mirror' (left/right)",
-                          choices=("reverse", "mirror"))
+  augment: tuple = _field(
+    (), "training augmentations: 'reverse' (time) and/or 'mirror' (left/right)", choices=("reverse", "mirror")
+  )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -54,13 +62,15 @@ class ModelConfig:
   num_layers: int = _field(3, "stacked recurrent layers", minimum=1)
   hidden_size: int = _field(256, "units per layer", minimum=1)
   num_mixtures: int = _field(8, "MDN mixture components", minimum=1)
-  mdn_scale: str = _field("diagonal", "MDN scales: one per dim, or one per component (chor-rnn)",
-                          choices=("diagonal", "isotropic"))
+  mdn_scale: str = _field(
+    "diagonal", "MDN scales: one per dim, or one per component (chor-rnn)", choices=("diagonal", "isotropic")
+  )
   min_scale: float = _field(1e-3, "floor of MDN scales (normalized units)", minimum=0.0)
   dropout: float = _field(0.0, "dropout rate between layers (same mask at every time step)", minimum=0.0)
   forget_bias: float = _field(1.0, "initial forget-gate bias of (LN-)LSTM cells (notebook: 5.0)")
-  initial_state: str = _field("motion", "initial (c, h): projected motion-id weights, or zeros",
-                              choices=("motion", "zero"))
+  initial_state: str = _field(
+    "motion", "initial (c, h): projected motion-id weights, or zeros", choices=("motion", "zero")
+  )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -86,8 +96,9 @@ class TrainConfig:
   eval_every: int = _field(250, "steps between validation passes (0 = only at the end)", minimum=0, resumable=True)
   log_every: int = _field(50, "steps between log lines / metrics.jsonl rows", minimum=1, resumable=True)
   figure_every: int = _field(0, "steps between sample figures in TensorBoard (0 = off)", minimum=0, resumable=True)
-  input_noise: float = _field(0.0, "std of Gaussian noise on inputs (normalized units), against exposure bias",
-                              minimum=0.0)
+  input_noise: float = _field(
+    0.0, "std of Gaussian noise on inputs (normalized units), against exposure bias", minimum=0.0
+  )
   val_windows: int = _field(64, "most validation windows evaluated", minimum=1)
 
 
@@ -113,7 +124,9 @@ class ParallelConfig:
   data_parallel: bool = _field(False, "shard every batch over a 'data' mesh axis of all devices", resumable=True)
   num_devices: int = _field(0, "devices in the mesh (0 = all devices of all processes)", minimum=0, resumable=True)
   distributed: bool = _field(False, "call jax.distributed.initialize (multi-host / multi-process)", resumable=True)
-  coordinator_address: str = _field("", "HOST:PORT of process 0 ('' = detect from the cluster environment)", resumable=True)
+  coordinator_address: str = _field(
+    "", "HOST:PORT of process 0 ('' = detect from the cluster environment)", resumable=True
+  )
   num_processes: int = _field(0, "processes in the job (0 = detect from the environment)", minimum=0, resumable=True)
   process_id: int = _field(-1, "this process's index (-1 = detect from the environment)", minimum=-1, resumable=True)
 
@@ -134,8 +147,15 @@ class Config:
     return json.loads(json.dumps(d))  # tuples -> lists, a plain JSON tree
 
 
-_SECTION_CLASSES = {"data": DataConfig, "model": ModelConfig, "optim": OptimConfig, "train": TrainConfig,
-                    "sample": SampleConfig, "log": LogConfig, "parallel": ParallelConfig}
+_SECTION_CLASSES = {
+  "data": DataConfig,
+  "model": ModelConfig,
+  "optim": OptimConfig,
+  "train": TrainConfig,
+  "sample": SampleConfig,
+  "log": LogConfig,
+  "parallel": ParallelConfig,
+}
 
 
 def valid_keys() -> list[str]:
@@ -144,8 +164,9 @@ def valid_keys() -> list[str]:
 
 def resumable_keys() -> list[str]:
   """Dotted keys that may change when a run is continued without --force (a field flag in the schema)."""
-  return [f"{s}.{f.name}" for s, cls in _SECTION_CLASSES.items() for f in dataclasses.fields(cls)
-          if f.metadata["resumable"]]
+  return [
+    f"{s}.{f.name}" for s, cls in _SECTION_CLASSES.items() for f in dataclasses.fields(cls) if f.metadata["resumable"]
+  ]
 
 
 def _suggest(key: str, options: Sequence[str]) -> str:
@@ -167,18 +188,20 @@ def _check_value(where: str, key: str, field: dataclasses.Field, value: Any):
   elif hint is str:
     ok = isinstance(value, str)
   elif hint is tuple:
-    ok = isinstance(value, (list, tuple)) and all(isinstance(v, (str, int)) and not isinstance(v, bool)
-                                                  for v in value)
+    ok = isinstance(value, (list, tuple)) and all(isinstance(v, (str, int)) and not isinstance(v, bool) for v in value)
     value = tuple(value) if ok else value
   else:  # pragma: no cover - schema error
     raise TypeError(hint)
   if not ok:
-    tname = {tuple: "list"}.get(hint, hint.__name__)
+    tname = "list" if hint is tuple else hint.__name__
     raise UserError(f"{where}: key {key!r}: expected {tname}, got {type(value).__name__} {value!r}")
-  for item in value if hint is tuple else (value,):  # a list's choices apply to each element
+  items = value if isinstance(value, tuple) else (value,)  # a list (a tuple by now): each element
+  for item in items:
     if meta.get("choices") and item not in meta["choices"]:
-      raise UserError(f"{where}: key {key!r}: {item!r} is not one of {', '.join(map(repr, meta['choices']))}"
-                      + _suggest(str(item), [str(c) for c in meta["choices"]]))
+      raise UserError(
+        f"{where}: key {key!r}: {item!r} is not one of {', '.join(map(repr, meta['choices']))}"
+        + _suggest(str(item), [str(c) for c in meta["choices"]])
+      )
   if meta.get("minimum") is not None and value < meta["minimum"]:
     raise UserError(f"{where}: key {key!r}: {value!r} is below the minimum {meta['minimum']}")
   return value
@@ -205,8 +228,9 @@ def _apply(sections: dict[str, dict], tree: dict, where_of) -> None:
     if section == "name":
       continue
     if section not in _SECTION_CLASSES:
-      raise UserError(f"{where_of(section, None)}: unknown section {section!r}"
-                      + _suggest(section, list(_SECTION_CLASSES)))
+      raise UserError(
+        f"{where_of(section, None)}: unknown section {section!r}" + _suggest(section, list(_SECTION_CLASSES))
+      )
     if not isinstance(body, dict):
       raise UserError(f"{where_of(section, None)}: {section!r} must be a table ([{section}])")
     fields = {f.name: f for f in dataclasses.fields(_SECTION_CLASSES[section])}
@@ -298,6 +322,7 @@ def config_diff(a: Config, b: Config, ignore: Sequence[str] = ()) -> list[str]:
 
 def to_toml(cfg: Config) -> str:
   """The resolved config as TOML text (what ``chorjax config show`` prints)."""
+
   def fmt(v):
     if isinstance(v, bool):
       return "true" if v else "false"
@@ -306,6 +331,7 @@ def to_toml(cfg: Config) -> str:
     if isinstance(v, (list, tuple)):
       return "[" + ", ".join(fmt(x) for x in v) + "]"
     return repr(v)
+
   lines = [f"name = {fmt(cfg.name)}"]
   for s, body in cfg.to_dict().items():
     if s == "name":

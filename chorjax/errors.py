@@ -8,15 +8,15 @@ from __future__ import annotations
 
 import os
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 
 class UserError(Exception):
   """Bad input from the user; its message is one line that names the file/line or key."""
 
 
-def atomic_write(path: str | os.PathLike, write: Callable[[Path], None], *, overwrite: bool = True) -> Path:
+def atomic_write(path: str | os.PathLike, write: Callable[[Path], object], *, overwrite: bool = True) -> Path:
   """Writes a file through a temporary sibling and renames it into place.
 
   Nothing is half written: if ``write`` fails, the target is untouched and the temporary is removed.
@@ -59,11 +59,11 @@ def read_text(path, kind: str, errors: str = "strict") -> str:
     raise UserError(f"{path}: cannot read as a {kind} text file ({type(e).__name__})") from None
 
 
-def first_non_number(cells) -> int | None:
-  """Index of the first cell that does not parse as a float (None if all do): for line errors."""
+def first_non_number(cells) -> int:
+  """Index of the first cell that does not parse as a float, for line errors (called after one failed)."""
   for i, c in enumerate(cells):
     try:
       float(c)
     except ValueError:
       return i
-  return None
+  raise ValueError("every cell parses as a number")

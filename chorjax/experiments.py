@@ -20,6 +20,7 @@ Every point is an ordinary run directory (``<root>/<name>-<key>=<value>...``) wi
 
 from __future__ import annotations
 
+import contextlib
 import datetime
 import itertools
 import json
@@ -81,6 +82,7 @@ def sweep_points(sweep: dict) -> list[tuple[str, list[str]]]:
 def is_finished(workdir: Path, num_steps: int, with_eval: bool) -> bool:
   from chorjax import checkpoint as ckpt
   from chorjax.evaluate import metrics_path
+
   done = (ckpt.checkpoint_dir(workdir) / str(num_steps)).is_dir()
   return done and (not with_eval or metrics_path(workdir).exists())
 
@@ -113,42 +115,54 @@ def run_sweep(path, log=print) -> list[Path]:
 
 # metric -> (label, how to pick the winner)
 COLUMNS = [
-    ("heldout_loss", "held-out loss", "min"),
-    ("freeze_ratio_first_1000", "freeze first 1k", "one"),
-    ("freeze_ratio_last_1000", "freeze last 1k", "one"),
-    ("bone_cv_median", "bone CV", "min"),
-    ("foot_sliding", "foot slide", "data:data_foot_sliding"),
-    ("fid_k", "FID_k", "min"),
-    ("div_k", "Div_k", "data:data_div_k"),
-    ("novelty", "novelty", "data:real_novelty"),
+  ("heldout_loss", "held-out loss", "min"),
+  ("freeze_ratio_first_1000", "freeze first 1k", "one"),
+  ("freeze_ratio_last_1000", "freeze last 1k", "one"),
+  ("bone_cv_median", "bone CV", "min"),
+  ("foot_sliding", "foot slide", "data:data_foot_sliding"),
+  ("fid_k", "FID_k", "min"),
+  ("div_k", "Div_k", "data:data_div_k"),
+  ("novelty", "novelty", "data:real_novelty"),
 ]
 
 
 def machine_info() -> str:
   """CPU model, core count and library versions, for reports and benchmarks."""
   import os
+
   import jax
+
   cpu = platform.processor() or platform.machine()
-  try:
-    cpu = next(l.split(":", 1)[1].strip() for l in Path("/proc/cpuinfo").read_text().splitlines()
-               if l.startswith("model name"))
-  except (OSError, StopIteration):
-    pass
-  return (f"{cpu}, {os.cpu_count()} cores, {jax.devices()[0].platform}; Python {platform.python_version()}, "
-          f"jax {jax.__version__}")
+  with contextlib.suppress(OSError, StopIteration):
+    cpu = next(
+      l.split(":", 1)[1].strip() for l in Path("/proc/cpuinfo").read_text().splitlines() if l.startswith("model name")
+    )
+  return (
+    f"{cpu}, {os.cpu_count()} cores, {jax.devices()[0].platform}; Python {platform.python_version()}, "
+    f"jax {jax.__version__}"
+  )
 
 
 def _read_run(workdir: Path) -> dict:
   from chorjax.evaluate import metrics_path
+
   cfg_path, ev_path = workdir / "config.json", metrics_path(workdir)
   if not cfg_path.exists():
     raise UserError(f"{workdir}: not a run directory (no config.json)")
   if not ev_path.exists():
     raise UserError(f"{ev_path}: missing; run `chorjax eval {workdir} --data ...` first")
-  rows = [json.loads(l) for l in (workdir / "metrics.jsonl").read_text().splitlines() if l.strip()] \
-      if (workdir / "metrics.jsonl").exists() else []
-  return {"name": workdir.name, "dir": workdir, "config": json.loads(cfg_path.read_text()),
-          "eval": json.loads(ev_path.read_text()), "history": rows}
+  rows = (
+    [json.loads(l) for l in (workdir / "metrics.jsonl").read_text().splitlines() if l.strip()]
+    if (workdir / "metrics.jsonl").exists()
+    else []
+  )
+  return {
+    "name": workdir.name,
+    "dir": workdir,
+    "config": json.loads(cfg_path.read_text()),
+    "eval": json.loads(ev_path.read_text()),
+    "history": rows,
+  }
 
 
 def _winner(runs, key, rule):
@@ -160,19 +174,20 @@ def _winner(runs, key, rule):
   if not vals:
     return None, ""
   if rule == "min":
-    v, r = min(vals, key=lambda x: x[0])
+    _, r = min(vals, key=lambda x: x[0])
     return r, "lowest"
   if rule == "one":
-    v, r = min(vals, key=lambda x: abs(x[0] - 1.0))
+    _, r = min(vals, key=lambda x: abs(x[0] - 1.0))
     return r, "closest to 1 (the data's speed)"
   ref_key = rule.split(":")[1]
-  v, r = min(vals, key=lambda x: abs(x[0] - x[1]["eval"][ref_key]))
+  _, r = min(vals, key=lambda x: abs(x[0] - x[1]["eval"][ref_key]))
   return r, "closest to the real data's value"
 
 
 def compare(workdirs, output) -> Path:
   """Writes ``report.md`` with a metrics table, loss and freeze-ratio plots, and a summary."""
   from chorjax.render.plot import require_matplotlib, save_figure
+
   runs = [_read_run(Path(w)) for w in workdirs]
   out = Path(output)
   plt = require_matplotlib()
@@ -186,7 +201,9 @@ def compare(workdirs, output) -> Path:
     val = [(h["step"], h["val_loss"]) for h in r["history"] if "val_loss" in h]
     if val:
       ax.plot(*zip(*val), "--", label=f"{r['name']} val")
-  ax.set_xlabel("step"); ax.set_ylabel("loss (NLL per frame or MSE)"); ax.legend(fontsize=7)
+  ax.set_xlabel("step")
+  ax.set_ylabel("loss (NLL per frame or MSE)")
+  ax.legend(fontsize=7)
   fig.tight_layout()
   save_figure(fig, loss_png)
 
@@ -196,28 +213,49 @@ def compare(workdirs, output) -> Path:
     ax.plot(np.arange(len(curve)) * 100, curve, label=r["name"])
   ax.axhline(1.0, color="k", lw=0.8, ls=":")
   ax.axhspan(0.7, 1.3, color="g", alpha=0.08)
-  ax.set_xlabel("generated frame"); ax.set_ylabel("joint speed / data's"); ax.set_yscale("log"); ax.legend(fontsize=7)
+  ax.set_xlabel("generated frame")
+  ax.set_ylabel("joint speed / data's")
+  ax.set_yscale("log")
+  ax.legend(fontsize=7)
   fig.tight_layout()
   save_figure(fig, freeze_png)
 
-  lines = [f"# Comparison: {', '.join(r['name'] for r in runs)}", "",
-           f"Generated by `chorjax compare` on {datetime.date.today()}; {machine_info()}.", ""]
+  lines = [
+    f"# Comparison: {', '.join(r['name'] for r in runs)}",
+    "",
+    f"Generated by `chorjax compare` on {datetime.date.today()}; {machine_info()}.",
+    "",
+  ]
   e0 = runs[0]["eval"]
-  lines += [f"Samples: {e0['num']} x {e0['frames']} frames per run; compared with {', '.join(e0['data'])}; "
-            f"windows of {e0['window']} frames for FID_k, Div_k and novelty.", "",
-            "| run | cell | head | steps | " + " | ".join(c[1] for c in COLUMNS) + " |",
-            "|---" * (4 + len(COLUMNS)) + "|"]
+  lines += [
+    f"Samples: {e0['num']} x {e0['frames']} frames per run; compared with {', '.join(e0['data'])}; "
+    f"windows of {e0['window']} frames for FID_k, Div_k and novelty.",
+    "",
+    "| run | cell | head | steps | " + " | ".join(c[1] for c in COLUMNS) + " |",
+    "|---" * (4 + len(COLUMNS)) + "|",
+  ]
   for r in runs:
     m, c = r["eval"], r["config"]
     cells = [f"{m[k]:.4g}" if isinstance(m.get(k), (int, float)) else "-" for k, _, _ in COLUMNS]
-    lines.append(f"| {r['name']} | {c['model']['cell']} | {c['model']['head']} | {m['checkpoint_step']} | "
-                 + " | ".join(cells) + " |")
-  lines.append(f"| real data (reference) | | | | | 1 | 1 | {e0['data_bone_cv_median']:.4g} | "
-               f"{e0['data_foot_sliding']:.4g} | {e0['real_fid_k']:.4g} (train vs these takes) | "
-               f"{e0['data_div_k']:.4g} | {e0['real_novelty']:.4g} (held-out vs train) |")
-  lines += ["", "Lower is better for held-out loss (NLL and MSE are not comparable), bone CV and FID_k; "
-            "freeze ratios should be near 1 (0 = frozen); foot sliding, Div_k and novelty should be near "
-            "the real data's (novelty 0 = copying the training data).", "", "## Who wins", ""]
+    lines.append(
+      f"| {r['name']} | {c['model']['cell']} | {c['model']['head']} | {m['checkpoint_step']} | "
+      + " | ".join(cells)
+      + " |"
+    )
+  lines.append(
+    f"| real data (reference) | | | | | 1 | 1 | {e0['data_bone_cv_median']:.4g} | "
+    f"{e0['data_foot_sliding']:.4g} | {e0['real_fid_k']:.4g} (train vs these takes) | "
+    f"{e0['data_div_k']:.4g} | {e0['real_novelty']:.4g} (held-out vs train) |"
+  )
+  lines += [
+    "",
+    "Lower is better for held-out loss (NLL and MSE are not comparable), bone CV and FID_k; "
+    "freeze ratios should be near 1 (0 = frozen); foot sliding, Div_k and novelty should be near "
+    "the real data's (novelty 0 = copying the training data).",
+    "",
+    "## Who wins",
+    "",
+  ]
   for key, label, rule in COLUMNS:
     r, why = _winner(runs, key, rule)
     lines.append(f"- **{label}**: " + (f"{r['name']} ({r['eval'][key]:.4g}; {why})" if r else why or "-"))

@@ -31,6 +31,7 @@ def body_size(pos_TxJx3, skeleton: Skeleton) -> float:
     while skeleton.parents[j] >= 0:
       total, j = total + length[j], skeleton.parents[j]
     return total
+
   ends = skeleton.end_joints or tuple(range(skeleton.num_joints))
   head = max(ends, key=lambda j: pos_TxJx3[:, j, 1].mean())
   foot = skeleton.feet[0] if skeleton.feet else min(ends, key=lambda j: pos_TxJx3[:, j, 1].mean())
@@ -58,8 +59,9 @@ def bone_cv(pos_TxJx3, skeleton: Skeleton) -> dict:
   return {"median": float(np.median(cv)), "max": float(cv.max())}
 
 
-def foot_sliding(pos_TxJx3, skeleton: Skeleton, fps: float, size: float, height_tol: float = 0.05,
-                 speed_tol: float = 1.0) -> float:
+def foot_sliding(
+  pos_TxJx3, skeleton: Skeleton, fps: float, size: float, height_tol: float = 0.05, speed_tol: float = 1.0
+) -> float:
   """Mean horizontal foot speed (body sizes / s) over frames where a foot is on the ground.
 
   A foot is on the ground when it is within ``height_tol`` body sizes of the floor (the 5th
@@ -135,7 +137,11 @@ def fid_k(real_feats, gen_feats) -> dict:
 def windows(pos_TxJx3, length: int, hop: int) -> np.ndarray:
   """``[N, length, J, 3]`` windows of a motion."""
   starts = range(0, pos_TxJx3.shape[0] - length + 1, hop)
-  return np.stack([pos_TxJx3[s:s + length] for s in starts]) if len(starts) else np.zeros((0, length) + pos_TxJx3.shape[1:])
+  return (
+    np.stack([pos_TxJx3[s : s + length] for s in starts])
+    if len(starts)
+    else np.zeros((0, length) + pos_TxJx3.shape[1:])
+  )
 
 
 # ---------------------------------------------------------------- novelty
@@ -143,7 +149,7 @@ def windows(pos_TxJx3, length: int, hop: int) -> np.ndarray:
 
 def _pose_vectors(wins_NxLxJx3, root: int) -> np.ndarray:
   wins = np.asarray(wins_NxLxJx3, np.float64)  # float64: the distance expansion below cancels heavily
-  rel = wins - wins[:, :, root:root + 1]  # where the dancer stands does not matter
+  rel = wins - wins[:, :, root : root + 1]  # where the dancer stands does not matter
   return rel.reshape(len(rel), -1)
 
 

@@ -16,7 +16,8 @@ import dataclasses
 
 import jax
 import numpy as np
-from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
+from jax.sharding import Mesh, NamedSharding
+from jax.sharding import PartitionSpec as P
 
 from chorjax.errors import UserError
 
@@ -56,14 +57,18 @@ class Parallel:
   def global_batch(self, sampler, step: int) -> dict:
     """Builds this process's share of batch ``step`` and assembles the global arrays."""
     local = sampler.batch(step, self.local_rows())
-    return {k: jax.make_array_from_process_local_data(self.batch_sharding, v, (self.batch_size,) + v.shape[1:])
-            for k, v in local.items()}
+    return {
+      k: jax.make_array_from_process_local_data(self.batch_sharding, v, (self.batch_size,) + v.shape[1:])
+      for k, v in local.items()
+    }
 
   def replicate(self, tree):
     """Host values -> arrays replicated on every device of the mesh (works across processes)."""
+
     def put(x):
       x = np.asarray(x)
       return jax.make_array_from_callback(x.shape, self.replicated, lambda idx: x[idx])
+
     return jax.tree.map(put, tree)
 
   def local_copy(self, tree):
@@ -100,11 +105,15 @@ def setup_parallel(cfg) -> Parallel | None:
     if pcfg.num_devices > len(devices):
       raise UserError(f"parallel.num_devices={pcfg.num_devices}, but only {len(devices)} devices exist")
     if pcfg.num_devices % jax.process_count():
-      raise UserError(f"parallel.num_devices={pcfg.num_devices} must be a multiple of the {jax.process_count()} processes")
+      raise UserError(
+        f"parallel.num_devices={pcfg.num_devices} must be a multiple of the {jax.process_count()} processes"
+      )
     per = pcfg.num_devices // jax.process_count()
     devices = [d for p in range(jax.process_count()) for d in [x for x in devices if x.process_index == p][:per]]
   if cfg.train.batch_size % len(devices):
-    raise UserError(f"train.batch_size={cfg.train.batch_size} must be divisible by the {len(devices)} devices "
-                    "of the data-parallel mesh")
+    raise UserError(
+      f"train.batch_size={cfg.train.batch_size} must be divisible by the {len(devices)} devices "
+      "of the data-parallel mesh"
+    )
   devices = sorted(devices, key=lambda d: (d.process_index, d.id))
   return Parallel(Mesh(np.array(devices), ("data",)), cfg.train.batch_size)

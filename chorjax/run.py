@@ -50,8 +50,9 @@ def create_optimizer(cfg: Config) -> tuple[optax.GradientTransformation, optax.S
   """The optax chain of ``cfg.optim``: optional global-norm clipping, then the optimizer."""
   o = cfg.optim
   if o.schedule == "warmup_cosine":
-    schedule = optax.warmup_cosine_decay_schedule(0.0, o.lr, o.warmup_steps, max(cfg.train.num_steps, o.warmup_steps + 1),
-                                                  end_value=o.lr * o.final_lr_ratio)
+    schedule = optax.warmup_cosine_decay_schedule(
+      0.0, o.lr, o.warmup_steps, max(cfg.train.num_steps, o.warmup_steps + 1), end_value=o.lr * o.final_lr_ratio
+    )
   else:
     schedule = optax.constant_schedule(o.lr)
   if o.name == "adam":
@@ -83,10 +84,16 @@ def model_template(cfg: Config, dim: int, num_motions: int) -> tuple[Any, dict]:
 
 def run_meta(cfg: Config, features: Features, id_map: dict, train_takes, val_takes, step: int) -> dict:
   """The JSON meta every checkpoint carries: what sampling needs, and what resuming checks."""
-  return {"config": cfg.to_dict(), "features": features.to_dict(), "id_map": id_map,
-          "train_takes": list(train_takes), "val_takes": list(val_takes),
-          "rng": {"seed": cfg.train.seed, "fold_in": "step"},
-          "sampler": {"seed": cfg.train.seed, "position": step}, "step": step}
+  return {
+    "config": cfg.to_dict(),
+    "features": features.to_dict(),
+    "id_map": id_map,
+    "train_takes": list(train_takes),
+    "val_takes": list(val_takes),
+    "rng": {"seed": cfg.train.seed, "fold_in": "step"},
+    "sampler": {"seed": cfg.train.seed, "position": step},
+    "step": step,
+  }
 
 
 @dataclasses.dataclass(frozen=True)
@@ -126,9 +133,11 @@ class Run:
   def sampling(self, pi_temperature=None, sigma_temperature=None, greedy=None) -> dict:
     """Sampling controls: the ones given, else the run's ``[sample]`` config."""
     s = self.config.sample
-    return {"pi_temperature": s.pi_temperature if pi_temperature is None else pi_temperature,
-            "sigma_temperature": s.sigma_temperature if sigma_temperature is None else sigma_temperature,
-            "greedy": bool(s.greedy if greedy is None else greedy)}
+    return {
+      "pi_temperature": s.pi_temperature if pi_temperature is None else pi_temperature,
+      "sigma_temperature": s.sigma_temperature if sigma_temperature is None else sigma_temperature,
+      "greedy": bool(s.greedy if greedy is None else greedy),
+    }
 
 
 def load_run(workdir, which: str | int = "latest") -> Run:
@@ -151,7 +160,15 @@ def load_run(workdir, which: str | int = "latest") -> Run:
     params = ckpt.restore_params(manager, step, template)
   finally:
     manager.close()
-  return Run(workdir=workdir, config=cfg, features=features, id_map=dict(meta["id_map"]),
-             train_takes=tuple(meta.get("train_takes", ())), val_takes=tuple(meta.get("val_takes", ())),
-             graphdef=graphdef, params=params, step=int(meta["step"]), val_loss=meta.get("val_loss"))
-
+  return Run(
+    workdir=workdir,
+    config=cfg,
+    features=features,
+    id_map=dict(meta["id_map"]),
+    train_takes=tuple(meta.get("train_takes", ())),
+    val_takes=tuple(meta.get("val_takes", ())),
+    graphdef=graphdef,
+    params=params,
+    step=int(meta["step"]),
+    val_loss=meta.get("val_loss"),
+  )

@@ -38,6 +38,7 @@ def keep_freed_memory() -> bool:
   except OSError:
     return False
   # One arena (XLA's threads share the main heap), no mmap for large blocks, no trimming.
-  _applied = all(libc.mallopt(p, v) == 1 for p, v in ((_M_ARENA_MAX, 1), (_M_MMAP_MAX, 0),
-                                                     (_M_TRIM_THRESHOLD, _KEEP_BYTES)))
+  _applied = all(
+    libc.mallopt(p, v) == 1 for p, v in ((_M_ARENA_MAX, 1), (_M_MMAP_MAX, 0), (_M_TRIM_THRESHOLD, _KEEP_BYTES))
+  )
   return _applied

@@ -21,8 +21,18 @@ from chorjax.errors import UserError
 
 
 @functools.partial(jax.jit, static_argnames=("graphdef", "num_frames", "greedy"))
-def generate(graphdef, params, motion, key, *, num_frames: int, prime_BxPxD=None,
-             pi_temperature=1.0, sigma_temperature=1.0, greedy: bool = False):
+def generate(
+  graphdef,
+  params,
+  motion,
+  key,
+  *,
+  num_frames: int,
+  prime_BxPxD=None,
+  pi_temperature=1.0,
+  sigma_temperature=1.0,
+  greedy: bool = False,
+):
   """Generates ``num_frames`` normalized frames per dancer.
 
   Args:
@@ -66,10 +76,12 @@ def read_prime(spec: str, features, data_cfg) -> np.ndarray:
     path, start, length = Path(spec), 0, None
   motion = conform(read_takes([str(path)], data_cfg)[:1], data_cfg)[0]
   if motion.skeleton.num_joints != features.skeleton.num_joints:
-    raise UserError(f"{path}: {motion.skeleton.num_joints} joints; the model was trained on "
-                    f"{features.skeleton.num_joints}")
+    raise UserError(
+      f"{path}: {motion.skeleton.num_joints} joints; the model was trained on {features.skeleton.num_joints}"
+    )
   end = motion.num_frames if length is None else start + length
   if start >= motion.num_frames or end > motion.num_frames or end - start < 2:
-    raise UserError(f"--prime {spec}: frames {start}..{end} are not inside the take's {motion.num_frames} frames "
-                    "(need at least 2)")
+    raise UserError(
+      f"--prime {spec}: frames {start}..{end} are not inside the take's {motion.num_frames} frames (need at least 2)"
+    )
   return np.asarray(features.encode(motion.positions[start:end]), np.float32)

@@ -22,8 +22,9 @@ import math
 import os
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -55,15 +56,21 @@ def _loss_fn(params, batch, key, spec: StepSpec):
 
 
 def _train_step(state, batch, key, spec: StepSpec):
-  if not jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key):
+  if not jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
     key = jax.random.wrap_key_data(key)  # raw uint32 key data (replicated across processes)
   key = jax.random.fold_in(key, state["step"])
   grad_fn = jax.value_and_grad(_loss_fn, has_aux=True)
   (loss, aux), grads = grad_fn(state["params"], batch, key, spec)
   updates, opt_state = spec.tx.update(grads, state["opt_state"], state["params"])
   params = optax.apply_updates(state["params"], updates)
-  metrics = {"loss": loss, **aux, "grad_norm": optax.tree.norm(grads), "param_norm": optax.tree.norm(params),
-             "update_norm": optax.tree.norm(updates), "lr": spec.schedule(state["step"])}
+  metrics = {
+    "loss": loss,
+    **aux,
+    "grad_norm": optax.tree.norm(grads),
+    "param_norm": optax.tree.norm(params),
+    "update_norm": optax.tree.norm(updates),
+    "lr": spec.schedule(state["step"]),
+  }
   return {"params": params, "opt_state": opt_state, "step": state["step"] + 1}, metrics
 
 
@@ -76,8 +83,9 @@ def sharded_train_step(parallel):
   """``train_step`` for a data-parallel run: the batch sharded over the mesh's data axis, the rest
   replicated."""
   repl, data = parallel.replicated, parallel.batch_sharding
-  return jax.jit(_train_step, static_argnums=3, donate_argnums=0, in_shardings=(repl, data, repl),
-                 out_shardings=(repl, repl))
+  return jax.jit(
+    _train_step, static_argnums=3, donate_argnums=0, in_shardings=(repl, data, repl), out_shardings=(repl, repl)
+  )
 
 
 @functools.partial(jax.jit, static_argnums=2)
@@ -100,7 +108,7 @@ def due(step: int, every: int, total: int) -> bool:
 class Hook:
   """``fn(loop)`` after every ``every`` steps, and after the last step when ``at_last``."""
 
-  fn: Callable[["Loop"], None]
+  fn: Callable[[Loop], None]
   every: int
   at_last: bool = True
 
@@ -139,7 +147,9 @@ class Loop:
     loss = float(metrics["loss"])
     if not math.isfinite(loss):
       where = f"step {self.last_good}" if self.last_good is not None else "none (no checkpoint was written yet)"
-      raise TrainingDiverged(f"non-finite loss ({loss}) at step {step}; training stopped; last good checkpoint: {where}")
+      raise TrainingDiverged(
+        f"non-finite loss ({loss}) at step {step}; training stopped; last good checkpoint: {where}"
+      )
     self.losses[step] = loss
     for listener in self.listeners:
       listener(step, loss, metrics, val_loss)
@@ -178,7 +188,7 @@ def default_workdir(cfg: Config) -> Path:
 def workdir_lock(workdir: Path):
   """An exclusive lock on the workdir; the OS releases it even if the process is killed."""
   workdir.mkdir(parents=True, exist_ok=True)
-  f = open(workdir / ".lock", "a+")
+  f = open(workdir / ".lock", "a+")  # noqa: SIM115 - held open while the run holds the lock
   try:
     fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
   except BlockingIOError:
@@ -204,8 +214,10 @@ def _check_saved_config(workdir: Path, cfg: Config, force: bool, may_write: bool
     return
   diff = config_diff(saved, cfg, ignore=resumable_keys())
   if diff and not force:
-    raise UserError(f"{workdir}: holds a run with a different config ({'; '.join(diff[:3])}"
-                    f"{' ...' if len(diff) > 3 else ''}); use another --workdir, or --force to continue it")
+    raise UserError(
+      f"{workdir}: holds a run with a different config ({'; '.join(diff[:3])}"
+      f"{' ...' if len(diff) > 3 else ''}); use another --workdir, or --force to continue it"
+    )
   if diff and may_write:  # keep the old config beside the new one: nothing is overwritten silently
     os.replace(path, workdir / f"config.{int(time.time())}.json")
 
@@ -234,14 +246,16 @@ class _Progress:
     self.total, self.bar = total, None
     if self.mode == "bar":
       from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-      self.bar = Progress(TextColumn("train"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[info]}"),
-                          TimeRemainingColumn())
+
+      self.bar = Progress(
+        TextColumn("train"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[info]}"), TimeRemainingColumn()
+      )
       self.task = self.bar.add_task("train", total=total, completed=start, info="")
       self.bar.start()
 
   def update(self, step: int, row: dict, eta_s: float):
     info = f"loss {row['train_loss']:.4g}" + (f" val {row['val_loss']:.4g}" if "val_loss" in row else "")
-    if self.mode == "bar":
+    if self.bar is not None:
       self.bar.update(self.task, completed=step, info=info)
     elif self.mode == "lines":
       print(f"step {step}/{self.total} {info} {row.get('steps_per_s', 0):.1f} steps/s ETA {eta_s:.0f}s", flush=True)
@@ -263,6 +277,7 @@ class MetricsLog:
     self.writer = None
     if cfg.log.tensorboard:
       from tensorboardX import SummaryWriter
+
       self.writer = SummaryWriter(str(workdir), flush_secs=10)
     self.progress = _Progress(cfg.log.progress, self.total, start)
     self.t_last, self.step_last = time.time(), start
@@ -273,8 +288,12 @@ class MetricsLog:
     now = time.time()
     sps = (step - self.step_last) / max(now - self.t_last, 1e-9)
     self.t_last, self.step_last = now, step
-    row = {"step": step, "train_loss": loss, **{k: float(v) for k, v in metrics.items() if k != "loss"},
-           "steps_per_s": sps}
+    row = {
+      "step": step,
+      "train_loss": loss,
+      **{k: float(v) for k, v in metrics.items() if k != "loss"},
+      "steps_per_s": sps,
+    }
     if val_loss is not None:
       row["val_loss"] = val_loss
     with open(self.path, "a") as f:
@@ -293,25 +312,30 @@ class MetricsLog:
 
 def evaluation_hook(val, graphdef):
   """Measures the validation loss (``loop.val_loss``) and publishes it with the step's metrics."""
+
   def evaluate(loop: Loop) -> None:
     if val:
       loop.val_loss = float(eval_step(loop.state["params"], val, graphdef))
     loop.flush()
+
   return evaluate
 
 
 def checkpoint_hook(manager, meta_of: Callable[[int], dict]):
   """Saves the state once the step's loss is known to be finite (``meta_of(step)`` is its meta)."""
+
   def save(loop: Loop) -> None:
     loop.flush()
     ckpt.save(manager, loop.step, loop.state, meta_of(loop.step), loop.val_loss)
     loop.last_good = loop.step
+
   return save
 
 
 def figure_hook(writer, graphdef, host_params, ds: Dataset, cfg: Config):
   """A short generated sample beside a real one, as a TensorBoard figure (needs matplotlib)."""
   from chorjax.render.plot import require_matplotlib
+
   try:
     plt = require_matplotlib()
   except UserError:
@@ -320,9 +344,16 @@ def figure_hook(writer, graphdef, host_params, ds: Dataset, cfg: Config):
   def draw(loop: Loop) -> None:
     n, s, sk = 120, cfg.sample, ds.features.skeleton
     real_id, real_z = (ds.val or ds.train)[0]
-    z = generate(graphdef, host_params(loop.state["params"]), np.array([real_id]), jax.random.key(loop.step),
-                 num_frames=n, pi_temperature=s.pi_temperature, sigma_temperature=s.sigma_temperature,
-                 greedy=s.greedy)  # drawn as the run's own samples are
+    z = generate(
+      graphdef,
+      host_params(loop.state["params"]),
+      np.array([real_id]),
+      jax.random.key(loop.step),
+      num_frames=n,
+      pi_temperature=s.pi_temperature,
+      sigma_temperature=s.sigma_temperature,
+      greedy=s.greedy,
+    )  # drawn as the run's own samples are
     fig, axes = plt.subplots(1, 2, figsize=(10, 3), sharey=True)
     for ax, z_TxD, title in ((axes[0], real_z[:n], "real"), (axes[1], z[0], "generated")):
       pos_TxJx3 = np.asarray(ds.features.decode(z_TxD))
@@ -332,6 +363,7 @@ def figure_hook(writer, graphdef, host_params, ds: Dataset, cfg: Config):
     axes[0].legend(fontsize=6)
     writer.add_figure("sample/end_joints", fig, loop.step)
     plt.close(fig)
+
   return draw
 
 
@@ -342,8 +374,16 @@ def write_end_sample(workdir: Path, graphdef, params, ds: Dataset, cfg: Config) 
   from chorjax.render.html import write_player
 
   s = cfg.sample
-  z = generate(graphdef, params, np.full((s.num,), s.motion), jax.random.key(s.seed), num_frames=s.frames,
-               pi_temperature=s.pi_temperature, sigma_temperature=s.sigma_temperature, greedy=s.greedy)
+  z = generate(
+    graphdef,
+    params,
+    np.full((s.num,), s.motion),
+    jax.random.key(s.seed),
+    num_frames=s.frames,
+    pi_temperature=s.pi_temperature,
+    sigma_temperature=s.sigma_temperature,
+    greedy=s.greedy,
+  )
   pos = np.asarray(ds.features.decode(z))
   out = workdir / "samples"
   csv = write_csv(pos[0], out / "sample.csv")
@@ -351,11 +391,14 @@ def write_end_sample(workdir: Path, graphdef, params, ds: Dataset, cfg: Config) 
   sk = ds.features.skeleton
   real = ds.motions[s.motion]
   motions = [real.replace(positions=real.positions[: s.frames], name=f"original: {name}")]
-  motions += [Motion(p, real.fps, sk, real.up_axis, real.units, name=f"generated #{i} (motion {s.motion})")
-              for i, p in enumerate(pos)]
+  motions += [
+    Motion(p, real.fps, sk, real.up_axis, real.units, name=f"generated #{i} (motion {s.motion})")
+    for i, p in enumerate(pos)
+  ]
   # originals above, generated below (the reference notebook's catalog page)
-  html = write_player(motions, out / "player.html", title=f"chorjax: {cfg.name}", columns=max(s.num, 1),
-                      rows=[0] + [1] * s.num)
+  html = write_player(
+    motions, out / "player.html", title=f"chorjax: {cfg.name}", columns=max(s.num, 1), rows=[0] + [1] * s.num
+  )
   return {"csv": str(csv), "html": str(html)}
 
 
@@ -410,7 +453,7 @@ def _train(cfg: Config, workdir: Path, ds: Dataset, manager, parallel, cleanup: 
     state, val, key = parallel.replicate(state), parallel.replicate(val), parallel.replicate(jax.random.key_data(key))
     jitted = sharded_train_step(parallel)
     get_batch, host_params = (lambda s: parallel.global_batch(sampler, s)), parallel.local_copy
-  step_fn = lambda state, batch, key: jitted(state, batch, key, spec)  # noqa: E731
+  step_fn = lambda state, batch, key: jitted(state, batch, key, spec)
   total = cfg.train.num_steps
   loop = Loop(step_fn, get_batch, key, state, start, total)
   log = None
@@ -426,11 +469,17 @@ def _train(cfg: Config, workdir: Path, ds: Dataset, manager, parallel, cleanup: 
   loop.end_hooks.append(lambda loop: manager.wait_until_finished())
   samples: dict = {}
   if is_main and cfg.sample.frames > 0 and total > 0:
-    loop.end_hooks.append(lambda loop: samples.update(
-        write_end_sample(workdir, spec.graphdef, host_params(loop.state["params"]), ds, cfg)))
+    loop.end_hooks.append(
+      lambda loop: samples.update(write_end_sample(workdir, spec.graphdef, host_params(loop.state["params"]), ds, cfg))
+    )
   loop.run()
-  summary = {"start_step": start, "final_step": loop.step, "train_losses": loop.losses,
-             "seconds": time.time() - t_start, "compile_s": loop.compile_s}
+  summary = {
+    "start_step": start,
+    "final_step": loop.step,
+    "train_losses": loop.losses,
+    "seconds": time.time() - t_start,
+    "compile_s": loop.compile_s,
+  }
   if loop.losses:
     summary["final_train_loss"] = loop.losses[max(loop.losses)]
   if loop.val_loss is not None:

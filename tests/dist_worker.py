@@ -12,14 +12,20 @@ os.environ["XLA_FLAGS"] = "--xla_force_host_platform_device_count=1"
 os.environ["JAX_PLATFORMS"] = "cpu"
 sys.path.insert(0, os.path.dirname(__file__))
 
-from helpers import tiny_config  # noqa: E402
+from helpers import tiny_config
 
-from chorjax.parallel import setup_parallel  # noqa: E402
-from chorjax.train import train_and_evaluate  # noqa: E402
+from chorjax.parallel import setup_parallel
+from chorjax.train import train_and_evaluate
 
 port, pid, n, workdir, steps = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4], int(sys.argv[5])
-cfg = tiny_config(f"train.num_steps={steps}", "train.checkpoint_every=3", "log.tensorboard=false",
-                  "parallel.distributed=true", f"parallel.coordinator_address='127.0.0.1:{port}'",
-                  f"parallel.num_processes={n}", f"parallel.process_id={pid}")
+cfg = tiny_config(
+  f"train.num_steps={steps}",
+  "train.checkpoint_every=3",
+  "log.tensorboard=false",
+  "parallel.distributed=true",
+  f"parallel.coordinator_address='127.0.0.1:{port}'",
+  f"parallel.num_processes={n}",
+  f"parallel.process_id={pid}",
+)
 summary = train_and_evaluate(cfg, workdir, parallel=setup_parallel(cfg))
 print(json.dumps({"process": pid, "losses": summary["train_losses"]}), flush=True)

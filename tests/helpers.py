@@ -2,9 +2,19 @@
 
 from chorjax.config import load_config
 
-TINY = ["model.hidden_size=16", "model.num_layers=2", "model.num_mixtures=3", "data.seq_length=12",
-        "train.batch_size=4", "train.num_steps=2", "train.log_every=1", "train.eval_every=0",
-        "train.val_windows=4", "sample.frames=20", "log.progress=none"]
+TINY = [
+  "model.hidden_size=16",
+  "model.num_layers=2",
+  "model.num_mixtures=3",
+  "data.seq_length=12",
+  "train.batch_size=4",
+  "train.num_steps=2",
+  "train.log_every=1",
+  "train.eval_every=0",
+  "train.val_windows=4",
+  "sample.frames=20",
+  "log.progress=none",
+]
 
 
 def tiny_config(*overrides, path=None):

@@ -8,8 +8,7 @@ from chorjax.data.csv import read_csv, write_csv
 from chorjax.data.dataset import bundled_path, resolve_files
 from chorjax.errors import UserError
 
-FRAMES = {"01": 830, "02": 771, "03": 820, "04": 716, "05": 1238, "06": 526, "07": 505, "08": 648,
-          "09": 930, "10": 740}
+FRAMES = {"01": 830, "02": 771, "03": 820, "04": 716, "05": 1238, "06": 526, "07": 505, "08": 648, "09": 930, "10": 740}
 
 
 def test_bundled_takes_match_their_sources_note():
@@ -21,7 +20,7 @@ def test_bundled_takes_match_their_sources_note():
     assert m.positions.dtype == np.float32
     assert m.up_axis == "-y" and m.skeleton.name == "mpii16"
     # y points down: feet lower on screen = larger y than the head top
-    assert (m.positions[:, [0, 5], 1].mean() > m.positions[:, 9, 1].mean())
+    assert m.positions[:, [0, 5], 1].mean() > m.positions[:, 9, 1].mean()
   assert (bundled_path("cmu94") / "SOURCES.md").read_text().count("mocap.cs.cmu.edu") >= 1
 
 
@@ -40,7 +39,9 @@ def test_write_then_read_round_trips(tmp_path):
 GOOD_ROW = ",".join(["1.5"] * 48)
 
 
-@pytest.mark.parametrize("text, line, fragment", [
+@pytest.mark.parametrize(
+  "text, line, fragment",
+  [
     (GOOD_ROW + "\n" + ",".join(["1"] * 47) + "\n", 2, "expected 48 columns"),
     (GOOD_ROW + "\n" + GOOD_ROW + ",7\n", 2, "found 49"),
     (GOOD_ROW + "\n" + GOOD_ROW + "\n" + GOOD_ROW.replace("1.5", "abc", 1) + "\n", 3, "not a number: 'abc'"),
@@ -48,7 +49,8 @@ GOOD_ROW = ",".join(["1.5"] * 48)
     (GOOD_ROW + "\n" + GOOD_ROW.replace("1.5", "inf", 2) + "\n", 2, "non-finite"),
     ("", None, "empty file"),
     ("\n\n", None, "empty file"),
-])
+  ],
+)
 def test_malformed_csv_errors_name_file_and_line(tmp_path, capsys, text, line, fragment):
   path = tmp_path / "bad.csv"
   path.write_text(text)
@@ -65,6 +67,7 @@ def test_malformed_csv_errors_name_file_and_line(tmp_path, capsys, text, line, f
 def test_take_shorter_than_a_window_is_named(tmp_path):
   from chorjax.config import load_config
   from chorjax.data.dataset import load_dataset
+
   (tmp_path / "a.csv").write_text("\n".join([GOOD_ROW] * 30))
   (tmp_path / "b.csv").write_text("\n".join([GOOD_ROW] * 5))
   cfg = load_config(None, [f"data.dataset={str(tmp_path)!r}", "data.seq_length=10"])

@@ -34,7 +34,7 @@ def test_augmentations_add_sequences():
   cfg = load_config(None, ["data.augment=['reverse', 'mirror']"])
   ds = load_dataset(cfg.data)
   assert len(ds.train) == 4 * 9
-  (i0, a), (i1, b), (i2, c), (i3, d) = ds.train[:4]
+  (i0, a), (i1, _), (i2, c), (i3, _) = ds.train[:4]
   assert i0 == i1 == i2 == i3 == 0
   np.testing.assert_allclose(c, a[::-1], atol=1e-5)  # reversed copy of the original
 
@@ -51,7 +51,7 @@ def test_batches_are_deterministic_real_windows(ds):
   for r in range(16):
     mid, x = ds.train[seq[r]]
     assert b1["motion_ids"][r] == mid
-    np.testing.assert_array_equal(b1["inputs"][r], x[start[r]:start[r] + 20])
+    np.testing.assert_array_equal(b1["inputs"][r], x[start[r] : start[r] + 20])
   # process shares: rows of the global batch
   np.testing.assert_array_equal(s.batch(7, slice(4, 8))["inputs"], b1["inputs"][4:8])
 

@@ -1,10 +1,10 @@
 """Real mocap formats from ../shared/data: BVH, ASF/AMC and C3D in; BVH out by inverse kinematics."""
 
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import tiny_config
 
 from chorjax import cli
 from chorjax.data.amc import read_amc
@@ -14,7 +14,6 @@ from chorjax.data.csv import read_csv
 from chorjax.data.dataset import bundled_path, load_dataset, resolve_files
 from chorjax.data.skeletons import MPII16, to_mpii16
 from chorjax.errors import UserError
-from helpers import tiny_config
 
 
 def height(m):
@@ -55,17 +54,31 @@ def test_asf_amc_and_bvh_give_the_same_positions(shared_data, take):
   bi = {n: i for i, n in enumerate(b.skeleton.joint_names)}
   tol = 1e-3 * height(b)
   # joints at the same place in both files (BVH joint <- the ASF bone ending there)
-  same = {"Hips": "root", "LeftHip": "lhipjoint", "LeftKnee": "lfemur", "LeftAnkle": "ltibia", "LeftToe": "lfoot",
-          "LeftToe_end": "ltoes", "RightHip": "rhipjoint", "RightKnee": "rfemur", "RightAnkle": "rtibia",
-          "RightToe": "rfoot", "RightToe_end": "rtoes", "Chest": "lowerback", "Chest2": "upperback"}
+  same = {
+    "Hips": "root",
+    "LeftHip": "lhipjoint",
+    "LeftKnee": "lfemur",
+    "LeftAnkle": "ltibia",
+    "LeftToe": "lfoot",
+    "LeftToe_end": "ltoes",
+    "RightHip": "rhipjoint",
+    "RightKnee": "rfemur",
+    "RightAnkle": "rtibia",
+    "RightToe": "rfoot",
+    "RightToe_end": "rtoes",
+    "Chest": "lowerback",
+    "Chest2": "upperback",
+  }
   for bn, an in same.items():
     assert np.abs(a.positions[:, ai[an]] - b.positions[:, bi[bn]]).max() < tol, (bn, an)
   # this BVH conversion leaves out the ASF 'thorax' bone (1.98 units), so above it compare bone vectors
-  for (b1, b0), (a1, a0) in [(("LeftElbow", "LeftShoulder"), ("lhumerus", "lclavicle")),
-                             (("LeftWrist", "LeftElbow"), ("lradius", "lhumerus")),
-                             (("RightElbow", "RightShoulder"), ("rhumerus", "rclavicle")),
-                             (("RightWrist", "RightElbow"), ("rradius", "rhumerus")),
-                             (("Head_end", "Head"), ("head", "upperneck"))]:
+  for (b1, b0), (a1, a0) in [
+    (("LeftElbow", "LeftShoulder"), ("lhumerus", "lclavicle")),
+    (("LeftWrist", "LeftElbow"), ("lradius", "lhumerus")),
+    (("RightElbow", "RightShoulder"), ("rhumerus", "rclavicle")),
+    (("RightWrist", "RightElbow"), ("rradius", "rhumerus")),
+    (("Head_end", "Head"), ("head", "upperneck")),
+  ]:
     vb = b.positions[:, bi[b1]] - b.positions[:, bi[b0]]
     va = a.positions[:, ai[a1]] - a.positions[:, ai[a0]]
     assert np.abs(va - vb).max() < tol, (b1, b0)
@@ -114,6 +127,7 @@ def test_rigid_bvh_keeps_bone_directions_with_constant_lengths(tmp_path):
 
 def test_written_bvh_reads_with_an_independent_reader(tmp_path):
   from bvh import Bvh
+
   m = read_csv(resolve_files("cmu94")[0])
   for exact in (True, False):
     text = write_bvh(m, tmp_path / f"{exact}.bvh", exact=exact).read_text()
@@ -125,6 +139,7 @@ def test_written_bvh_reads_with_an_independent_reader(tmp_path):
 
 def test_generated_sample_exports_to_bvh(tmp_path):
   from chorjax.train import train_and_evaluate
+
   train_and_evaluate(tiny_config("train.num_steps=2", "log.tensorboard=false"), tmp_path / "run")
   args = ["sample", str(tmp_path / "run"), "--frames", "120", "--seed", "3"]
   assert cli.main([*args, "-o", str(tmp_path / "s.csv")]) == 0
@@ -138,8 +153,11 @@ def test_generated_sample_exports_to_bvh(tmp_path):
 
 
 def test_named_mappings_to_the_training_layout(shared_data):
-  for path in [shared_data / "asfamc" / "cmu131" / "131_01.amc", shared_data / "bvh" / "cmu131" / "131_01.bvh",
-               shared_data / "bvh" / "bandai" / "dataset-1_dance-short_normal_001.bvh"]:
+  for path in [
+    shared_data / "asfamc" / "cmu131" / "131_01.amc",
+    shared_data / "bvh" / "cmu131" / "131_01.bvh",
+    shared_data / "bvh" / "bandai" / "dataset-1_dance-short_normal_001.bvh",
+  ]:
     m = to_mpii16(read_amc(path) if path.suffix == ".amc" else read_bvh(path))
     assert m.skeleton is MPII16 and m.positions.shape[1:] == (16, 3)
     y = m.positions[..., 1]  # y-up files: the head above the feet, the knees between
@@ -150,8 +168,12 @@ def test_named_mappings_to_the_training_layout(shared_data):
 
 
 def test_a_dataset_folder_may_mix_formats(shared_data, tmp_path):
-  for src in [shared_data / "bvh" / "cmu131" / "131_01.bvh", shared_data / "asfamc" / "cmu131" / "131_02.amc",
-              shared_data / "asfamc" / "cmu131" / "mjackson.asf", bundled_path("cmu94") / "94_01_skeleton_3d.csv"]:
+  for src in [
+    shared_data / "bvh" / "cmu131" / "131_01.bvh",
+    shared_data / "asfamc" / "cmu131" / "131_02.amc",
+    shared_data / "asfamc" / "cmu131" / "mjackson.asf",
+    bundled_path("cmu94") / "94_01_skeleton_3d.csv",
+  ]:
     (tmp_path / src.name).write_bytes(src.read_bytes())
   ds = load_dataset(tiny_config(f"data.dataset={str(tmp_path)!r}", "data.val_takes=[]").data)
   assert list(ds.id_map) == ["131_01", "131_02", "94_01_skeleton_3d"]
@@ -159,8 +181,11 @@ def test_a_dataset_folder_may_mix_formats(shared_data, tmp_path):
 
 
 def test_convert_info_and_render_on_every_format(shared_data, tmp_path, capsys):
-  inputs = [shared_data / "bvh" / "cmu131" / "131_03.bvh", shared_data / "asfamc" / "cmu05" / "md_03.amc",
-            shared_data / "bvh" / "bandai" / "dataset-1_walk_normal_002.bvh"]
+  inputs = [
+    shared_data / "bvh" / "cmu131" / "131_03.bvh",
+    shared_data / "asfamc" / "cmu05" / "md_03.amc",
+    shared_data / "bvh" / "bandai" / "dataset-1_walk_normal_002.bvh",
+  ]
   out = tmp_path / "conv"
   assert cli.main(["data", "convert", *map(str, inputs), "-o", str(out), "--joints", "mpii16", "--like", "cmu94"]) == 0
   converted = sorted(out.glob("*.csv"))
@@ -179,16 +204,32 @@ def test_convert_info_and_render_on_every_format(shared_data, tmp_path, capsys):
   assert cli.main(["render", str(c3d), "-o", str(tmp_path / "m.gif"), "--frames", "5"]) == 0
 
 
-@pytest.mark.parametrize("text, pattern", [
-    ("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation\n"
-     "  JOINT Spine\n  {\n    OFFSET 0 1 0\n", r"truncated HIERARCHY"),
-    ("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 4 Xposition Yposition Zposition Zrotation\n}\n"
-     "MOTION\nFrames: 1\nFrame Time: 0.1\n0 0 0 0\n", r":5: channel-count mismatch"),
-    ("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 3 Zrotation Yrotation Xrotation\n}\n"
-     "MOTION\nFrames: 2\nFrame Time: 0.1\n0 0 0\n0 0 0 0\n", r":11: 4 values, the hierarchy declares 3"),
-    ("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 3 Zrotation Yrotation Xrotation\n}\n"
-     "MOTION\nFrames: 2\nFrame Time: 0.1\n0 0 0\n0 zero 0\n", r":11: not a number: 'zero'"),
-])
+@pytest.mark.parametrize(
+  "text, pattern",
+  [
+    (
+      "HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n"
+      "  CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation\n"
+      "  JOINT Spine\n  {\n    OFFSET 0 1 0\n",
+      r"truncated HIERARCHY",
+    ),
+    (
+      "HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 4 Xposition Yposition Zposition Zrotation\n}\n"
+      "MOTION\nFrames: 1\nFrame Time: 0.1\n0 0 0 0\n",
+      r":5: channel-count mismatch",
+    ),
+    (
+      "HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 3 Zrotation Yrotation Xrotation\n}\n"
+      "MOTION\nFrames: 2\nFrame Time: 0.1\n0 0 0\n0 0 0 0\n",
+      r":11: 4 values, the hierarchy declares 3",
+    ),
+    (
+      "HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 3 Zrotation Yrotation Xrotation\n}\n"
+      "MOTION\nFrames: 2\nFrame Time: 0.1\n0 0 0\n0 zero 0\n",
+      r":11: not a number: 'zero'",
+    ),
+  ],
+)
 def test_malformed_bvh_errors_name_file_and_line(tmp_path, capsys, text, pattern):
   f = tmp_path / "bad.bvh"
   f.write_text(text)
@@ -211,6 +252,7 @@ def test_amc_bone_missing_from_the_asf(shared_data, tmp_path):
 
 def test_an_amc_finds_its_asf(shared_data, tmp_path):
   from chorjax.data.amc import find_asf
+
   asf = (shared_data / "asfamc" / "cmu131" / "mjackson.asf").read_bytes()
   only = tmp_path / "only"
   only.mkdir()
@@ -228,6 +270,7 @@ def test_an_amc_finds_its_asf(shared_data, tmp_path):
 
 def test_units_to_metres_are_recorded(shared_data):
   from chorjax.data.amc import asf_metres_scale, read_asf
+
   src = shared_data / "asfamc" / "cmu131"
   scale = asf_metres_scale(read_asf(src / "mjackson.asf"))
   assert scale == pytest.approx(0.0564444, rel=1e-5)

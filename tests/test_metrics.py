@@ -1,11 +1,11 @@
 """Metrics on constructed cases and real takes; eval, sweep and compare end to end (tiny)."""
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 import scipy.linalg
+from helpers import TINY
 
 from chorjax import cli
 from chorjax import metrics as M
@@ -13,7 +13,6 @@ from chorjax.data import transforms as tf
 from chorjax.data.csv import read_csv
 from chorjax.data.dataset import bundled_path
 from chorjax.data.skeletons import MPII16
-from helpers import TINY
 
 TAKE = read_csv(bundled_path("cmu94") / "94_05_skeleton_3d.csv")
 POS = np.asarray(tf.rotate(TAKE.positions, tf.up_axis_matrix("-y")))  # y-up
@@ -100,18 +99,32 @@ def test_novelty_zero_for_a_copied_window_and_positive_otherwise():
 
 def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
   monkeypatch.chdir(tmp_path)
-  set_lines = "\n".join(f'"{k}" = {v if v.replace(".", "").replace("-", "").isdigit() or v in ("true", "false") else json.dumps(v)}'
-                        for k, v in (o.split("=", 1) for o in TINY))
+  set_lines = "\n".join(
+    f'"{k}" = {v if v.replace(".", "").replace("-", "").isdigit() or v in ("true", "false") else json.dumps(v)}'
+    for k, v in (o.split("=", 1) for o in TINY)
+  )
   (tmp_path / "base.toml").write_text("")
   sweep = tmp_path / "s.toml"
-  sweep.write_text(f'name = "t"\nbase = "base.toml"\n[grid]\n"model.head" = ["mdn", "mse"]\n[set]\n{set_lines}\n'
-                   '"log.tensorboard" = false\n[eval]\ndata = ["cmu94/94_10_skeleton_3d.csv"]\nframes = 240\nnum = 2\n')
+  sweep.write_text(
+    f'name = "t"\nbase = "base.toml"\n[grid]\n"model.head" = ["mdn", "mse"]\n[set]\n{set_lines}\n'
+    '"log.tensorboard" = false\n[eval]\ndata = ["cmu94/94_10_skeleton_3d.csv"]\nframes = 240\nnum = 2\n'
+  )
   assert cli.main(["sweep", str(sweep)]) == 0
   runs = sorted((tmp_path / "runs" / "t").iterdir())
   assert [r.name for r in runs] == ["t-head=mdn", "t-head=mse"]
   m = json.loads((runs[0] / "eval" / "metrics.json").read_text())
-  for key in ("heldout_loss", "freeze_ratio_first_1000", "freeze_ratio_last_1000", "bone_cv_median", "foot_sliding",
-              "fid_k", "div_k", "real_fid_k", "novelty", "real_novelty"):
+  for key in (
+    "heldout_loss",
+    "freeze_ratio_first_1000",
+    "freeze_ratio_last_1000",
+    "bone_cv_median",
+    "foot_sliding",
+    "fid_k",
+    "div_k",
+    "real_fid_k",
+    "novelty",
+    "real_novelty",
+  ):
     assert np.isfinite(m[key]), key
   assert m["loss_kind"] == "nll" and json.loads((runs[1] / "eval" / "metrics.json").read_text())["loss_kind"] == "mse"
   capsys.readouterr()
@@ -123,8 +136,23 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
   assert "| t-head=mdn | lnlstm | mdn |" in text and "## Who wins" in text and "not comparable" in text
   assert (tmp_path / "report_loss.png").exists() and (tmp_path / "report_freeze.png").exists()
   # eval through the CLI, and its errors
-  assert cli.main(["eval", str(runs[0]), "--data", "cmu94/94_10_skeleton_3d.csv", "--frames", "240", "--num", "1",
-                   "-o", str(tmp_path / "m.json")]) == 0
+  assert (
+    cli.main(
+      [
+        "eval",
+        str(runs[0]),
+        "--data",
+        "cmu94/94_10_skeleton_3d.csv",
+        "--frames",
+        "240",
+        "--num",
+        "1",
+        "-o",
+        str(tmp_path / "m.json"),
+      ]
+    )
+    == 0
+  )
   assert "fid_k" in json.loads((tmp_path / "m.json").read_text())
   assert cli.main(["eval", str(runs[0]), "--data", "nope.csv", "-o", str(tmp_path / "m2.json")]) == 2
   assert cli.main(["compare", str(tmp_path), "-o", str(tmp_path / "r2.md")]) == 2

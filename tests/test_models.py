@@ -7,14 +7,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import tiny_config
 from scipy.special import logsumexp
 from scipy.stats import norm
 
-from chorjax.config import load_config
 from chorjax.models import as_weights, create_model
 from chorjax.models.heads import mdn_log_prob, mdn_params, mdn_sample
 from chorjax.models.rnn import RecurrentCore, dropout_mask
-from helpers import tiny_config
 
 CELLS, HEADS = ("lstm", "lnlstm", "gru"), ("mse", "mdn")
 GRID = [(c, h) for c in CELLS for h in HEADS]
@@ -39,6 +38,7 @@ def test_shapes_finite_and_jit_equal(cell, head):
   chex.assert_shape(raw, (3, 7, p))
   chex.assert_tree_all_finite(raw)
   from flax import nnx
+
   jitted = nnx.jit(lambda m, x, w: m(x, w))(m, x, w)
   np.testing.assert_allclose(jitted, raw, atol=1e-5)
   loss, aux = m.loss(raw, x)
@@ -51,7 +51,7 @@ def test_causality(cell, head):
   x, w = inputs(b=1, t=6)
   t = 2
   jac = jax.jacrev(lambda x: m(x, w)[0, t].sum())(x)
-  assert np.all(np.asarray(jac[0, t + 1:]) == 0.0)
+  assert np.all(np.asarray(jac[0, t + 1 :]) == 0.0)
   assert np.abs(np.asarray(jac[0, : t + 1])).sum() > 0
 
 
@@ -108,7 +108,7 @@ def test_mdn_nll_equals_an_independent_scipy_computation(isotropic):
   logpi, mu, scale = mdn_params(raw, k, d, isotropic, 1e-3)
   got = np.asarray(mdn_log_prob(logpi, mu, scale, x))
   r = np.asarray(raw, np.float64)
-  logits, mu_np, sc = r[:, :k], r[:, k:k + k * d].reshape(5, k, d), r[:, k + k * d:].reshape(5, k, s)
+  logits, mu_np, sc = r[:, :k], r[:, k : k + k * d].reshape(5, k, d), r[:, k + k * d :].reshape(5, k, s)
   sc = np.maximum(np.log1p(np.exp(sc)), 1e-3)
   logw = logits - logsumexp(logits, axis=-1, keepdims=True)
   comp = norm.logpdf(np.asarray(x, np.float64)[:, None, :], mu_np, np.broadcast_to(sc, mu_np.shape)).sum(-1)
@@ -194,6 +194,7 @@ GOLDEN = {"mse": 0.87391311, "mdn": 65.211639}
 @pytest.mark.parametrize("head", HEADS)
 def test_golden_one_step_loss(head):
   from chorjax.data.dataset import WindowSampler, load_dataset
+
   cfg = tiny_config(f"model.head={head}", "model.cell=lnlstm")
   ds = load_dataset(cfg.data)
   batch = WindowSampler(ds.train, cfg.data.seq_length, cfg.train.batch_size, seed=0).batch(0)
@@ -206,6 +207,7 @@ def test_golden_one_step_loss(head):
 def real_batch():
   """Windows of the bundled CMU subject 94 dance, normalized as training sees them."""
   from chorjax.data.dataset import WindowSampler, load_dataset
+
   cfg = tiny_config("data.seq_length=40")
   ds = load_dataset(cfg.data)
   return WindowSampler(ds.train, 40, 6, seed=0).batch(0), ds.num_motions
@@ -219,9 +221,11 @@ def _close(a, b, tol=1e-5):
 
 @pytest.mark.parametrize("cell_name", CELLS)
 def test_fused_layer_equals_the_plain_scan_in_outputs_and_gradients(real_batch, cell_name):
+  from flax import nnx
+
   from chorjax.models.cells import CELLS as CELL_CLASSES
   from chorjax.models.fused import gru_scan, lnlstm_scan, lstm_scan
-  from flax import nnx
+
   batch, _ = real_batch
   cls = CELL_CLASSES[cell_name]
   cell = cls(48, 32, rngs=nnx.Rngs(params=1))
@@ -230,10 +234,15 @@ def test_fused_layer_equals_the_plain_scan_in_outputs_and_gradients(real_batch, 
   carry = tuple(0.5 * jax.random.normal(k[j], (6, 32)) for j in range(cls.num_carries))
   probe_h, probe_c = jax.random.normal(k[2], (40, 6, 32)), jax.random.normal(k[3], (6, 32))
   # the small parameters away from their initial values, so that their gradients matter
-  params = {"w_h": cell.w_h[...], **{name: v + 0.3 * jax.random.normal(k[4], v.shape) for name, v in cell.loop_params().items()}}
-  fused = {"lstm": lambda p, xp, carry: lstm_scan(p["w_h"], xp, *carry),
-           "lnlstm": lambda p, xp, carry: lnlstm_scan(p["w_h"], p["gain_h"], p["gain_c"], p["bias_c"], xp, *carry),
-           "gru": lambda p, xp, carry: gru_scan(p["w_h"], p["b_h"], xp, *carry)}[cell_name]
+  params = {
+    "w_h": cell.w_h[...],
+    **{name: v + 0.3 * jax.random.normal(k[4], v.shape) for name, v in cell.loop_params().items()},
+  }
+  fused = {
+    "lstm": lambda p, xp, carry: lstm_scan(p["w_h"], xp, *carry),
+    "lnlstm": lambda p, xp, carry: lnlstm_scan(p["w_h"], p["gain_h"], p["gain_c"], p["bias_c"], xp, *carry),
+    "gru": lambda p, xp, carry: gru_scan(p["w_h"], p["b_h"], xp, *carry),
+  }[cell_name]
 
   def plain(p, xp, carry):  # lax.scan of the cell's step, differentiated by JAX
     loop_params = {k: v for k, v in p.items() if k != "w_h"}
@@ -252,13 +261,16 @@ def test_fused_layer_equals_the_plain_scan_in_outputs_and_gradients(real_batch, 
 
 @pytest.mark.parametrize("cell_name", CELLS)
 def test_model_gradients_through_the_fused_layer_equal_the_plain_scan(real_batch, monkeypatch, cell_name):
+  from flax import nnx
+
   from chorjax.models.cells import CELLS
   from chorjax.run import StepSpec
   from chorjax.train import _loss_fn
-  from flax import nnx
+
   batch, num_motions = real_batch
-  cfg = tiny_config(f"model.cell={cell_name}", "model.head=mdn", "model.num_layers=3", "model.hidden_size=32",
-                    "model.dropout=0.2")
+  cfg = tiny_config(
+    f"model.cell={cell_name}", "model.head=mdn", "model.num_layers=3", "model.hidden_size=32", "model.dropout=0.2"
+  )
   graphdef, params = nnx.split(create_model(cfg.model, 48, num_motions, 0), nnx.Param)
   spec = StepSpec(graphdef, None, None, input_noise=0.01, dropout=0.2)
   grad = lambda: jax.jit(jax.value_and_grad(lambda p: _loss_fn(p, batch, jax.random.key(3), spec), has_aux=True))

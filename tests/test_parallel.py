@@ -10,11 +10,11 @@ from pathlib import Path
 import jax
 import numpy as np
 import pytest
+from helpers import tiny_config
 
 from chorjax import cli
 from chorjax.parallel import setup_parallel
 from chorjax.train import train_and_evaluate
-from helpers import tiny_config
 
 HERE = Path(__file__).resolve().parent
 
@@ -35,6 +35,7 @@ def test_four_devices_match_one_device(tmp_path):
   np.testing.assert_allclose(losses(multi), losses(single), rtol=1e-5, atol=1e-5)
   # the batch really was sharded: each device holds 2 of the 8 rows
   from chorjax.data.dataset import WindowSampler, load_dataset
+
   ds = load_dataset(cfg.data)
   b = par.global_batch(WindowSampler(ds.train, cfg.data.seq_length, 8, 0), 0)
   assert {s.data.shape[0] for s in b["inputs"].addressable_shards} == {2}
@@ -43,6 +44,7 @@ def test_four_devices_match_one_device(tmp_path):
 def test_batch_must_divide_over_devices(capsys):
   assert cli.main(["config", "show", "parallel.data_parallel=true"]) == 0
   from chorjax.errors import UserError
+
   with pytest.raises(UserError, match="divisible by the 4 devices"):
     setup_parallel(tiny_config("parallel.data_parallel=true", "train.batch_size=6"))
 
@@ -57,26 +59,36 @@ def free_port() -> int:
 def test_two_processes_match_a_single_process_and_resume_on_one(tmp_path):
   port, steps = free_port(), 3
   env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
-  procs = [subprocess.Popen([sys.executable, str(HERE / "dist_worker.py"), str(port), str(i), "2",
-                             str(tmp_path / "dist"), str(steps)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=env) for i in range(2)]
+  procs = [
+    subprocess.Popen(
+      [sys.executable, str(HERE / "dist_worker.py"), str(port), str(i), "2", str(tmp_path / "dist"), str(steps)],
+      stdout=subprocess.PIPE,
+      stderr=subprocess.PIPE,
+      text=True,
+      env=env,
+    )
+    for i in range(2)
+  ]
   outs = [p.communicate(timeout=300) for p in procs]
-  for p, (out, err) in zip(procs, outs):
+  for p, (_, err) in zip(procs, outs):
     assert p.returncode == 0, err[-2000:]
   reports = [json.loads(out.strip().splitlines()[-1]) for out, _ in outs]
   # the single-process reference with the same global batch (4 windows)
-  single = train_and_evaluate(tiny_config(f"train.num_steps={steps}", "train.checkpoint_every=3",
-                                          "log.tensorboard=false"), tmp_path / "single")
+  single = train_and_evaluate(
+    tiny_config(f"train.num_steps={steps}", "train.checkpoint_every=3", "log.tensorboard=false"), tmp_path / "single"
+  )
   for r in reports:
     got = np.array([r["losses"][str(s)] for s in sorted(map(int, r["losses"]))])
     np.testing.assert_allclose(got, losses(single), rtol=1e-5, atol=1e-5)
   # only process 0 wrote logs; the collective checkpoint resumes in one process
   assert (tmp_path / "dist" / "metrics.jsonl").exists()
   assert (tmp_path / "dist" / "checkpoints" / "3").is_dir()
-  more = train_and_evaluate(tiny_config("train.num_steps=5", "train.checkpoint_every=3", "log.tensorboard=false"),
-                            tmp_path / "dist")  # another process count: no --force needed
-  ref = train_and_evaluate(tiny_config("train.num_steps=5", "train.checkpoint_every=3", "log.tensorboard=false"),
-                           tmp_path / "single")
+  more = train_and_evaluate(
+    tiny_config("train.num_steps=5", "train.checkpoint_every=3", "log.tensorboard=false"), tmp_path / "dist"
+  )  # another process count: no --force needed
+  ref = train_and_evaluate(
+    tiny_config("train.num_steps=5", "train.checkpoint_every=3", "log.tensorboard=false"), tmp_path / "single"
+  )
   assert more["start_step"] == 3 and ref["start_step"] == 3
   np.testing.assert_allclose(losses(more), losses(ref), rtol=1e-5, atol=1e-5)
 
@@ -84,14 +96,36 @@ def test_two_processes_match_a_single_process_and_resume_on_one(tmp_path):
 @pytest.mark.slow
 def test_cli_distributed_flags_launch_two_processes(tmp_path):
   from chorjax.config import to_toml
+
   cfg = tmp_path / "c.toml"
   cfg.write_text(to_toml(tiny_config("train.num_steps=2", "log.tensorboard=false", "sample.frames=1")))
   port = free_port()
   env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
-  procs = [subprocess.Popen([sys.executable, "-m", "chorjax.cli", "train", str(cfg), "--workdir", str(tmp_path / "w"),
-                             "--distributed", "--coordinator", f"127.0.0.1:{port}", "--num-processes", "2",
-                             "--process-id", str(i)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=env) for i in range(2)]
+  procs = [
+    subprocess.Popen(
+      [
+        sys.executable,
+        "-m",
+        "chorjax.cli",
+        "train",
+        str(cfg),
+        "--workdir",
+        str(tmp_path / "w"),
+        "--distributed",
+        "--coordinator",
+        f"127.0.0.1:{port}",
+        "--num-processes",
+        "2",
+        "--process-id",
+        str(i),
+      ],
+      stdout=subprocess.PIPE,
+      stderr=subprocess.PIPE,
+      text=True,
+      env=env,
+    )
+    for i in range(2)
+  ]
   outs = [p.communicate(timeout=300) for p in procs]
   assert [p.returncode for p in procs] == [0, 0], outs[0][1][-1500:] + outs[1][1][-1500:]
   assert "trained default: steps 0->2" in outs[0][0] and "process 1/2: steps 0->2" in outs[1][0]

@@ -12,17 +12,16 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from flax import nnx
+from helpers import tiny_config
 
 from chorjax import cli
 from chorjax.data.csv import read_csv
 from chorjax.data.dataset import bundled_path, load_dataset
-from chorjax.data.features import Features
 from chorjax.data.npz import read_npz
 from chorjax.models import as_weights, parse_mix
 from chorjax.run import load_run
 from chorjax.sample import generate
 from chorjax.train import train_and_evaluate
-from helpers import tiny_config
 
 ROOT = Path(__file__).resolve().parents[1]
 TAKE = bundled_path("cmu94") / "94_07_skeleton_3d.csv"
@@ -102,8 +101,7 @@ def test_samples_come_back_in_data_units_and_axes(run_dir):
   graphdef, params = nnx.split(EchoModel(48), nnx.Param)
   take = read_csv(TAKE).positions
   prime = jnp.asarray(ds.features.encode(take[100:110]))[None]
-  z = generate(graphdef, nnx.to_pure_dict(params), jnp.array([0]), jax.random.key(0),
-               num_frames=5, prime_BxPxD=prime)
+  z = generate(graphdef, nnx.to_pure_dict(params), jnp.array([0]), jax.random.key(0), num_frames=5, prime_BxPxD=prime)
   pos = np.asarray(ds.features.decode(z))[0]
   np.testing.assert_allclose(pos, np.broadcast_to(take[109], pos.shape), rtol=1e-4, atol=1e-3)
 
@@ -111,6 +109,7 @@ def test_samples_come_back_in_data_units_and_axes(run_dir):
 def test_mix_parsing():
   np.testing.assert_allclose(parse_mix("4:0.5,5:0.5", 10), np.eye(10)[4] * 0.5 + np.eye(10)[5] * 0.5)
   from chorjax.errors import UserError
+
   with pytest.raises(UserError, match="out of range"):
     parse_mix("12:1", 10)
 
@@ -125,8 +124,26 @@ def test_sample_cli_writes_csv_npz_with_blends_and_primes(run_dir, tmp_path, cap
   assert cli.main(["sample", str(run_dir), "-o", str(out), "--frames", "5"]) == 2  # no silent overwrite
   assert "already exists" in capsys.readouterr().err
   npz = tmp_path / "s.npz"
-  assert cli.main(["sample", str(run_dir), "-o", str(npz), "--frames", "20", "--num", "3",
-                   "--prime", f"{TAKE}:100:10", "--greedy", "--checkpoint", "3"]) == 0
+  assert (
+    cli.main(
+      [
+        "sample",
+        str(run_dir),
+        "-o",
+        str(npz),
+        "--frames",
+        "20",
+        "--num",
+        "3",
+        "--prime",
+        f"{TAKE}:100:10",
+        "--greedy",
+        "--checkpoint",
+        "3",
+      ]
+    )
+    == 0
+  )
   ms = read_npz(npz)
   assert len(ms) == 3 and ms[0].positions.shape == (10 + 20, 16, 3)
   np.testing.assert_allclose(ms[0].positions[:10], read_csv(TAKE).positions[100:110], rtol=1e-4, atol=1e-2)
@@ -143,6 +160,7 @@ def test_render_gif_and_mp4_are_valid(tmp_path):
   assert frames.shape[0] == 12 and frames.shape[1:3] == (400, 400)
   assert cli.main(["render", str(TAKE), "-o", str(mp4), "--frames", "12"]) == 0
   import imageio_ffmpeg
+
   reader = imageio_ffmpeg.read_frames(str(mp4))
   meta = next(reader)
   assert tuple(meta["size"]) == (400, 400) and meta["fps"] == pytest.approx(30)
@@ -161,14 +179,38 @@ def chromium():
 
 def test_html_player_in_headless_chromium(run_dir, tmp_path):
   html = tmp_path / "player.html"
-  assert cli.main(["render", str(TAKE), str(bundled_path("cmu94") / "94_01_skeleton_3d.csv"),
-                   str(run_dir / "samples" / "sample.csv"), "-o", str(html), "--columns", "2"]) == 0
+  assert (
+    cli.main(
+      [
+        "render",
+        str(TAKE),
+        str(bundled_path("cmu94") / "94_01_skeleton_3d.csv"),
+        str(run_dir / "samples" / "sample.csv"),
+        "-o",
+        str(html),
+        "--columns",
+        "2",
+      ]
+    )
+    == 0
+  )
   text = html.read_text()
   assert "http://" not in text and "https://" not in text and "<script src" not in text  # offline
-  flags = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
-           "--disable-sync", "--no-first-run", f"--user-data-dir={tmp_path / 'profile'}"]
-  dom = subprocess.run([chromium(), *flags, "--virtual-time-budget=3000", "--dump-dom", f"file://{html}#selftest"],
-                       capture_output=True, text=True, timeout=120).stdout
+  flags = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+    f"--user-data-dir={tmp_path / 'profile'}",
+  ]
+  dom = subprocess.run(
+    [chromium(), *flags, "--virtual-time-budget=3000", "--dump-dom", f"file://{html}#selftest"],
+    capture_output=True,
+    text=True,
+    timeout=120,
+  ).stdout
   report = json.loads(dom.split('<pre id="selftest">')[1].split("</pre>")[0])
   assert report["errors"] == []
   assert report["nonblank"] > 1000  # stick figures and floor were drawn
@@ -176,8 +218,11 @@ def test_html_player_in_headless_chromium(run_dir, tmp_path):
   artifacts = ROOT / "test-artifacts"
   artifacts.mkdir(exist_ok=True)
   shot = artifacts / "player.png"
-  subprocess.run([chromium(), *flags, "--window-size=1200,900", f"--screenshot={shot}", f"file://{html}"],
-                 capture_output=True, timeout=120)
+  subprocess.run(
+    [chromium(), *flags, "--window-size=1200,900", f"--screenshot={shot}", f"file://{html}"],
+    capture_output=True,
+    timeout=120,
+  )
   assert shot.read_bytes()[:4] == b"\x89PNG"
 
 
@@ -192,9 +237,11 @@ def test_prime_from_another_format_is_read_as_training_reads(run_dir, tmp_path, 
   from chorjax.config import config_from_dict
   from chorjax.data.bvh import read_bvh
   from chorjax.data.dataset import conform
+
   bvh = shared_data / "bvh" / "cmu131" / "131_01.bvh"  # y-up, 38 joints: mapped and rotated like a take
-  assert cli.main(["sample", str(run_dir), "-o", str(tmp_path / "p.csv"), "--frames", "5",
-                   "--prime", f"{bvh}:100:10"]) == 0
+  assert (
+    cli.main(["sample", str(run_dir), "-o", str(tmp_path / "p.csv"), "--frames", "5", "--prime", f"{bvh}:100:10"]) == 0
+  )
   data_cfg = config_from_dict(json.loads((run_dir / "config.json").read_text())).data
   want = conform([read_bvh(bvh)], data_cfg)[0].positions[100:110]
   got = read_csv(tmp_path / "p.csv").positions[:10]
@@ -203,6 +250,7 @@ def test_prime_from_another_format_is_read_as_training_reads(run_dir, tmp_path, 
 
 def test_an_impossible_end_sample_fails_before_training(tmp_path, capsys):
   from chorjax.config import to_toml
+
   cfg = tmp_path / "c.toml"
   cfg.write_text(to_toml(tiny_config("sample.motion=12")))
   assert cli.main(["train", str(cfg), "--workdir", str(tmp_path / "w")]) == 2

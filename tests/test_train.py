@@ -14,16 +14,16 @@ from pathlib import Path
 import jax
 import numpy as np
 import pytest
+from helpers import TINY, tiny_config
 
 from chorjax import checkpoint as ckpt
 from chorjax import cli
 from chorjax.config import load_config, to_toml
 from chorjax.data.csv import read_csv
-from chorjax.data.dataset import WindowSampler, eval_windows, load_dataset
+from chorjax.data.dataset import WindowSampler, load_dataset
 from chorjax.errors import UserError
 from chorjax.run import create_train_state, load_run
 from chorjax.train import due, eval_step, train_and_evaluate, train_step, workdir_lock
-from helpers import TINY, tiny_config
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -36,7 +36,9 @@ def write_config(path: Path, *overrides) -> Path:
 # ---------------------------------------------------------------- config files
 
 
-@pytest.mark.parametrize("body, fragment", [
+@pytest.mark.parametrize(
+  "body, fragment",
+  [
     ("[model]\ncel = 'gru'\n", ":2: unknown key 'model.cel'; did you mean 'model.cell'?"),
     ("[model]\n\ncell = 'grux'\n", ":3: key 'model.cell': 'grux' is not one of"),
     ("[optim]\nlr = 'fast'\n", ":2: key 'optim.lr': expected float, got str"),
@@ -44,7 +46,8 @@ def write_config(path: Path, *overrides) -> Path:
     ("[modle]\ncell = 'gru'\n", "unknown section 'modle'; did you mean 'model'?"),
     ("[train]\nnum_steps = -3\n", "below the minimum"),
     ("[model\n", "invalid TOML"),
-])
+  ],
+)
 def test_config_errors_name_file_line_and_key(tmp_path, capsys, body, fragment):
   path = tmp_path / "bad.toml"
   path.write_text(body)
@@ -99,8 +102,9 @@ def test_a_few_steps_lower_the_loss_and_the_step_compiles_once(tiny_setup, head)
 
 
 def test_non_finite_loss_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path, capsys):
-  cfg = write_config(tmp_path / "nan.toml", "optim.lr=1e30", "optim.clip_norm=0.0", "train.num_steps=40",
-                     "train.checkpoint_every=1")
+  cfg = write_config(
+    tmp_path / "nan.toml", "optim.lr=1e30", "optim.clip_norm=0.0", "train.num_steps=40", "train.checkpoint_every=1"
+  )
   assert cli.main(["train", str(cfg), "--workdir", str(tmp_path / "w"), "log.tensorboard=false"]) == 2
   err = capsys.readouterr().err
   assert "non-finite loss" in err and "at step" in err and err.count("\n") == 1
@@ -117,10 +121,11 @@ def test_non_finite_loss_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_pa
 def read_events(event_file: Path) -> tuple[dict, dict]:
   """Reads a TensorBoard event file with tensorboardX's bundled protobufs: (scalars, images) by tag."""
   from tensorboardX.proto import event_pb2
+
   data, scalars, images, i = event_file.read_bytes(), {}, {}, 0
   while i < len(data):
-    (n,) = struct.unpack("<Q", data[i:i + 8])
-    ev = event_pb2.Event.FromString(data[i + 12:i + 12 + n])
+    (n,) = struct.unpack("<Q", data[i : i + 8])
+    ev = event_pb2.Event.FromString(data[i + 12 : i + 12 + n])
     i += 12 + n + 4
     for v in ev.summary.value:
       if v.HasField("image"):
@@ -131,8 +136,9 @@ def read_events(event_file: Path) -> tuple[dict, dict]:
 
 
 def test_run_directory_holds_config_metrics_events_checkpoints_and_sample(tmp_path):
-  cfg = tiny_config("train.num_steps=6", "train.checkpoint_every=3", "train.eval_every=3", "train.log_every=2",
-                    "train.figure_every=3")
+  cfg = tiny_config(
+    "train.num_steps=6", "train.checkpoint_every=3", "train.eval_every=3", "train.log_every=2", "train.figure_every=3"
+  )
   summary = train_and_evaluate(cfg, tmp_path)
   assert json.loads((tmp_path / "config.json").read_text())["model"] == cfg.to_dict()["model"]
   rows = [json.loads(l) for l in (tmp_path / "metrics.jsonl").read_text().splitlines()]
@@ -166,7 +172,10 @@ def test_params_are_their_own_checkpoint_item_and_a_run_written_before_that_stil
   cfg = tiny_config("train.num_steps=2", "log.tensorboard=false")
   train_and_evaluate(cfg, tmp_path / "new")
   assert sorted(p.name for p in (tmp_path / "new" / "checkpoints" / "2").iterdir() if p.is_dir()) == [
-      "meta", "params", "train"]
+    "meta",
+    "params",
+    "train",
+  ]
   # tests/fixtures/legacy_run: written by chorjax 539c1f4 (one 'state' item holding params and optimizer)
   legacy = shutil.copytree(ROOT / "tests" / "fixtures" / "legacy_run", tmp_path / "legacy")
   assert (legacy / "checkpoints" / "6" / "state").is_dir() and not (legacy / "checkpoints" / "6" / "params").exists()
@@ -214,8 +223,9 @@ def test_missing_checkpoint_is_a_clean_error(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_resume_after_sigkill_is_bit_identical(tmp_path):
-  cfg = write_config(tmp_path / "c.toml", "train.num_steps=400", "train.checkpoint_every=10",
-                     "log.tensorboard=false", "sample.frames=1")
+  cfg = write_config(
+    tmp_path / "c.toml", "train.num_steps=400", "train.checkpoint_every=10", "log.tensorboard=false", "sample.frames=1"
+  )
   cmd = [sys.executable, "-m", "chorjax.cli", "train", str(cfg), "--workdir"]
   env = {**os.environ, "PYTHONUNBUFFERED": "1"}
   killed = tmp_path / "killed"
@@ -233,6 +243,7 @@ def test_resume_after_sigkill_is_bit_identical(tmp_path):
 
   def final_params(w):
     return load_run(w, 400).params
+
   a, b = final_params(killed), final_params(straight)
   for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)):
     np.testing.assert_array_equal(np.asarray(x), np.asarray(y))

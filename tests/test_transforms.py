@@ -43,8 +43,11 @@ def test_mirror_is_an_involution_that_keeps_bone_lengths(take):
   np.testing.assert_array_equal(np.asarray(tf.mirror(once, SK.twins)), pos)
   # each bone of the mirror is as long as its twin bone in the original
   for p, c in SK.bones:
-    np.testing.assert_allclose(np.linalg.norm(once[:, c] - once[:, p], axis=-1),
-                               np.linalg.norm(pos[:, SK.twins[c]] - pos[:, SK.twins[p]], axis=-1), rtol=1e-6)
+    np.testing.assert_allclose(
+      np.linalg.norm(once[:, c] - once[:, p], axis=-1),
+      np.linalg.norm(pos[:, SK.twins[c]] - pos[:, SK.twins[p]], axis=-1),
+      rtol=1e-6,
+    )
   # left and right really swapped: the right foot of the mirror sits where the left one was, x negated
   np.testing.assert_array_equal(once[:, 0, 0], -pos[:, 5, 0])
 

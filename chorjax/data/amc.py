@@ -156,11 +156,23 @@ def read_amc(path, asf_path=None, *, fps: float = 120.0, scale: float = 1.0, uni
   if not frames:
     raise UserError(f"{path}: no frames")
   pos, names, parents = _fk(asf, frames, path)
-  skeleton = Skeleton(name=asf.path.stem, joint_names=names, parents=parents, twins=_guess_twins(names),
-                      end_joints=tuple(i for i, n in enumerate(names) if n not in asf.parent.values()),
-                      feet=_guess_feet(names))
-  return Motion((pos * scale).astype(np.float32), fps=fps, skeleton=skeleton, up_axis="y", units=units,
-                name=path.stem, source=str(path))
+  skeleton = Skeleton(
+    name=asf.path.stem,
+    joint_names=names,
+    parents=parents,
+    twins=_guess_twins(names),
+    end_joints=tuple(i for i, n in enumerate(names) if n not in asf.parent.values()),
+    feet=_guess_feet(names),
+  )
+  return Motion(
+    (pos * scale).astype(np.float32),
+    fps=fps,
+    skeleton=skeleton,
+    up_axis="y",
+    units=units,
+    name=path.stem,
+    source=str(path),
+  )
 
 
 def _fk(asf: Asf, frames, path):

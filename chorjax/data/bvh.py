@@ -81,7 +81,7 @@ def _parse_hierarchy(path: Path, text: str):
     elif up == "OFFSET":
       need(4)
       try:
-        joints[stack[-1]].offset = np.array([float(t) for _, t in toks[i + 1:i + 4]])
+        joints[stack[-1]].offset = np.array([float(t) for _, t in toks[i + 1 : i + 4]])
       except ValueError:
         raise UserError(f"{path}:{line}: OFFSET needs 3 numbers") from None
       i += 4
@@ -92,11 +92,12 @@ def _parse_hierarchy(path: Path, text: str):
       except ValueError:
         raise UserError(f"{path}:{line}: CHANNELS needs a count") from None
       need(2 + n)
-      names = [t.lower() for _, t in toks[i + 2:i + 2 + n]]
+      names = [t.lower() for _, t in toks[i + 2 : i + 2 + n]]
       bad = [c for c in names if c not in _ROT and c not in _POS]
       if bad or n not in (3, 6):
-        raise UserError(f"{path}:{line}: channel-count mismatch or unknown channel "
-                        f"({n} declared: {' '.join(names)[:60]})")
+        raise UserError(
+          f"{path}:{line}: channel-count mismatch or unknown channel ({n} declared: {' '.join(names)[:60]})"
+        )
       joints[stack[-1]].channels = names
       i += 2 + n
     elif tok == "}":
@@ -141,8 +142,9 @@ def _parse_motion(path: Path, text: str, num_channels: int):
   return np.asarray(rows, np.float64).reshape(frames, num_channels), frame_time
 
 
-def read_bvh(path, *, drop_first_frame: bool = False, scale: float = 1.0, units: str = "file",
-             up_axis: str = "y") -> Motion:
+def read_bvh(
+  path, *, drop_first_frame: bool = False, scale: float = 1.0, units: str = "file", up_axis: str = "y"
+) -> Motion:
   """Reads a BVH file into joint positions (End Sites included).
 
   Args:
@@ -162,12 +164,19 @@ def read_bvh(path, *, drop_first_frame: bool = False, scale: float = 1.0, units:
   pos = forward_kinematics(joints, data) * scale
   names = tuple(j.name for j in joints)
   parents = tuple(-1 if j.parent is None else j.parent for j in joints)
-  skeleton = Skeleton(name=path.stem, joint_names=names, parents=parents, twins=_guess_twins(names),
-                      end_joints=tuple(k for k, j in enumerate(joints) if j.end), feet=_guess_feet(names))
+  skeleton = Skeleton(
+    name=path.stem,
+    joint_names=names,
+    parents=parents,
+    twins=_guess_twins(names),
+    end_joints=tuple(k for k, j in enumerate(joints) if j.end),
+    feet=_guess_feet(names),
+  )
   fps = 1.0 / frame_time
   fps = float(round(fps)) if abs(fps - round(fps)) < 0.01 else fps  # '.0083333' means 120 fps
-  return Motion(pos.astype(np.float32), fps=fps, skeleton=skeleton, up_axis=up_axis,
-                units=units, name=path.stem, source=str(path))
+  return Motion(
+    pos.astype(np.float32), fps=fps, skeleton=skeleton, up_axis=up_axis, units=units, name=path.stem, source=str(path)
+  )
 
 
 def forward_kinematics(joints, data_TxC) -> np.ndarray:
@@ -176,7 +185,7 @@ def forward_kinematics(joints, data_TxC) -> np.ndarray:
   rot = np.zeros((t, len(joints), 3, 3))
   col = 0
   for k, j in enumerate(joints):
-    chans = data_TxC[:, col:col + len(j.channels)]
+    chans = data_TxC[:, col : col + len(j.channels)]
     col += len(j.channels)
     local_t = np.broadcast_to(j.offset, (t, 3)).copy()
     p_idx = [(i, _POS[c]) for i, c in enumerate(j.channels) if c in _POS]
@@ -184,8 +193,11 @@ def forward_kinematics(joints, data_TxC) -> np.ndarray:
       for i, axis in p_idx:
         local_t[:, axis] = chans[:, i]
     r_idx = [(i, _ROT[c]) for i, c in enumerate(j.channels) if c in _ROT]
-    local_r = euler_to_matrix(chans[:, [i for i, _ in r_idx]], "".join(a for _, a in r_idx)) if r_idx \
-        else np.broadcast_to(np.eye(3), (t, 3, 3))
+    local_r = (
+      euler_to_matrix(chans[:, [i for i, _ in r_idx]], "".join(a for _, a in r_idx))
+      if r_idx
+      else np.broadcast_to(np.eye(3), (t, 3, 3))
+    )
     if j.parent is None:
       pos[:, k], rot[:, k] = local_t, local_r
     else:
@@ -202,12 +214,15 @@ def _guess_twins(names) -> tuple[int, ...]:
   def twin(n):
     for a, b in pairs:
       for x, y in ((a, b), (b, a)):
-        for cand in (n.replace(x, y, 1) if n.startswith(x) else None,
-                     n[: -len(x)] + y if n.endswith(x) else None,
-                     n.replace(x + "_", y + "_") if (x + "_") in n else None):
+        for cand in (
+          n.replace(x, y, 1) if n.startswith(x) else None,
+          n[: -len(x)] + y if n.endswith(x) else None,
+          n.replace(x + "_", y + "_") if (x + "_") in n else None,
+        ):
           if cand and cand != n and cand in index:
             return index[cand]
     return index[n]
+
   out = [twin(n) for n in names]
   return tuple(t if out[t] == i else i for i, t in enumerate(out))  # keep only symmetric pairs
 

@@ -35,8 +35,10 @@ def read_c3d(path, *, up_axis: str = "z") -> Motion:
   pts = np.asarray(c["data"]["points"])  # [4, M, T]
   declared, held = last - first + 1, pts.shape[2]
   if declared != held:
-    raise UserError(f"{path}: header declares {declared} frames ({first}..{last}) but the file holds {held}: "
-                    "truncated or inconsistent; refusing a partial read")
+    raise UserError(
+      f"{path}: header declares {declared} frames ({first}..{last}) but the file holds {held}: "
+      "truncated or inconsistent; refusing a partial read"
+    )
   point = c["parameters"]["POINT"]
   rate = float(np.asarray(point["RATE"]["value"]).ravel()[0])
   units = point["UNITS"]["value"][0] if point.get("UNITS", {}).get("value") else "mm"
@@ -47,8 +49,7 @@ def read_c3d(path, *, up_axis: str = "z") -> Motion:
   if missing.any():  # occluded markers: hold the last seen position (and report it)
     pos = _fill_gaps(pos, missing)
   m = len(labels)
-  skeleton = Skeleton(name=f"{path.stem}-markers", joint_names=tuple(labels), parents=(-1,) * m,
-                      twins=tuple(range(m)))
+  skeleton = Skeleton(name=f"{path.stem}-markers", joint_names=tuple(labels), parents=(-1,) * m, twins=tuple(range(m)))
   return Motion(pos, fps=rate, skeleton=skeleton, up_axis=up_axis, units=units, name=path.stem, source=str(path))
 
 

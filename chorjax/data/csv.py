@@ -15,8 +15,9 @@ from chorjax.data.skeletons import MPII16
 from chorjax.errors import UserError, atomic_write, first_non_number, read_text
 
 
-def read_csv(path, skeleton: Skeleton = MPII16, fps: float = 30.0, up_axis: str = "-y",
-             units: str = "arbitrary") -> Motion:
+def read_csv(
+  path, skeleton: Skeleton = MPII16, fps: float = 30.0, up_axis: str = "-y", units: str = "arbitrary"
+) -> Motion:
   """Reads a CSV motion file.
 
   Args:
@@ -43,8 +44,10 @@ def read_csv(path, skeleton: Skeleton = MPII16, fps: float = 30.0, up_axis: str 
       continue
     cells = line.split(",")
     if len(cells) != want:
-      raise UserError(f"{path}:{lineno}: expected {want} columns ({skeleton.num_joints} joints x 3 "
-                      f"for skeleton {skeleton.name}), found {len(cells)}")
+      raise UserError(
+        f"{path}:{lineno}: expected {want} columns ({skeleton.num_joints} joints x 3 "
+        f"for skeleton {skeleton.name}), found {len(cells)}"
+      )
     try:
       values = [float(c) for c in cells]
     except ValueError:
@@ -57,8 +60,7 @@ def read_csv(path, skeleton: Skeleton = MPII16, fps: float = 30.0, up_axis: str 
   if not rows:
     raise UserError(f"{path}: empty file (no frames)")
   positions = np.asarray(rows, dtype=np.float32).reshape(len(rows), skeleton.num_joints, 3)
-  return Motion(positions, fps=fps, skeleton=skeleton, up_axis=up_axis, units=units,
-                name=path.stem, source=str(path))
+  return Motion(positions, fps=fps, skeleton=skeleton, up_axis=up_axis, units=units, name=path.stem, source=str(path))
 
 
 def write_csv(motion_or_positions, path, *, overwrite: bool = True) -> Path:

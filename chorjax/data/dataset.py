@@ -7,9 +7,9 @@ integer id from the sorted order of the file names; the id map travels with ever
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
@@ -46,8 +46,9 @@ def resolve_files(spec: str) -> list[Path]:
   raise UserError(f"{spec}: no such file, folder or bundled dataset{hint}")
 
 
-def read_motions(path: Path, *, skeleton: str = "mpii16", fps: float = 30.0, up_axis: str = "-y",
-                 asf=None, amc_fps: float = 120.0) -> list[Motion]:
+def read_motions(
+  path: Path, *, skeleton: str = "mpii16", fps: float = 30.0, up_axis: str = "-y", asf=None, amc_fps: float = 120.0
+) -> list[Motion]:
   """Reads every motion in a file: one for a take, K for a sample ``.npz`` of K dancers.
 
   CSV takes use ``skeleton``, ``fps`` and ``up_axis`` (CSV records none of them); BVH, ASF/AMC, C3D
@@ -60,22 +61,26 @@ def read_motions(path: Path, *, skeleton: str = "mpii16", fps: float = 30.0, up_
     return [read_csv(path, skeleton=get_skeleton(skeleton), fps=fps, up_axis=up_axis)]
   if suffix == ".npz":
     from chorjax.data.npz import read_npz
+
     return read_npz(path)
   if suffix == ".bvh":
     from chorjax.data.bvh import read_bvh
+
     return [read_bvh(path)]
   if suffix == ".amc":
     from chorjax.data.amc import read_amc
+
     return [read_amc(path, asf, fps=amc_fps)]
   if suffix == ".c3d":
     from chorjax.data.c3d import read_c3d
+
     return [read_c3d(path)]
   raise UserError(f"{path}: unsupported motion format {suffix!r} (supported: {', '.join(READABLE_SUFFIXES)})")
 
 
 def read_takes(specs: Sequence[str], data_cfg=None) -> list[Motion]:
   """Reads every take named by ``specs`` (bundled names, folders or files)."""
-  kw = {} if data_cfg is None else dict(skeleton=data_cfg.skeleton, fps=data_cfg.fps, up_axis=data_cfg.up_axis)
+  kw = {} if data_cfg is None else {"skeleton": data_cfg.skeleton, "fps": data_cfg.fps, "up_axis": data_cfg.up_axis}
   return [m for spec in specs for f in resolve_files(spec) for m in read_motions(f, **kw)]
 
 
@@ -90,6 +95,7 @@ def to_up_axis(motion: Motion, up_axis: str) -> Motion:
 def conform(motions: Sequence[Motion], data_cfg) -> list[Motion]:
   """Brings takes of any format into the dataset's layout: joints (``data.joints``) and up axis."""
   from chorjax.data.skeletons import to_mpii16
+
   out = [to_mpii16(m) if data_cfg.joints == "mpii16" else m for m in motions]
   out = [to_up_axis(m, data_cfg.up_axis) for m in out]
   names = {m.skeleton.joint_names for m in out}
@@ -155,16 +161,21 @@ def load_dataset(data_cfg) -> Dataset:
   need = data_cfg.seq_length + 1
   for m in motions:
     if m.num_frames < need:
-      raise UserError(f"{m.source}: {m.num_frames} frames, shorter than one window "
-                      f"(data.seq_length + 1 = {need})")
+      raise UserError(f"{m.source}: {m.num_frames} frames, shorter than one window (data.seq_length + 1 = {need})")
   id_map = {n: i for i, n in enumerate(names)}
   val_names = _val_names(names, data_cfg.val_takes)
   train_names = [n for n in names if n not in val_names]
   by_name = dict(zip(names, motions))
 
   skeleton = motions[0].skeleton
-  proto = Features(skeleton, data_cfg.representation, data_cfg.up_axis, data_cfg.scale,
-                   np.zeros(3 * skeleton.num_joints, np.float32), np.ones(3 * skeleton.num_joints, np.float32))
+  proto = Features(
+    skeleton,
+    data_cfg.representation,
+    data_cfg.up_axis,
+    data_cfg.scale,
+    np.zeros(3 * skeleton.num_joints, np.float32),
+    np.ones(3 * skeleton.num_joints, np.float32),
+  )
 
   def canon_versions(m: Motion) -> list[np.ndarray]:
     canon = np.asarray(proto.canonical(m.positions))
@@ -180,8 +191,15 @@ def load_dataset(data_cfg) -> Dataset:
   stats = transforms.merged_stats([x for _, x in train_raw])
   features = dataclasses.replace(proto, mean=stats.mean.astype(np.float32), std=stats.std(ddof=1).astype(np.float32))
   enc = lambda x: ((x - features.mean) / features.std).astype(np.float32)
-  return Dataset(id_map, tuple(motions), tuple(train_names), tuple(val_names), features,
-                 tuple((i, enc(x)) for i, x in train_raw), tuple((i, enc(x)) for i, x in val_raw))
+  return Dataset(
+    id_map,
+    tuple(motions),
+    tuple(train_names),
+    tuple(val_names),
+    features,
+    tuple((i, enc(x)) for i, x in train_raw),
+    tuple((i, enc(x)) for i, x in val_raw),
+  )
 
 
 class WindowSampler:
@@ -224,7 +242,7 @@ def eval_windows(sequences: Sequence[tuple[int, np.ndarray]], seq_length: int, m
   frames, ids = [], []
   for i, x in sequences:
     for s in range(0, x.shape[0] - seq_length, seq_length):
-      frames.append(x[s:s + seq_length + 1])
+      frames.append(x[s : s + seq_length + 1])
       ids.append(i)
   if not frames:
     return {}

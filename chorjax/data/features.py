@@ -46,7 +46,9 @@ class Features:
     return transforms.scale_units(transforms.to_y_up(pos_TxJx3, self.up_axis), self.scale)
 
   def uncanonical(self, pos_TxJx3):
-    return transforms.rotate(transforms.scale_units(pos_TxJx3, 1.0 / self.scale), transforms.up_axis_matrix(self.up_axis).T)
+    return transforms.rotate(
+      transforms.scale_units(pos_TxJx3, 1.0 / self.scale), transforms.up_axis_matrix(self.up_axis).T
+    )
 
   def represent(self, canon_TxJx3):
     """Canonical positions -> un-normalized flat features ``[T, D]``."""
@@ -64,14 +66,25 @@ class Features:
     return self.uncanonical(_unrepresent(rep, self.skeleton, self.representation))
 
   def to_dict(self) -> dict:
-    return {"skeleton": self.skeleton.to_dict(), "representation": self.representation,
-            "up_axis": self.up_axis, "scale": self.scale,
-            "mean": np.asarray(self.mean).tolist(), "std": np.asarray(self.std).tolist()}
+    return {
+      "skeleton": self.skeleton.to_dict(),
+      "representation": self.representation,
+      "up_axis": self.up_axis,
+      "scale": self.scale,
+      "mean": np.asarray(self.mean).tolist(),
+      "std": np.asarray(self.std).tolist(),
+    }
 
   @classmethod
-  def from_dict(cls, d: dict) -> "Features":
-    return cls(Skeleton.from_dict(d["skeleton"]), d["representation"], d["up_axis"], float(d["scale"]),
-               np.asarray(d["mean"], np.float32), np.asarray(d["std"], np.float32))
+  def from_dict(cls, d: dict) -> Features:
+    return cls(
+      Skeleton.from_dict(d["skeleton"]),
+      d["representation"],
+      d["up_axis"],
+      float(d["scale"]),
+      np.asarray(d["mean"], np.float32),
+      np.asarray(d["std"], np.float32),
+    )
 
 
 def _represent(pos, skeleton: Skeleton, representation: str):

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
-from typing import Optional
+from typing import Any
 
 import numpy as np
 
@@ -37,7 +37,7 @@ class Skeleton:
     for i, t in enumerate(self.twins):
       if self.twins[t] != i:
         raise ValueError(f"skeleton {self.name}: twins must be symmetric (joint {i} <-> {t})")
-    self.topological_order  # raises on cycles
+    _ = self.topological_order  # raises on cycles
 
   @property
   def num_joints(self) -> int:
@@ -70,8 +70,9 @@ class Skeleton:
     return dataclasses.asdict(self)
 
   @classmethod
-  def from_dict(cls, d: dict) -> "Skeleton":
-    return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
+  def from_dict(cls, d: dict) -> Skeleton:
+    fields: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}
+    return cls(**fields)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -100,7 +101,8 @@ class Motion:
     pos = np.asarray(self.positions, dtype=np.float32)
     if pos.ndim != 3 or pos.shape[1:] != (self.skeleton.num_joints, 3):
       raise ValueError(
-          f"{self.source or self.name}: positions must be [T, {self.skeleton.num_joints}, 3], got {pos.shape}")
+        f"{self.source or self.name}: positions must be [T, {self.skeleton.num_joints}, 3], got {pos.shape}"
+      )
     pos.setflags(write=False)
     object.__setattr__(self, "positions", pos)
 
@@ -108,7 +110,7 @@ class Motion:
   def num_frames(self) -> int:
     return self.positions.shape[0]
 
-  def replace(self, **changes) -> "Motion":
+  def replace(self, **changes) -> Motion:
     return dataclasses.replace(self, **changes)
 
   def bone_lengths(self) -> np.ndarray:
@@ -122,7 +124,7 @@ def bone_lengths(positions_TxJx3, skeleton: Skeleton) -> np.ndarray:
   return np.linalg.norm(positions_TxJx3[:, c] - positions_TxJx3[:, p], axis=-1)
 
 
-def bone_length_cv(positions: np.ndarray, skeleton: Skeleton, eps: Optional[float] = 1e-9) -> np.ndarray:
+def bone_length_cv(positions: np.ndarray, skeleton: Skeleton, eps: float = 1e-9) -> np.ndarray:
   """Per-bone coefficient of variation (std / mean, ddof=0) of bone lengths over time, ``[num_bones]``.
 
   The one-number summary chorjax reports ("bone CV") is the MEDIAN over bones of this vector, a

@@ -9,9 +9,11 @@ def axis_rotation(axis: str, angle_rad) -> np.ndarray:
   """``[..., 3, 3]`` rotation matrices about x, y or z (right-handed)."""
   c, s = np.cos(angle_rad), np.sin(angle_rad)
   o, z = np.ones_like(c), np.zeros_like(c)
-  m = {"x": [[o, z, z], [z, c, -s], [z, s, c]],
-       "y": [[c, z, s], [z, o, z], [-s, z, c]],
-       "z": [[c, -s, z], [s, c, z], [z, z, o]]}[axis.lower()]
+  m = {
+    "x": [[o, z, z], [z, c, -s], [z, s, c]],
+    "y": [[c, z, s], [z, o, z], [-s, z, c]],
+    "z": [[c, -s, z], [s, c, z], [z, z, o]],
+  }[axis.lower()]
   return np.moveaxis(np.array(m, dtype=np.float64), (0, 1), (-2, -1))
 
 

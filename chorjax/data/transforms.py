@@ -11,7 +11,7 @@ in float64 (Chan et al.'s parallel merge of count/mean/M2), once per dataset.
 from __future__ import annotations
 
 import dataclasses
-from typing import Sequence
+from collections.abc import Sequence
 
 import jax.numpy as jnp
 import numpy as np
@@ -28,12 +28,12 @@ class Stats:
   m2: np.ndarray
 
   @classmethod
-  def of(cls, x_TxD) -> "Stats":
+  def of(cls, x_TxD) -> Stats:
     x = np.asarray(x_TxD, dtype=np.float64)
     mean = x.mean(axis=0)
     return cls(x.shape[0], mean, ((x - mean) ** 2).sum(axis=0))
 
-  def merge(self, other: "Stats") -> "Stats":
+  def merge(self, other: Stats) -> Stats:
     """Chan et al.'s pairwise update: exact for any split of the rows."""
     n = self.count + other.count
     delta = other.mean - self.mean
@@ -67,10 +67,10 @@ def denormalize(z, mean, std):
 
 def to_bone_relative(pos_TxJx3, parents: Sequence[int]):
   """Root absolute; every other joint as the offset from its parent along the bone."""
-  parents = np.asarray(parents)
-  root = np.flatnonzero(parents < 0)
-  parent_pos = pos_TxJx3[..., np.where(parents < 0, root[0], parents), :]
-  is_root = (parents < 0)[:, None]
+  parent_of = np.asarray(parents)
+  root = np.flatnonzero(parent_of < 0)
+  parent_pos = pos_TxJx3[..., np.where(parent_of < 0, root[0], parent_of), :]
+  is_root = (parent_of < 0)[:, None]
   return jnp.where(is_root, pos_TxJx3, pos_TxJx3 - parent_pos)
 
 
@@ -94,16 +94,15 @@ def from_bone_relative(rel_TxJx3, parents: Sequence[int]):
 def to_root_relative(pos_TxJx3, root: int):
   """Root absolute; every other joint as the offset from the root."""
   is_root = (np.arange(pos_TxJx3.shape[-2]) == root)[:, None]
-  return jnp.where(is_root, pos_TxJx3, pos_TxJx3 - pos_TxJx3[..., root:root + 1, :])
+  return jnp.where(is_root, pos_TxJx3, pos_TxJx3 - pos_TxJx3[..., root : root + 1, :])
 
 
 def from_root_relative(rel_TxJx3, root: int):
   is_root = (np.arange(rel_TxJx3.shape[-2]) == root)[:, None]
-  return jnp.where(is_root, rel_TxJx3, rel_TxJx3 + rel_TxJx3[..., root:root + 1, :])
+  return jnp.where(is_root, rel_TxJx3, rel_TxJx3 + rel_TxJx3[..., root : root + 1, :])
 
 
 # ---------------------------------------------------------------- axes, units, time
-
 
 
 def up_axis_matrix(up_axis: str) -> np.ndarray:
@@ -113,12 +112,12 @@ def up_axis_matrix(up_axis: str) -> np.ndarray:
   ``-y`` (y down) turns 180 degrees about x; ``z`` turns -90 degrees about x; and so on.
   """
   table = {
-      "y": [[1, 0, 0], [0, 1, 0], [0, 0, 1]],
-      "-y": [[1, 0, 0], [0, -1, 0], [0, 0, -1]],
-      "z": [[1, 0, 0], [0, 0, 1], [0, -1, 0]],
-      "-z": [[1, 0, 0], [0, 0, -1], [0, 1, 0]],
-      "x": [[0, 1, 0], [1, 0, 0], [0, 0, -1]],
-      "-x": [[0, -1, 0], [1, 0, 0], [0, 0, 1]],
+    "y": [[1, 0, 0], [0, 1, 0], [0, 0, 1]],
+    "-y": [[1, 0, 0], [0, -1, 0], [0, 0, -1]],
+    "z": [[1, 0, 0], [0, 0, 1], [0, -1, 0]],
+    "-z": [[1, 0, 0], [0, 0, -1], [0, 1, 0]],
+    "x": [[0, 1, 0], [1, 0, 0], [0, 0, -1]],
+    "-x": [[0, -1, 0], [1, 0, 0], [0, 0, 1]],
   }
   if up_axis not in table:
     raise ValueError(f"unknown up axis {up_axis!r}; one of {sorted(table)}")

@@ -22,8 +22,16 @@ from __future__ import annotations
 import jax.numpy as jnp
 from flax import nnx
 
-from chorjax.models.fused import (gru_scan, gru_step, layer_norm, lnlstm_scan, lnlstm_step, lstm_gates, lstm_scan,
-                                  lstm_update)
+from chorjax.models.fused import (
+  gru_scan,
+  gru_step,
+  layer_norm,
+  lnlstm_scan,
+  lnlstm_step,
+  lstm_gates,
+  lstm_scan,
+  lstm_update,
+)
 
 
 def _kernel(rngs, shape, init):
@@ -54,7 +62,7 @@ class LSTMCell(_Cell):
     self.hidden = hidden
     self.w_x = _kernel(rngs, (in_features, 4 * hidden), nnx.initializers.glorot_uniform())
     self.w_h = _kernel(rngs, (hidden, 4 * hidden), nnx.initializers.orthogonal())
-    self.b = nnx.Param(jnp.zeros((4 * hidden,)).at[hidden:2 * hidden].set(forget_bias))
+    self.b = nnx.Param(jnp.zeros((4 * hidden,)).at[hidden : 2 * hidden].set(forget_bias))
 
   def project(self, x):
     return x @ self.w_x[...] + self.b[...]
@@ -95,7 +103,9 @@ class LNLSTMCell(_Cell):
 
   @staticmethod
   def recurrent_update(loop_params, xp_Bx4H, r_Bx4H, carry):
-    c, h, _ = lnlstm_step(loop_params["gain_h"], loop_params["gain_c"], loop_params["bias_c"], xp_Bx4H, r_Bx4H, carry[0])
+    c, h, _ = lnlstm_step(
+      loop_params["gain_h"], loop_params["gain_c"], loop_params["bias_c"], xp_Bx4H, r_Bx4H, carry[0]
+    )
     return (c, h), h
 
   def scan(self, carry, xp_TxBx4H):

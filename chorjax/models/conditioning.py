@@ -41,8 +41,9 @@ def parse_mix(text: str, num_motions: int) -> np.ndarray:
   return w / w.sum()
 
 
-def motion_weight_vector(num_motions: int, motion: int | None = None, mix: str | None = None,
-                         source: str = "--motion") -> np.ndarray:
+def motion_weight_vector(
+  num_motions: int, motion: int | None = None, mix: str | None = None, source: str = "--motion"
+) -> np.ndarray:
   """One-hot weights ``[M]`` of ``motion`` (default 0), or the blend ``mix``; ``source`` names the
   setting in errors."""
   if mix:

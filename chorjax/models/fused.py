@@ -50,16 +50,24 @@ def _gate_grads(a_Bx4H, dc_BxH, c_prev_BxH, dh_squashed_BxH):
   """The gradient of the LSTM gate pre-activations ``[i, f, g, o]`` from the gate activations, the
   cell-state gradient and ``dh * squash(c)`` (the output gate's input)."""
   i, f, g, o = jnp.split(a_Bx4H, 4, axis=-1)
-  return jnp.concatenate([dc_BxH * g * i * (1.0 - i), dc_BxH * c_prev_BxH * f * (1.0 - f),
-                          dc_BxH * i * (1.0 - g * g), dh_squashed_BxH * o * (1.0 - o)], -1)
+  return jnp.concatenate(
+    [
+      dc_BxH * g * i * (1.0 - i),
+      dc_BxH * c_prev_BxH * f * (1.0 - f),
+      dc_BxH * i * (1.0 - g * g),
+      dh_squashed_BxH * o * (1.0 - o),
+    ],
+    -1,
+  )
 
 
 def lstm_gates(z_Bx4H):
   """``[sigmoid(i), sigmoid(f), tanh(g), sigmoid(o)]`` of the pre-activations, in one elementwise pass
   (``tanh(x) = 2 sigmoid(2x) - 1``)."""
   hidden = z_Bx4H.shape[-1] // 4
-  m = jnp.concatenate([jnp.ones((2 * hidden,), z_Bx4H.dtype), jnp.full((hidden,), 2.0, z_Bx4H.dtype),
-                       jnp.ones((hidden,), z_Bx4H.dtype)])
+  m = jnp.concatenate(
+    [jnp.ones((2 * hidden,), z_Bx4H.dtype), jnp.full((hidden,), 2.0, z_Bx4H.dtype), jnp.ones((hidden,), z_Bx4H.dtype)]
+  )
   return jax.nn.sigmoid(z_Bx4H * m) * m - (m - 1.0)
 
 
@@ -167,7 +175,8 @@ def _lnlstm_scan_bwd(res, cotangents):
     return (dc * f, dr @ w_hT), (dz, dr, dln_c)
 
   (dc0, dh0), (dz, dr, dln_c) = jax.lax.scan(
-      body, (dc_last, dh_last), (dhs, acts, cs, _previous(c0, cs), n_hs, rstd_hs), reverse=True)
+    body, (dc_last, dh_last), (dhs, acts, cs, _previous(c0, cs), n_hs, rstd_hs), reverse=True
+  )
   dw_h = jnp.einsum("tbh,tbg->hg", _previous(h0, hs), dr)
   dgain_h = jnp.einsum("tbkh,tbkh->kh", dz.reshape(n_hs.shape), n_hs)
   dgain_c = jnp.einsum("tbh,tbh->h", dln_c, normalize(cs)[0])
@@ -182,10 +191,10 @@ def gru_step(b_h, xp_Bx3H, r_Bx3H, h_BxH):
   ``xp`` and ``r = h @ w_h``: ``(h, (reset, update, candidate, recurrent candidate part))``."""
   hidden = h_BxH.shape[-1]
   rh = r_Bx3H + b_h
-  gates = jax.nn.sigmoid(xp_Bx3H[..., :2 * hidden] + rh[..., :2 * hidden])
+  gates = jax.nn.sigmoid(xp_Bx3H[..., : 2 * hidden] + rh[..., : 2 * hidden])
   reset, update = gates[..., :hidden], gates[..., hidden:]
-  hn = rh[..., 2 * hidden:]
-  n = jnp.tanh(xp_Bx3H[..., 2 * hidden:] + reset * hn)
+  hn = rh[..., 2 * hidden :]
+  n = jnp.tanh(xp_Bx3H[..., 2 * hidden :] + reset * hn)
   return (1.0 - update) * n + update * h_BxH, (reset, update, n, hn)
 
 

@@ -55,8 +55,7 @@ def mdn_log_prob(logpi_xK, mu_xKxD, scale_xKxS, x_xD):
   return jax.nn.logsumexp(logpi_xK + comp_xK, axis=-1)
 
 
-def mdn_sample(key, logpi_BxK, mu_BxKxD, scale_BxKxS, pi_temperature=1.0, sigma_temperature=1.0,
-               greedy: bool = False):
+def mdn_sample(key, logpi_BxK, mu_BxKxD, scale_BxKxS, pi_temperature=1.0, sigma_temperature=1.0, greedy: bool = False):
   """Draws one frame per row.
 
   Args:
@@ -84,8 +83,16 @@ class MDNHead(nnx.Module):
   Loss = negative log-likelihood per frame (summed over the D coordinates, averaged over frames).
   """
 
-  def __init__(self, hidden: int, dim: int, *, num_mixtures: int = 8, isotropic: bool = False,
-               min_scale: float = 1e-3, rngs: nnx.Rngs):
+  def __init__(
+    self,
+    hidden: int,
+    dim: int,
+    *,
+    num_mixtures: int = 8,
+    isotropic: bool = False,
+    min_scale: float = 1e-3,
+    rngs: nnx.Rngs,
+  ):
     self.dim, self.num_mixtures, self.isotropic, self.min_scale = dim, num_mixtures, isotropic, min_scale
     self.out = nnx.Linear(hidden, self.num_outputs, rngs=rngs)
 
@@ -105,8 +112,7 @@ class MDNHead(nnx.Module):
     nll = -jnp.mean(mdn_log_prob(logpi, mu, scale, target_xD))
     # The MSE of the mixture mean: comparable with the MSE head.
     mean = jnp.sum(jnp.exp(logpi)[..., None] * mu, axis=-2)
-    return nll, {"nll": nll, "mse": jnp.mean(jnp.square(mean - target_xD)),
-                 "min_scale": jnp.min(scale)}
+    return nll, {"nll": nll, "mse": jnp.mean(jnp.square(mean - target_xD)), "min_scale": jnp.min(scale)}
 
   def sample(self, out_BxP, key, pi_temperature=1.0, sigma_temperature=1.0, greedy=False):
     logpi, mu, scale = self.params(out_BxP)

@@ -21,13 +21,27 @@ class ChorModel(nnx.Module):
 
   def __init__(self, cfg, dim: int, num_motions: int, *, rngs: nnx.Rngs):
     self.dim, self.num_motions = dim, num_motions
-    self.core = RecurrentCore(cfg.cell, dim, cfg.hidden_size, cfg.num_layers, num_motions,
-                              forget_bias=cfg.forget_bias, dropout=cfg.dropout,
-                              initial_state=cfg.initial_state, rngs=rngs)
+    self.core = RecurrentCore(
+      cfg.cell,
+      dim,
+      cfg.hidden_size,
+      cfg.num_layers,
+      num_motions,
+      forget_bias=cfg.forget_bias,
+      dropout=cfg.dropout,
+      initial_state=cfg.initial_state,
+      rngs=rngs,
+    )
     self.head: MDNHead | MSEHead
     if cfg.head == "mdn":
-      self.head = MDNHead(cfg.hidden_size, dim, num_mixtures=cfg.num_mixtures,
-                          isotropic=cfg.mdn_scale == "isotropic", min_scale=cfg.min_scale, rngs=rngs)
+      self.head = MDNHead(
+        cfg.hidden_size,
+        dim,
+        num_mixtures=cfg.num_mixtures,
+        isotropic=cfg.mdn_scale == "isotropic",
+        min_scale=cfg.min_scale,
+        rngs=rngs,
+      )
     else:
       self.head = MSEHead(cfg.hidden_size, dim, rngs=rngs)
 

@@ -23,18 +23,30 @@ def dropout_mask(key, shape_BxH, rate: float):
 class RecurrentCore(nnx.Module):
   """``num_layers`` cells of ``hidden`` units, each scanned over time."""
 
-  def __init__(self, cell: str, in_features: int, hidden: int, num_layers: int, num_motions: int, *,
-               forget_bias: float = 1.0, dropout: float = 0.0, initial_state: str = "motion",
-               rngs: nnx.Rngs):
+  def __init__(
+    self,
+    cell: str,
+    in_features: int,
+    hidden: int,
+    num_layers: int,
+    num_motions: int,
+    *,
+    forget_bias: float = 1.0,
+    dropout: float = 0.0,
+    initial_state: str = "motion",
+    rngs: nnx.Rngs,
+  ):
     cls = CELLS[cell]
     self.hidden, self.num_layers, self.dropout = hidden, num_layers, dropout
     self.num_carries = cls.num_carries
-    self.cells = nnx.List([cls(in_features if l == 0 else hidden, hidden, forget_bias=forget_bias, rngs=rngs)
-                           for l in range(num_layers)])
+    self.cells = nnx.List(
+      [cls(in_features if l == 0 else hidden, hidden, forget_bias=forget_bias, rngs=rngs) for l in range(num_layers)]
+    )
     self.initial_state = initial_state
     if initial_state == "motion":
-      self.init_proj = nnx.Linear(num_motions, num_layers * self.num_carries * hidden, rngs=rngs,
-                                  kernel_init=nnx.initializers.normal(0.1))
+      self.init_proj = nnx.Linear(
+        num_motions, num_layers * self.num_carries * hidden, rngs=rngs, kernel_init=nnx.initializers.normal(0.1)
+      )
 
   def initial_carry(self, weights_BxM):
     """Per layer, a tuple of ``[B, H]`` arrays, from motion-id weights ``[B, M]``."""

@@ -15,8 +15,8 @@ from __future__ import annotations
 import base64
 import html as html_lib
 import json
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
@@ -29,26 +29,33 @@ def _payload(m: Motion) -> dict:
   pos = np.asarray(transforms.to_y_up(m.positions, m.up_axis), np.float32)  # the viewer is y-up
   height = float(np.ptp(pos[..., 1])) or 1.0
   return {
-      "title": m.name, "fps": m.fps, "frames": int(pos.shape[0]), "joints": int(pos.shape[1]),
-      "bones": [list(b) for b in m.skeleton.bones], "scale": 2.0 / height,
-      "data": base64.b64encode(np.ascontiguousarray(pos).tobytes()).decode("ascii"),
+    "title": m.name,
+    "fps": m.fps,
+    "frames": int(pos.shape[0]),
+    "joints": int(pos.shape[1]),
+    "bones": [list(b) for b in m.skeleton.bones],
+    "scale": 2.0 / height,
+    "data": base64.b64encode(np.ascontiguousarray(pos).tobytes()).decode("ascii"),
   }
 
 
-def player_html(motions: Sequence[Motion], title: str = "chorjax", columns: int | None = None,
-                rows: Sequence[int] | None = None) -> str:
+def player_html(
+  motions: Sequence[Motion], title: str = "chorjax", columns: int | None = None, rows: Sequence[int] | None = None
+) -> str:
   """The player page as a string; ``rows`` optionally pins each motion to a grid row (0 = top)."""
   cols = columns or min(len(motions), 4)
   payloads = [_payload(m) for m in motions]
   for p, r in zip(payloads, rows or []):
     p["row"] = int(r)
   data = json.dumps(payloads)
-  return _TEMPLATE.replace("__TITLE__", html_lib.escape(title)).replace("__COLUMNS__", str(cols)).replace(
-      "__DATA__", data)
+  return (
+    _TEMPLATE.replace("__TITLE__", html_lib.escape(title)).replace("__COLUMNS__", str(cols)).replace("__DATA__", data)
+  )
 
 
-def write_player(motions: Sequence[Motion], path, title: str = "chorjax", columns: int | None = None,
-                 rows: Sequence[int] | None = None) -> Path:
+def write_player(
+  motions: Sequence[Motion], path, title: str = "chorjax", columns: int | None = None, rows: Sequence[int] | None = None
+) -> Path:
   """Writes the player page atomically."""
   text = player_html(motions, title, columns, rows)
   return atomic_write(path, lambda p: p.write_text(text, encoding="utf-8"))

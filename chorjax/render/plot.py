@@ -13,8 +13,10 @@ from chorjax.errors import UserError, atomic_write
 def require_matplotlib():
   try:
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
     return plt
   except ImportError:
     raise UserError("this needs matplotlib: pip install 'chorjax[viz]'") from None
@@ -23,6 +25,7 @@ def require_matplotlib():
 def save_figure(fig, path) -> Path:
   """Writes a matplotlib figure atomically (format from the suffix, PNG by default) and closes it."""
   import matplotlib.pyplot as plt
+
   fmt = (Path(path).suffix or ".png").lstrip(".")
   try:
     return atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=80, format=fmt))
