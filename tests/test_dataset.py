@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from chorjax.config import load_config
+from chorjax.data import transforms
 from chorjax.data.dataset import WindowSampler, eval_windows, load_dataset
 from chorjax.errors import UserError
 
@@ -34,9 +35,15 @@ def test_augmentations_add_sequences():
   cfg = load_config(None, ["data.augment=['reverse', 'mirror']"])
   ds = load_dataset(cfg.data)
   assert len(ds.train) == 4 * 9
-  (i0, a), (i1, _), (i2, c), (i3, _) = ds.train[:4]
+  (i0, a), (i1, b), (i2, c), (i3, d) = ds.train[:4]
   assert i0 == i1 == i2 == i3 == 0
   np.testing.assert_allclose(c, a[::-1], atol=1e-5)  # reversed copy of the original
+  np.testing.assert_allclose(d, b[::-1], atol=1e-5)  # reversed copy of the mirrored one
+  # the mirrored copy: twin joints swapped and the lateral axis negated, in y-up positions
+  canon = lambda z: np.asarray(ds.features.canonical(ds.features.decode(z)))
+  twins = ds.features.skeleton.twins
+  np.testing.assert_allclose(canon(b), np.asarray(transforms.mirror(canon(a), twins, lateral_axis=0)), atol=1e-4)
+  assert not np.allclose(canon(b), canon(a), atol=1e-2)
 
 
 def test_batches_are_deterministic_real_windows(ds):

@@ -153,6 +153,8 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
     )
     == 0
   )
-  assert "fid_k" in json.loads((tmp_path / "m.json").read_text())
+  m = json.loads((tmp_path / "m.json").read_text())
+  assert (m["frames"], m["num"], m["data"]) == (240, 1, ["cmu94/94_10_skeleton_3d.csv"])
+  assert m["fid_k"] >= 0 and m["real_fid_k"] >= 0 and m["div_k"] > 0 and np.isfinite(m["heldout_loss"])
   assert cli.main(["eval", str(runs[0]), "--data", "nope.csv", "-o", str(tmp_path / "m2.json")]) == 2
   assert cli.main(["compare", str(tmp_path), "-o", str(tmp_path / "r2.md")]) == 2
