@@ -220,6 +220,34 @@ def _sample(args) -> int:
   return 0
 
 
+# The keys `chorjax metrics` and `chorjax eval` print (every one is in the JSON; see chorjax/scoring.py).
+METRIC_KEYS = (
+  "movement_first_1000",
+  "movement_last_1000",
+  "movement_min",
+  "movement_max",
+  "jitter",
+  "jitter_max",
+  "bone_cv_mean",
+  "bone_cv_max",
+  "fid_k",
+  "div_k",
+  "fid_g",
+  "div_g",
+  "pfc",
+  "foot_sliding",
+  "novelty",
+)
+
+
+def _print_metrics(result: dict, keys) -> None:
+  from chorjax.scoring import mean_of
+
+  for k in keys:
+    real = result.get(k + "_real")
+    print(f"{k:22s} {mean_of(result[k]):10.4g}" + (f"   (real: {mean_of(real):.4g})" if real is not None else ""))
+
+
 def _output(path, allowed) -> tuple[Path, str]:
   """The output path and its suffix, checked to be an allowed kind."""
   out = Path(path)
@@ -305,20 +333,25 @@ def _eval(args) -> int:
     greedy=True if args.greedy else None,
   )
   write_metrics(result, out)
-  for k in (
-    "heldout_loss",
-    "freeze_ratio_first_1000",
-    "freeze_ratio_last_1000",
-    "bone_cv_median",
-    "foot_sliding",
-    "fid_k",
-    "real_fid_k",
-    "div_k",
-    "novelty",
-    "real_novelty",
-  ):
-    print(f"{k:26s} {result[k]:.4g}")
+  _print_metrics(result, ("heldout_loss", *METRIC_KEYS))
   print(f"wrote {out}")
+  return 0
+
+
+def _metrics(args) -> int:
+  import json
+
+  from chorjax.errors import atomic_write
+  from chorjax.scoring import score_files
+
+  out = Path(args.output) if args.output else None
+  if out is not None:
+    _refuse_existing([out], args.force)
+  result = score_files(args.motions, args.data, window=args.window, splits=args.splits, seed=args.seed)
+  _print_metrics(result, METRIC_KEYS)
+  if out is not None:
+    atomic_write(out, lambda p: p.write_text(json.dumps(result, indent=2)))
+    print(f"wrote {out}")
   return 0
 
 
@@ -482,6 +515,22 @@ def _add_report_commands(sub) -> None:
   ev.add_argument("-o", "--output", metavar="metrics.json", help="default: WORKDIR/eval/metrics.json")
   _add_sampling_args(ev)
   ev.set_defaults(func=_eval)
+
+  me = sub.add_parser("metrics", help="score any motion files against real takes with the eval metrics")
+  me.add_argument("motions", nargs="+", metavar="MOTION", help="motion files (.csv, .npz, .bvh, .amc) or folders")
+  me.add_argument(
+    "--data",
+    nargs="+",
+    required=True,
+    metavar="PATH_OR_NAME",
+    help="real reference takes, e.g. cmu94 or a folder (the divisors and the distributions)",
+  )
+  me.add_argument("-o", "--output", metavar="metrics.json", help="write every key as JSON")
+  me.add_argument("--window", type=int, default=60, help="frames per window for FID and novelty (default 60)")
+  me.add_argument("--splits", type=int, default=10, help="random halves of the reference for the spreads (default 10)")
+  me.add_argument("--seed", type=int, default=0, help="seed of the resampling")
+  me.add_argument("--force", action="store_true", help="overwrite the output if it exists")
+  me.set_defaults(func=_metrics)
 
   sw = sub.add_parser("sweep", help="train and evaluate every point of a grid over config keys")
   sw.add_argument("sweep", metavar="SWEEP.toml")

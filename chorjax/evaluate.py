@@ -1,4 +1,4 @@
-"""``chorjax eval``: held-out likelihood plus the generation metrics of ``chorjax.metrics`` for a run."""
+"""``chorjax eval``: held-out likelihood plus the generation metrics of ``chorjax.scoring`` for a run."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from chorjax import metrics
+from chorjax import scoring
 from chorjax.data.dataset import conform, eval_windows, read_takes
 from chorjax.data.transforms import to_y_up
 from chorjax.errors import UserError, atomic_write
@@ -30,6 +30,7 @@ def evaluate(
   sigma_temperature=None,
   greedy=None,
   window: int = 60,
+  splits: int = 10,
 ) -> dict:
   """Samples ``num`` dancers of ``frames`` frames and measures them against the takes in ``data``.
 
@@ -38,11 +39,12 @@ def evaluate(
     data: bundled names, folders or files: the real motion to compare with (e.g. the held-out take).
     frames, num: length and count of generated sequences (dancer k is conditioned on the k-th
       training take, round robin).
-    window: frames per window for FID_k, Div_k and novelty (60 = 2 s at 30 fps).
+    window, splits: windows and reference splits of the distribution metrics (``chorjax.scoring``).
     pi_temperature, sigma_temperature, greedy: sampling controls; default: the run's ``[sample]``.
 
   Returns:
-    A flat dict of metrics (JSON-ready); see the README for each entry.
+    The held-out loss and every key of :func:`chorjax.scoring.score` (JSON-ready): the generated
+    motion measured against the takes in ``data``, novelty against the run's training takes.
   """
   run = load_run(workdir, checkpoint)
   feats = run.features
@@ -61,23 +63,9 @@ def evaluate(
   real_c = [y_up(m.positions) for m in real]
   train_c = [y_up(m.positions) for m in train]
 
-  size = float(np.mean([metrics.body_size(p, sk) for p in train_c]))
-  data_speed = float(np.mean(np.concatenate([metrics.joint_speed(p) for p in train_c])))
-  curves = np.stack([metrics.freeze_curve(g, data_speed, 100) for g in gen])
-  last = min(1000, frames // 2)
-  cv_gen = [metrics.bone_cv(g, sk) for g in gen]
-  cv_real = [metrics.bone_cv(p, sk) for p in real_c]
-
-  def kin(wins):
-    return np.stack([metrics.kinetic_features(x / size, fps) for x in wins])
-
-  gen_w = np.concatenate([metrics.windows(g, window, window) for g in gen])
-  real_w = np.concatenate([metrics.windows(p, window, window // 4) for p in real_c])
-  train_w = np.concatenate([metrics.windows(p, window, window // 4) for p in train_c])
-  if len(real_w) < 2:
-    raise UserError(f"--data: the takes give {len(real_w)} windows of {window} frames; need at least 2")
-  fid = metrics.fid_k(kin(real_w), kin(gen_w))
-  ref = metrics.fid_k(kin(real_w), kin(train_w))
+  if sum(len(p) // max(window // 4, 1) for p in real_c) < 4:
+    raise UserError(f"--data: the takes are too short for {window}-frame windows")
+  scored = scoring.score(gen, real_c, sk, fps, train=train_c, window=window, splits=splits, seed=seed)
   return {
     "run": str(workdir),
     "checkpoint_step": run.step,
@@ -87,23 +75,7 @@ def evaluate(
     "sampling": {**sampling, "seed": seed},
     "loss_kind": "nll" if run.config.model.head == "mdn" else "mse",
     "heldout_loss": loss,
-    "freeze_ratio_first_1000": float(np.mean([metrics.freeze_ratio(g[: last + 1], data_speed) for g in gen])),
-    "freeze_ratio_last_1000": float(np.mean([metrics.freeze_ratio(g[-last - 1 :], data_speed) for g in gen])),
-    "freeze_curve": curves.mean(0).tolist(),
-    "bone_cv_median": float(np.mean([c["median"] for c in cv_gen])),
-    "bone_cv_max": float(np.mean([c["max"] for c in cv_gen])),
-    "data_bone_cv_median": float(np.mean([c["median"] for c in cv_real])),
-    "foot_sliding": float(np.mean([metrics.foot_sliding(g, sk, fps, size) for g in gen])),
-    "data_foot_sliding": float(np.mean([metrics.foot_sliding(p, sk, fps, size) for p in real_c])),
-    "fid_k": fid["fid_k"],
-    "div_k": fid["div_k"],
-    "data_div_k": fid["real_div_k"],
-    "real_fid_k": ref["fid_k"],
-    "real_train_div_k": ref["div_k"],
-    "novelty": metrics.novelty(gen_w / size, train_w / size, sk.root),
-    "real_novelty": metrics.novelty(real_w / size, train_w / size, sk.root),
-    "body_size": float(size),
-    "window": window,
+    **scored,
   }
 
 

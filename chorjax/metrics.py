@@ -16,6 +16,8 @@ lengths by the body size (root->foot plus root->head along the bones), so number
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
 from chorjax.data.motion import Skeleton, bone_length_cv, bone_lengths
@@ -159,3 +161,148 @@ def novelty(gen_windows, train_windows, root: int) -> float:
   d2 = np.sum(g**2, 1)[:, None] + np.sum(t**2, 1)[None] - 2 * g @ t.T
   per_point = gen_windows.shape[1] * gen_windows.shape[2]
   return float(np.sqrt(np.maximum(d2.min(1), 0) / per_point).mean())
+
+
+# ---------------------------------------------------------------- movement and jitter (per segment)
+
+
+def segments(pos_TxJx3, length: int = 1000) -> list[np.ndarray]:
+  """Consecutive ``length``-frame segments (the whole motion if shorter; a short tail joins the last)."""
+  n = max(len(pos_TxJx3) // length, 1)
+  bounds = [i * length for i in range(n)] + [len(pos_TxJx3)]
+  return [pos_TxJx3[a:b] for a, b in itertools.pairwise(bounds)]
+
+
+def displacement(pos_TxJx3, root: int, lag: int) -> float:
+  """Mean root-relative joint displacement over ``lag`` frames (how far the limbs travel in that time).
+
+  Trembling in place moves joints back and forth around one pose: over half a second they end up
+  where they were, so this stays low where the frame-to-frame speed does not.
+  """
+  rel = np.asarray(pos_TxJx3, np.float64) - np.asarray(pos_TxJx3, np.float64)[:, root : root + 1]
+  if len(rel) <= lag:
+    return 0.0
+  return float(np.linalg.norm(rel[lag:] - rel[:-lag], axis=-1).mean())
+
+
+def roughness(pos_TxJx3) -> float:
+  """Mean magnitude of the second difference of joint positions (length per frame^2): jitter."""
+  p = np.asarray(pos_TxJx3, np.float64)
+  if len(p) < 3:
+    return 0.0
+  return float(np.linalg.norm(p[2:] - 2 * p[1:-1] + p[:-2], axis=-1).mean())
+
+
+def reference_rates(takes, root: int, lag: int) -> tuple[float, float]:
+  """``(displacement, roughness)`` of real takes, pooled over their frames (the divisors)."""
+  weights = [len(t) for t in takes]
+  disp = np.average([displacement(t, root, lag) for t in takes], weights=weights)
+  rough = np.average([roughness(t) for t in takes], weights=weights)
+  return float(disp), float(rough)
+
+
+def movement_curve(pos_TxJx3, root: int, lag: int, reference: float, length: int = 1000) -> np.ndarray:
+  """Per consecutive segment: the displacement over ``lag`` frames / the reference data's."""
+  return np.array([displacement(s, root, lag) / reference for s in segments(pos_TxJx3, length)])
+
+
+def jitter_curve(pos_TxJx3, reference: float, length: int = 1000) -> np.ndarray:
+  """Per consecutive segment: the roughness / the reference data's."""
+  return np.array([roughness(s) / reference for s in segments(pos_TxJx3, length)])
+
+
+# ---------------------------------------------------------------- geometric (relational) pose features
+
+# Each is a yes/no question about one frame, in the spirit of the AIST++ "manual" features; a
+# window's feature vector is the fraction of its frames for which each answer is yes. Lengths are in
+# body sizes, directions in the dancer's own frame (forward = up x the right-to-left hip axis).
+GEOMETRIC_FEATURES = (
+  "left foot in front of the right",
+  "right foot in front of the left",
+  "left hand above the head",
+  "right hand above the head",
+  "left hand above the left shoulder",
+  "right hand above the right shoulder",
+  "left knee bent (< 150 degrees)",
+  "right knee bent (< 150 degrees)",
+  "left elbow bent (< 120 degrees)",
+  "right elbow bent (< 120 degrees)",
+  "left foot raised (> 0.1 above the floor)",
+  "right foot raised (> 0.1 above the floor)",
+  "hands far apart (> 0.6)",
+  "left hand in front of the chest (> 0.2)",
+  "right hand in front of the chest (> 0.2)",
+  "crouched (pelvis < 0.38 above the floor)",
+  "feet wide apart (> 0.25)",
+  "torso leaning (> 20 degrees from vertical)",
+)
+
+
+def _angle(a, b, c):
+  """The angle at ``b`` (degrees) of the triangle a-b-c, per frame."""
+  u, v = a - b, c - b
+  cos = (u * v).sum(-1) / np.maximum(np.linalg.norm(u, axis=-1) * np.linalg.norm(v, axis=-1), 1e-9)
+  return np.degrees(np.arccos(np.clip(cos, -1, 1)))
+
+
+def geometric_features(pos_TxJx3, skeleton: Skeleton, size: float) -> np.ndarray:
+  """``[T, F]`` booleans (as 0/1) of ``GEOMETRIC_FEATURES`` for y-up positions of an mpii16 skeleton."""
+  j = {n: i for i, n in enumerate(skeleton.joint_names)}
+  p = np.asarray(pos_TxJx3, np.float64) / size
+  at = lambda name: p[:, j[name]]
+  lateral = at("left_hip") - at("right_hip")
+  lateral[:, 1] = 0
+  lateral /= np.maximum(np.linalg.norm(lateral, axis=-1, keepdims=True), 1e-9)
+  forward = np.cross(lateral, [0.0, 1.0, 0.0])  # left x up: the way the chest faces (y-up, right-handed)
+  floor = np.percentile(np.minimum(at("left_foot")[:, 1], at("right_foot")[:, 1]), 5)
+  ahead = lambda v: (v * forward).sum(-1)
+  torso = at("thorax") - at("pelvis")
+  lean = np.degrees(np.arccos(np.clip(torso[:, 1] / np.maximum(np.linalg.norm(torso, axis=-1), 1e-9), -1, 1)))
+  answers = [
+    ahead(at("left_foot") - at("right_foot")) > 0.05,
+    ahead(at("right_foot") - at("left_foot")) > 0.05,
+    at("left_hand")[:, 1] > at("head_top")[:, 1],
+    at("right_hand")[:, 1] > at("head_top")[:, 1],
+    at("left_hand")[:, 1] > at("left_shoulder")[:, 1],
+    at("right_hand")[:, 1] > at("right_shoulder")[:, 1],
+    _angle(at("left_hip"), at("left_knee"), at("left_foot")) < 150,
+    _angle(at("right_hip"), at("right_knee"), at("right_foot")) < 150,
+    _angle(at("left_shoulder"), at("left_elbow"), at("left_hand")) < 120,
+    _angle(at("right_shoulder"), at("right_elbow"), at("right_hand")) < 120,
+    at("left_foot")[:, 1] - floor > 0.1,
+    at("right_foot")[:, 1] - floor > 0.1,
+    np.linalg.norm(at("left_hand") - at("right_hand"), axis=-1) > 0.6,
+    ahead(at("left_hand") - at("thorax")) > 0.2,
+    ahead(at("right_hand") - at("thorax")) > 0.2,
+    at("pelvis")[:, 1] - floor < 0.38,
+    np.abs(((at("left_foot") - at("right_foot")) * lateral).sum(-1)) > 0.25,
+    lean > 20,
+  ]
+  return np.stack(answers, -1).astype(np.float64)
+
+
+def window_geometric_features(wins_NxLxJx3, skeleton: Skeleton, size: float) -> np.ndarray:
+  """``[N, F]``: per window, the fraction of frames for which each geometric feature holds."""
+  return np.stack([geometric_features(w, skeleton, size).mean(0) for w in wins_NxLxJx3])
+
+
+# ---------------------------------------------------------------- physical foot contact (EDGE)
+
+
+def pfc(pos_TxJx3, skeleton: Skeleton, fps: float, size: float) -> float:
+  """Physical foot contact score (EDGE, Tseng et al. 2023); lower is more plausible.
+
+  Per frame: the root's acceleration (its upward part clamped at 0: gravity may pull the body down
+  with both feet off the floor) divided by its largest value in the motion, times the horizontal
+  speed of the left foot and of the right foot (body sizes per second); averaged over frames. A body
+  that accelerates must push off a foot that stays put.
+  """
+  p = np.asarray(pos_TxJx3, np.float64) / size
+  root = p[:, skeleton.root]
+  acc = np.diff(root, 2, axis=0) * fps**2
+  acc[:, 1] = np.maximum(acc[:, 1], 0)
+  a = np.linalg.norm(acc, axis=-1)
+  a = a / max(a.max(), 1e-12)
+  feet = p[:, list(skeleton.feet[:2])]
+  v = np.linalg.norm(np.diff(feet[..., [0, 2]], axis=0), axis=-1)[1:] * fps  # [T-2, 2]
+  return float(np.mean(a * v[:, 0] * v[:, 1]))

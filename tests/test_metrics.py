@@ -9,10 +9,12 @@ from helpers import TINY
 
 from chorjax import cli
 from chorjax import metrics as M
+from chorjax.cli import METRIC_KEYS
 from chorjax.data import transforms as tf
 from chorjax.data.csv import read_csv
 from chorjax.data.dataset import bundled_path
 from chorjax.data.skeletons import MPII16
+from chorjax.scoring import mean_of, score
 
 TAKE = read_csv(bundled_path("cmu94") / "94_05_skeleton_3d.csv")
 POS = np.asarray(tf.rotate(TAKE.positions, tf.up_axis_matrix("-y")))  # y-up
@@ -113,19 +115,9 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
   runs = sorted((tmp_path / "runs" / "t").iterdir())
   assert [r.name for r in runs] == ["t-head=mdn", "t-head=mse"]
   m = json.loads((runs[0] / "eval" / "metrics.json").read_text())
-  for key in (
-    "heldout_loss",
-    "freeze_ratio_first_1000",
-    "freeze_ratio_last_1000",
-    "bone_cv_median",
-    "foot_sliding",
-    "fid_k",
-    "div_k",
-    "real_fid_k",
-    "novelty",
-    "real_novelty",
-  ):
-    assert np.isfinite(m[key]), key
+  for key in ("heldout_loss", *METRIC_KEYS, "fid_k_real", "fid_g_real", "novelty_real"):
+    assert np.isfinite(mean_of(m[key])), key
+  assert set(m["fid_k"]) == {"mean", "sd"} and set(m["movement_first_1000"]) == {"mean", "sd"}  # 2 samples
   assert m["loss_kind"] == "nll" and json.loads((runs[1] / "eval" / "metrics.json").read_text())["loss_kind"] == "mse"
   capsys.readouterr()
   assert cli.main(["sweep", str(sweep)]) == 0  # finished points are skipped
@@ -134,7 +126,7 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
   assert cli.main(["compare", *map(str, runs), "-o", str(report)]) == 0
   text = report.read_text()
   assert "| t-head=mdn | lnlstm | mdn |" in text and "## Who wins" in text and "not comparable" in text
-  assert (tmp_path / "report_loss.png").exists() and (tmp_path / "report_freeze.png").exists()
+  assert (tmp_path / "report_loss.png").exists() and (tmp_path / "report_movement.png").exists()
   # eval through the CLI, and its errors
   assert (
     cli.main(
@@ -155,6 +147,105 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
   )
   m = json.loads((tmp_path / "m.json").read_text())
   assert (m["frames"], m["num"], m["data"]) == (240, 1, ["cmu94/94_10_skeleton_3d.csv"])
-  assert m["fid_k"] >= 0 and m["real_fid_k"] >= 0 and m["div_k"] > 0 and np.isfinite(m["heldout_loss"])
+  assert mean_of(m["fid_k"]) >= 0 and mean_of(m["fid_k_real"]) >= 0 and m["div_k"] > 0
+  assert np.isfinite(m["heldout_loss"])
   assert cli.main(["eval", str(runs[0]), "--data", "nope.csv", "-o", str(tmp_path / "m2.json")]) == 2
   assert cli.main(["compare", str(tmp_path), "-o", str(tmp_path / "r2.md")]) == 2
+
+
+# ---------------------------------------------------------------- movement, jitter, bones, FID on constructed cases
+
+
+@pytest.fixture(scope="module")
+def takes():
+  """The cmu94 takes, y-up, by name."""
+  from chorjax.data.dataset import resolve_files
+
+  return {f.stem: np.asarray(tf.to_y_up(read_csv(f).positions, "-y"), np.float64) for f in resolve_files("cmu94")}
+
+
+def _score(motion, takes, held="94_10_skeleton_3d"):
+  return score([motion], [t for n, t in takes.items() if n != held], MPII16, 30.0, splits=5)
+
+
+def test_an_unseen_real_take_scores_like_the_data_and_so_do_its_mirror_and_reversal(takes):
+  take = takes["94_10_skeleton_3d"]
+  for motion in (take, np.asarray(tf.mirror(take, MPII16.twins)), take[::-1]):
+    r = _score(motion, takes)
+    assert 0.8 <= r["movement_first_1000"] <= 1.25 and 0.8 <= r["jitter"] <= 1.25, r
+    for k in ("fid_k", "fid_g"):  # inside the real reference's own spread
+      assert r[k]["mean"] <= r[k + "_real"]["mean"] + 2 * r[k + "_real"]["sd"], (k, r[k], r[k + "_real"])
+
+
+def test_a_held_pose_that_trembles_scores_as_trembling(takes):
+  take = takes["94_10_skeleton_3d"]
+  fake = np.repeat(take[100:101], 3000, 0) + np.random.default_rng(0).normal(0, 1.0, (3000, 16, 3))
+  r = _score(fake, takes)
+  assert r["movement_max"] < 0.2 and r["jitter"] > 2
+  # the old frame-to-frame speed ratio counts the trembling as movement: why it is no freeze measure
+  assert r["speed_ratio"] > 4 * r["movement_max"]
+  for k in ("fid_k", "fid_g"):  # far outside the real spread
+    assert r[k]["mean"] > r[k + "_real"]["mean"] + 4 * r[k + "_real"]["sd"], (k, r[k], r[k + "_real"])
+
+
+def test_movement_per_segment_sees_a_dance_that_stops():
+  rng = np.random.default_rng(0)
+  walk = np.cumsum(rng.normal(0, 1, (2000, 16, 3)), 0)
+  stopped = np.concatenate([walk, np.repeat(walk[-1:], 2000, 0)])
+  r = score([stopped], [walk], MPII16, 30.0, splits=2, window=30)
+  curve = r["movement_curve"]
+  assert len(curve) == 4 and curve[0] == pytest.approx(1.0, rel=0.1) and curve[-1] == 0.0
+  assert r["movement_first_1000"] == curve[0] and r["movement_last_1000"] == 0.0 and r["movement_min"] == 0.0
+
+
+def test_rigid_bones_have_zero_cv_and_the_mean_and_max_see_one_bad_bone(takes):
+  take = takes["94_10_skeleton_3d"]
+  rigid = np.repeat(take[:1], 200, 0) + np.linspace(0, 50, 200)[:, None, None]  # translated, never bent
+  r = score([rigid], [take], MPII16, 30.0, splits=2, window=30)
+  assert r["bone_cv_mean"] < 1e-9 and r["bone_cv_max"] < 1e-9
+  stretched = rigid.copy()
+  stretched[:, 0] += np.sin(np.arange(200))[:, None] * 10  # the right foot wobbles
+  r = score([stretched], [take], MPII16, 30.0, splits=2, window=30)
+  assert r["bone_cv_max"] > 0.05 and r["bone_cv_median"] < 1e-9 and r["bone_cv_mean"] > 0
+
+
+def test_chorjax_metrics_separates_a_real_take_from_a_trembling_fake(tmp_path, takes, capsys):
+  from chorjax.data.csv import write_csv
+
+  take = read_csv(bundled_path("cmu94") / "94_10_skeleton_3d.csv").positions
+  fake = np.repeat(take[100:101], 3000, 0) + np.random.default_rng(0).normal(0, 1.0, (3000, 16, 3)).astype(np.float32)
+  write_csv(fake, tmp_path / "fake.csv")
+  refs = [str(f) for f in sorted(bundled_path("cmu94").glob("94_0*.csv"))]
+  out = {}
+  for name, path in (("real", bundled_path("cmu94") / "94_10_skeleton_3d.csv"), ("fake", tmp_path / "fake.csv")):
+    assert cli.main(["metrics", str(path), "--data", *refs, "--splits", "5", "-o", str(tmp_path / f"{name}.json")]) == 0
+    out[name] = json.loads((tmp_path / f"{name}.json").read_text())
+  keys = {
+    "movement_first_1000",
+    "movement_last_1000",
+    "movement_min",
+    "movement_max",
+    "jitter",
+    "jitter_max",
+    "bone_cv_mean",
+    "bone_cv_max",
+    "fid_k",
+    "fid_k_real",
+    "div_k",
+    "fid_g",
+    "fid_g_real",
+    "div_g",
+    "pfc",
+    "foot_sliding",
+    "novelty",
+    "novelty_real",
+  }
+  assert keys <= set(out["real"]) and keys <= set(out["fake"])
+  real, fake = out["real"], out["fake"]
+  assert 0.8 <= real["movement_min"] <= 1.25 and fake["movement_max"] < 0.2
+  assert 0.8 <= real["jitter"] <= 1.25 and fake["jitter"] > 2
+  for k in ("fid_k", "fid_g"):  # the real take inside the data's own spread, the fake far outside it
+    ref = real[k + "_real"]
+    assert real[k]["mean"] <= ref["mean"] + 2 * ref["sd"] < ref["mean"] + 3 * ref["sd"] < fake[k]["mean"], k
+  assert "movement_min" in capsys.readouterr().out
+  assert cli.main(["metrics", str(tmp_path / "nope.csv"), "--data", *refs]) == 2

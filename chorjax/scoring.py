@@ -1,0 +1,235 @@
+"""One ruler for any motion: the generation metrics of ``chorjax eval`` and ``chorjax metrics``.
+
+``score(motions, reference, ...)`` measures motions (generated samples, another system's output, or a
+real take) against real reference takes of the same skeleton. All positions are y-up, in the data's
+units; lengths are divided by the reference's body size where sizes matter.
+
+Keys (a value, or ``{"mean", "sd"}`` over several motions or reference splits):
+
+* ``movement_first_1000``, ``movement_last_1000``, ``movement_min``, ``movement_max``: per consecutive
+  1,000-frame segment (the whole motion if shorter), the mean root-relative joint displacement over
+  0.5 s divided by the reference's; 1 = moves as much as the data, trembling in place -> 0.
+* ``jitter``, ``jitter_max``: mean magnitude of the second difference of joint positions / the
+  reference's, over the whole motion and in its roughest segment.
+* ``bone_cv_mean``, ``bone_cv_max`` (and ``bone_cv_median``): per-bone length CV, mean and max over bones.
+* ``fid_k`` / ``fid_g``: Frechet distances on kinetic / geometric window features, normalized by the
+  statistics of all reference windows (Bailando; the geometric features' std floored at 0.05).
+  ``fid_k_real`` / ``fid_g_real``: the same figure between two disjoint halves of the real
+  reference, so a model can be read against the data's own spread. Resampling: each of ``splits``
+  rounds splits the reference TAKES in two random halves A and B (a single take: its first and
+  second half in time); the motions' windows and B's windows are subsampled to the same count n =
+  min(|motions|, |B|); ``fid_*`` = FID(A, motions_n) and ``fid_*_real`` = FID(A, B_n). Windows are
+  ``window`` frames (60 = 2 s at 30 fps), reference hop ``window // 4``, motion hop ``window // 2``.
+* ``div_k`` / ``div_g``: mean pairwise distance between the motions' normalized window features.
+* ``pfc``: EDGE's physical foot contact score; ``foot_sliding``: horizontal foot speed in contact
+  (both in body sizes per second; ``data_pfc`` and ``data_foot_sliding`` are the reference's).
+* ``novelty``: RMS joint distance (body sizes) from each motion window to its nearest window of the
+  training takes (``chorjax metrics``: of the reference); ``novelty_real``: the same for the
+  reference's windows (``chorjax metrics``: each reference take against the others).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from chorjax import metrics
+from chorjax.data.motion import Skeleton, bone_length_cv
+
+
+def spread(values) -> float | dict:
+  """One value as is; several as ``{"mean", "sd"}`` (sample sd)."""
+  v = np.asarray(values, np.float64).ravel()
+  if len(v) == 1:
+    return float(v[0])
+  return {"mean": float(v.mean()), "sd": float(v.std(ddof=1))}
+
+
+def mean_of(value) -> float:
+  """The mean of a value written by :func:`spread`."""
+  return float(value["mean"]) if isinstance(value, dict) else float(value)
+
+
+def _movement_and_jitter(motions, reference, skeleton: Skeleton, fps: float, segment: int) -> dict:
+  lag = max(round(0.5 * fps), 1)
+  ref_disp, ref_rough = metrics.reference_rates(reference, skeleton.root, lag)
+  moves = [metrics.movement_curve(m, skeleton.root, lag, ref_disp, segment) for m in motions]
+  jitters = [metrics.jitter_curve(m, ref_rough, segment) for m in motions]
+  return {
+    "movement_first_1000": spread([c[0] for c in moves]),
+    "movement_last_1000": spread([c[-1] for c in moves]),
+    "movement_min": spread([c.min() for c in moves]),
+    "movement_max": spread([c.max() for c in moves]),
+    "jitter": spread([metrics.roughness(m) / ref_rough for m in motions]),
+    "jitter_max": spread([c.max() for c in jitters]),
+    "movement_curve": np.mean([c for c in moves if len(c) == len(moves[0])], axis=0).tolist(),
+    "movement_lag_frames": lag,
+  }
+
+
+def _bones(motions, skeleton: Skeleton) -> dict:
+  cvs = [bone_length_cv(m, skeleton) for m in motions]
+  return {
+    "bone_cv_mean": spread([c.mean() for c in cvs]),
+    "bone_cv_max": spread([c.max() for c in cvs]),
+    "bone_cv_median": spread([np.median(c) for c in cvs]),
+  }
+
+
+def _window_sets(takes, window: int, hop: int, features) -> np.ndarray:
+  rows = [features(w) for t in takes for w in metrics.windows(t, window, hop)]
+  return np.stack(rows) if rows else np.zeros((0, 0))
+
+
+def _halves(reference, rng) -> tuple[list, list]:
+  if len(reference) >= 2:
+    order = rng.permutation(len(reference))
+    k = len(reference) // 2
+    return [reference[i] for i in order[:k]], [reference[i] for i in order[k:]]
+  t = reference[0]
+  return [t[: len(t) // 2]], [t[len(t) // 2 :]]
+
+
+def _distribution(motions, reference, features, window: int, splits: int, seed: int, std_floor: float) -> tuple:
+  """``(fid values, fid_real values, div, div_real)`` under the resampling scheme in the module doc.
+
+  Features are normalized by the reference windows' mean and std, the std floored at ``std_floor``: a
+  feature the reference never varies (a pose it never takes) must not divide by zero.
+  """
+  hop = max(window // 4, 1)
+  ref_all = _window_sets(reference, window, hop, features)
+  gen = _window_sets(motions, window, max(window // 2, 1), features)
+  mean, std = ref_all.mean(0), np.maximum(ref_all.std(0), std_floor)
+  norm = lambda f: (f - mean) / std
+  rng = np.random.default_rng(seed)
+  fids, reals = [], []
+  for _ in range(splits):
+    a, b = _halves(reference, rng)
+    fa, fb = _window_sets(a, window, hop, features), _window_sets(b, window, hop, features)
+    n = min(len(fb), len(gen))
+    if n < 2 or len(fa) < 2:
+      continue
+    gen_n, fb_n = gen[rng.choice(len(gen), n, replace=False)], fb[rng.choice(len(fb), n, replace=False)]
+    fids.append(metrics.frechet_distance(norm(fa), norm(gen_n)))
+    reals.append(metrics.frechet_distance(norm(fa), norm(fb_n)))
+  if not fids:
+    raise ValueError(f"too few {window}-frame windows to compare distributions")
+  cap = lambda f: f[rng.choice(len(f), min(len(f), 1000), replace=False)]
+  return fids, reals, metrics.diversity(norm(cap(gen))), metrics.diversity(norm(cap(ref_all)))
+
+
+def _novelty(motions, reference, train, skeleton: Skeleton, size: float, window: int) -> dict:
+  wins = lambda takes, hop: np.concatenate([metrics.windows(t, window, hop) for t in takes]) / size
+  if train:
+    ref_nov = metrics.novelty(wins(reference, window // 4), wins(train, window // 4), skeleton.root)
+    return {
+      "novelty": metrics.novelty(wins(motions, window), wins(train, window // 4), skeleton.root),
+      "novelty_real": ref_nov,
+    }
+  others = lambda i: [t for k, t in enumerate(reference) if k != i]
+  real = (
+    [
+      metrics.novelty(wins([t], window // 4), wins(others(i), window // 4), skeleton.root)
+      for i, t in enumerate(reference)
+    ]
+    if len(reference) > 1
+    else [float("nan")]
+  )
+  return {
+    "novelty": metrics.novelty(wins(motions, window), wins(reference, window // 4), skeleton.root),
+    "novelty_real": spread(real),
+  }
+
+
+def score(
+  motions,
+  reference,
+  skeleton: Skeleton,
+  fps: float,
+  *,
+  train=None,
+  window: int = 60,
+  splits: int = 10,
+  segment: int = 1000,
+  seed: int = 0,
+) -> dict:
+  """The metrics of ``motions`` (list of ``[T, J, 3]``, y-up) against ``reference`` takes (same form).
+
+  Args:
+    motions: the motions to score (samples, or real takes).
+    reference: real takes of the same skeleton: the divisors and the distributions compared with.
+    skeleton: their skeleton (mpii16 for the geometric features).
+    fps: frame rate of all of them.
+    train: the training takes, if any (novelty is measured against them).
+    window, splits, segment, seed: see the module docstring.
+
+  Returns:
+    The JSON-ready dict described in the module docstring (plus a few labelled extras).
+  """
+  size = float(np.mean([metrics.body_size(t, skeleton) for t in reference]))
+  kin = lambda w: metrics.kinetic_features(w / size, fps)
+  geo = lambda w: metrics.geometric_features(w, skeleton, size).mean(0)
+  fid_k, fid_k_real, div_k, div_k_real = _distribution(motions, reference, kin, window, splits, seed, 1e-10)
+  # geometric features are fractions of a window's frames: a std below 5% of the frames is noise
+  fid_g, fid_g_real, div_g, div_g_real = _distribution(motions, reference, geo, window, splits, seed, 0.05)
+  speed = float(np.mean(np.concatenate([metrics.joint_speed(t) for t in reference])))
+  return {
+    **_movement_and_jitter(motions, reference, skeleton, fps, segment),
+    **_bones(motions, skeleton),
+    "fid_k": spread(fid_k),
+    "fid_k_real": spread(fid_k_real),
+    "div_k": div_k,
+    "div_k_real": div_k_real,
+    "fid_g": spread(fid_g),
+    "fid_g_real": spread(fid_g_real),
+    "div_g": div_g,
+    "div_g_real": div_g_real,
+    "pfc": spread([metrics.pfc(m, skeleton, fps, size) for m in motions]),
+    "data_pfc": float(np.mean([metrics.pfc(t, skeleton, fps, size) for t in reference])),
+    "foot_sliding": spread([metrics.foot_sliding(m, skeleton, fps, size) for m in motions]),
+    "data_foot_sliding": float(np.mean([metrics.foot_sliding(t, skeleton, fps, size) for t in reference])),
+    **_novelty(motions, reference, train, skeleton, size, window),
+    "speed_ratio": spread([metrics.freeze_ratio(m, speed) for m in motions]),  # extra: NOT a freeze measure
+    "body_size": size,
+    "window": window,
+    "splits": splits,
+  }
+
+
+def read_for_scoring(specs, data_cfg) -> list:
+  """Takes named by ``specs`` as mpii16 motions (BVH/ASF/AMC mapped by joint name), any format."""
+  from chorjax.data.dataset import read_takes
+  from chorjax.data.skeletons import to_mpii16
+
+  return [to_mpii16(m) for m in read_takes(list(specs), data_cfg)]
+
+
+def score_files(motion_specs, data_specs, **kw) -> dict:
+  """``chorjax metrics``: :func:`score` of motion files against real takes, any formats.
+
+  Every motion is brought to the reference's frame rate (resampled) and body size (scaled), so
+  another system's output is measured with the same ruler as a chorjax sample.
+  """
+  from chorjax.config import DataConfig
+  from chorjax.data import transforms
+  from chorjax.errors import UserError
+
+  data_cfg = DataConfig()
+  reference = read_for_scoring(data_specs, data_cfg)
+  motions = read_for_scoring(motion_specs, data_cfg)
+  if not reference or not motions:
+    raise UserError(f"{'--data' if not reference else 'MOTION'}: no takes found")
+  fps, skeleton = reference[0].fps, reference[0].skeleton
+  y_up = lambda m: np.asarray(transforms.to_y_up(m.positions, m.up_axis), np.float64)
+  ref = [y_up(m) for m in reference]
+  size = float(np.mean([metrics.body_size(r, skeleton) for r in ref]))
+  out = []
+  for m in motions:
+    p = y_up(m)
+    if m.fps != fps:
+      p = np.asarray(transforms.resample(p, m.fps, fps), np.float64)
+    out.append(p * (size / metrics.body_size(p, skeleton)))
+  short = [m.name for m, p in zip(motions, out) if len(p) < 2 * kw.get("window", 60)]
+  if short:
+    raise UserError(f"{short[0]}: too short to score (need at least {2 * kw.get('window', 60)} frames)")
+  result = score(out, ref, skeleton, fps, **kw)
+  return {"motions": [m.name for m in motions], "data": list(data_specs), "fps": fps, **result}
