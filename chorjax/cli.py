@@ -293,6 +293,8 @@ def _render(args) -> int:
   from chorjax.data.dataset import read_motions, resolve_files
 
   out, suffix = _output(args.output, (".png", ".gif", ".mp4", ".html"))
+  if args.strip and suffix != ".png":
+    raise UserError(f"{out}: --strip draws a PNG")
   _refuse_existing([out], args.force)
   motions = [m for spec in args.inputs for f in resolve_files(spec) for m in read_motions(f, fps=args.fps)]
   if args.frames:
@@ -304,7 +306,11 @@ def _render(args) -> int:
   else:
     if len(motions) > 1:
       print(f"note: {suffix} shows one motion; rendering {motions[0].name}", file=sys.stderr)
-    if suffix == ".png":
+    if suffix == ".png" and args.strip:
+      from chorjax.render.plot import plot_strip
+
+      written = plot_strip(motions[0], out, every=args.every, poses=args.poses)
+    elif suffix == ".png":
       from chorjax.render.plot import plot_trajectories
 
       written = plot_trajectories(motions[0], out)
@@ -495,6 +501,14 @@ def _add_run_commands(sub) -> None:
   render.add_argument("--fps", type=float, default=30.0, help="frame rate of CSV inputs (default 30)")
   render.add_argument("--columns", type=int, help="HTML grid columns (default: up to 4)")
   render.add_argument("--title", help="HTML page title")
+  render.add_argument(
+    "--strip",
+    action="store_true",
+    help="PNG: filmstrips (a pose every N frames) at the start, middle and end, to see "
+    "freezing or trembling at a glance",
+  )
+  render.add_argument("--every", type=int, default=6, metavar="N", help="--strip: frames between poses (default 6)")
+  render.add_argument("--poses", type=int, default=12, help="--strip: poses per row (default 12)")
   render.add_argument("--force", action="store_true", help="overwrite OUT if it exists")
   render.set_defaults(func=_render)
 

@@ -169,6 +169,22 @@ def test_render_gif_and_mp4_are_valid(tmp_path):
   assert cli.main(["render", str(TAKE), "-o", str(png)]) == 0 and png.read_bytes()[:4] == b"\x89PNG"
 
 
+def test_strip_rows_are_start_middle_and_end_and_render_strip_draws_them(tmp_path, capsys):
+  from chorjax.render.plot import strip_rows
+
+  assert strip_rows(10_000, 6, 12) == [("start", 0), ("middle", 4966), ("end", 9933)]
+  assert strip_rows(100, 6, 12) == [("start", 0), ("end", 33)]  # a middle row would overlap both
+  assert strip_rows(50, 6, 12) == [("whole", 0)]
+  png = tmp_path / "strip.png"
+  assert cli.main(["render", str(TAKE), "-o", str(png), "--strip", "--every", "4", "--poses", "8"]) == 0
+  image = iio.imread(png)
+  assert image.shape[:2] == (round(3 * 1.9 * 80), round(8 * 0.9 * 80))  # three rows of eight poses at dpi 80
+  ink = (image[..., :3] < 200).any(-1)  # drawn pixels in each row's band
+  assert all(ink[r * 152 : (r + 1) * 152].sum() > 500 for r in range(3))
+  assert cli.main(["render", str(TAKE), "-o", str(tmp_path / "s.gif"), "--strip"]) == 2
+  assert "--strip draws a PNG" in capsys.readouterr().err
+
+
 def chromium():
   for name in ("chromium-headless-shell", "chromium"):
     path = shutil.which(name)

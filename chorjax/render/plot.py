@@ -57,3 +57,49 @@ def plot_trajectories(motion: Motion, path, split: int = 200) -> Path:
   fig.suptitle(f"{motion.name} ({motion.fps:g} fps, up axis {motion.up_axis}, {motion.units})")
   fig.tight_layout()
   return save_figure(fig, path)
+
+
+def strip_rows(num_frames: int, every: int, poses: int) -> list[tuple[str, int]]:
+  """``(label, first frame)`` of the filmstrip rows: start, middle and end (fewer when short)."""
+  span = every * (poses - 1) + 1
+  if num_frames <= span:
+    return [("whole", 0)]
+  rows = [("start", 0)]
+  if num_frames >= 3 * span:  # a middle row only where it overlaps neither
+    rows.append(("middle", (num_frames - span) // 2))
+  return [*rows, ("end", num_frames - span)]
+
+
+def draw_strip(ax, pos_TxJx3, skeleton, frames, spacing: float) -> None:
+  """Front view (x right, y up) of the poses at ``frames``, side by side, each about its own root."""
+  for k, t in enumerate(frames):
+    p = pos_TxJx3[t] - pos_TxJx3[t, skeleton.root] * np.array([1.0, 0.0, 1.0]) + np.array([k * spacing, 0.0, 0.0])
+    for a, b in skeleton.bones:
+      ax.plot(p[[a, b], 0], p[[a, b], 1], color="#1f5fa8", lw=1.5)
+    ax.plot(p[:, 0], p[:, 1], "o", color="#c0392b", ms=1.5)
+    ax.text(k * spacing, pos_TxJx3[:, :, 1].min() - 0.08 * spacing, str(t), ha="center", fontsize=6)
+  ax.set_aspect("equal")
+  ax.axis("off")
+
+
+def plot_strip(motion: Motion, path, every: int = 6, poses: int = 12) -> Path:
+  """Filmstrips of a motion: ``poses`` stick figures ``every`` frames apart, at the start, middle and end.
+
+  A dance that freezes shows the same figure over and over in the end row; one that trembles, the
+  same figure with its limbs slightly shaken. Positions are drawn y-up, each pose centred on its root.
+  """
+  from chorjax.data import transforms
+
+  plt = require_matplotlib()
+  pos = np.asarray(transforms.to_y_up(motion.positions, motion.up_axis), np.float64)
+  sk = motion.skeleton
+  height = float(np.ptp(pos[:, :, 1], axis=1).mean()) or 1.0
+  rows = strip_rows(motion.num_frames, every, poses)
+  fig, axes = plt.subplots(len(rows), 1, figsize=(poses * 0.9, 1.9 * len(rows)), squeeze=False)
+  for ax, (label, start) in zip(axes[:, 0], rows):
+    frames = [t for t in range(start, start + every * poses, every) if t < motion.num_frames]
+    draw_strip(ax, pos, sk, frames, spacing=0.7 * height)
+    ax.set_title(f"{label}: frames {frames[0]}-{frames[-1]}, every {every}", fontsize=8, loc="left")
+  fig.suptitle(f"{motion.name} ({motion.num_frames} frames, {motion.fps:g} fps)", fontsize=9)
+  fig.tight_layout()
+  return save_figure(fig, path)
