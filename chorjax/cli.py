@@ -323,10 +323,10 @@ def _render(args) -> int:
 
 
 def _eval(args) -> int:
-  from chorjax.evaluate import evaluate, metrics_path, write_metrics
+  from chorjax.evaluate import evaluate, metrics_path, sample_path, write_metrics
 
   out = Path(args.output) if args.output else metrics_path(args.workdir)
-  _refuse_existing([out], args.force)
+  _refuse_existing([out, sample_path(out)], args.force)
   result = evaluate(
     args.workdir,
     args.data,
@@ -334,6 +334,7 @@ def _eval(args) -> int:
     num=args.num,
     checkpoint=args.checkpoint,
     seed=args.seed,
+    seeds=args.seeds,
     pi_temperature=args.pi_temperature,
     sigma_temperature=args.sigma_temperature,
     greedy=True if args.greedy else None,
@@ -526,7 +527,19 @@ def _add_report_commands(sub) -> None:
   )
   ev.add_argument("--frames", type=int, default=10_000, help="frames per generated sequence (default 10000)")
   ev.add_argument("--num", type=int, default=4, help="generated sequences (default 4)")
-  ev.add_argument("-o", "--output", metavar="metrics.json", help="default: WORKDIR/eval/metrics.json")
+  ev.add_argument(
+    "-o",
+    "--output",
+    metavar="metrics.json",
+    help="default: WORKDIR/eval/metrics.json (the first generated dancer goes to sample.npz beside it)",
+  )
+  ev.add_argument(
+    "--seeds",
+    type=int,
+    nargs="+",
+    metavar="SEED",
+    help="several sampling seeds: --num dancers each, scored together (mean and sd); overrides --seed",
+  )
   _add_sampling_args(ev)
   ev.set_defaults(func=_eval)
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from chorjax import scoring
 from chorjax.data.dataset import conform, eval_windows, read_takes
+from chorjax.data.motion import Motion
 from chorjax.data.transforms import to_y_up
 from chorjax.errors import UserError, atomic_write
 from chorjax.run import Run, load_run
@@ -26,6 +27,7 @@ def evaluate(
   num: int = 4,
   checkpoint="latest",
   seed: int = 0,
+  seeds: Sequence[int] | None = None,
   pi_temperature=None,
   sigma_temperature=None,
   greedy=None,
@@ -39,6 +41,8 @@ def evaluate(
     data: bundled names, folders or files: the real motion to compare with (e.g. the held-out take).
     frames, num: length and count of generated sequences (dancer k is conditioned on the k-th
       training take, round robin).
+    seed, seeds: sampling seed(s); with several, ``num`` dancers are drawn with each and all are
+      scored together (every key then carries a mean and sd over them).
     window, splits: windows and reference splits of the distribution metrics (``chorjax.scoring``).
     pi_temperature, sigma_temperature, greedy: sampling controls; default: the run's ``[sample]``.
 
@@ -57,9 +61,15 @@ def evaluate(
   loss = heldout_loss(run, real)
   ids = [run.id_map[m.name] for m in train] or [0]
   motion = np.array([ids[k % len(ids)] for k in range(num)])
-  z = generate(run.graphdef, run.params, motion, jax.random.key(seed), num_frames=frames, **sampling)
+  seeds = list(seeds) if seeds else [seed]
+  decoded = [
+    np.asarray(
+      feats.decode(generate(run.graphdef, run.params, motion, jax.random.key(s), num_frames=frames, **sampling))
+    )
+    for s in seeds
+  ]
   y_up = lambda pos: np.asarray(to_y_up(pos, feats.up_axis))  # data space -> y-up: what the metrics measure
-  gen = [y_up(p) for p in np.asarray(feats.decode(z))]
+  gen = [y_up(p) for d in decoded for p in d]
   real_c = [y_up(m.positions) for m in real]
   train_c = [y_up(m.positions) for m in train]
 
@@ -72,7 +82,9 @@ def evaluate(
     "frames": frames,
     "num": num,
     "data": list(data),
-    "sampling": {**sampling, "seed": seed},
+    "sampling": {**sampling, "seed": seed, "seeds": seeds},
+    # the first dancer, in data space: write_metrics stores it beside the JSON (compare draws its strip)
+    "first_sample": Motion(decoded[0][0], fps, sk, feats.up_axis, name=f"{Path(workdir).name} seed {seeds[0]}"),
     "loss_kind": "nll" if run.config.model.head == "mdn" else "mse",
     "heldout_loss": loss,
     **scored,
@@ -102,4 +114,24 @@ def metrics_path(workdir) -> Path:
 
 
 def write_metrics(result: dict, path) -> Path:
+  """Writes the metrics JSON; an evaluation's first generated dancer goes to ``sample.npz`` beside it."""
+  from chorjax.data.npz import write_npz
+
+  result = dict(result)
+  first = result.pop("first_sample", None)
+  if first is not None:
+    write_npz(
+      sample_path(path),
+      first.positions[None],
+      fps=first.fps,
+      skeleton=first.skeleton,
+      up_axis=first.up_axis,
+      units="data",
+      settings=result["sampling"],
+    )
   return atomic_write(path, lambda p: p.write_text(json.dumps(result, indent=2)))
+
+
+def sample_path(metrics_json) -> Path:
+  """The evaluation's first generated dancer, beside its metrics JSON."""
+  return Path(metrics_json).with_name("sample.npz")

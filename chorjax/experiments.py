@@ -7,15 +7,19 @@ A sweep file (TOML)::
     root = "runs/mdn_vs_mse"                  # where the point workdirs go (relative to the cwd)
     [grid]                                    # the cross product of these lists
     "model.head" = ["mdn", "mse"]
+    "train.seed" = [0, 1, 2]                  # training seeds: compare reports mean +- sd over them
     [set]                                     # fixed overrides for every point (optional)
-    "train.seed" = 0
+    "train.num_steps" = 2000
     [eval]                                    # what `chorjax eval` measures after training (optional)
     data = ["cmu94/94_10_skeleton_3d.csv"]
     frames = 10000
-    num = 4
+    num = 1
+    seeds = [0, 1, 2, 3]                      # sampling seeds, scored together
 
 Every point is an ordinary run directory (``<root>/<name>-<key>=<value>...``) with its evaluation in
-``eval/metrics.json``; re-running a sweep skips finished points and resumes unfinished ones.
+``eval/metrics.json`` (and its first sample in ``eval/sample.npz``); re-running a sweep skips finished
+points and resumes unfinished ones. ``chorjax compare`` groups points that differ only in
+``train.seed``.
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ import datetime
 import itertools
 import json
 import platform
+import re
 import tomllib
 from pathlib import Path
 
@@ -35,7 +40,18 @@ from chorjax.errors import UserError, atomic_write
 from chorjax.scoring import mean_of
 
 SWEEP_KEYS = {"name", "base", "root", "grid", "set", "eval"}
-EVAL_KEYS = {"data", "frames", "num", "seed", "pi_temperature", "sigma_temperature", "greedy"}
+EVAL_KEYS = {
+  "data",
+  "frames",
+  "num",
+  "seed",
+  "pi_temperature",
+  "sigma_temperature",
+  "greedy",
+  "seeds",
+  "splits",
+  "window",
+}
 
 
 def _fmt(v) -> str:
@@ -119,16 +135,24 @@ COLUMNS = [
   ("heldout_loss", "held-out loss", "min"),
   ("movement_first_1000", "movement first 1k", "one"),
   ("movement_last_1000", "movement last 1k", "one"),
-  ("movement_min", "movement min", "one"),
+  ("movement_min", "movement worst 1k", "worst"),
   ("jitter", "jitter", "one"),
   ("bone_cv_mean", "bone CV mean", "min"),
   ("foot_sliding", "foot slide", "data:data_foot_sliding"),
   ("pfc", "PFC", "data:data_pfc"),
-  ("fid_k", "FID_k", "min"),
-  ("fid_g", "FID_g", "min"),
+  ("fid_k", "FID_k / real", "real"),
+  ("fid_g", "FID_g / real", "real"),
   ("div_k", "Div_k", "data:div_k_real"),
   ("novelty", "novelty", "data:novelty_real"),
 ]
+# what "best" means per rule; the value shown for "real" columns is FID / the real halves' FID
+RULES = {
+  "min": "lowest",
+  "one": "closest to 1 (the data's)",
+  "worst": "worst segment closest to 1",
+  "real": "lowest relative to the real data's own FID",
+  "data": "closest to the real data's value",
+}
 
 
 def machine_info() -> str:
@@ -170,23 +194,69 @@ def _read_run(workdir: Path) -> dict:
   }
 
 
-def _winner(runs, key, rule):
-  vals = [(mean_of(r["eval"][key]), r) for r in runs if r["eval"].get(key) is not None]
-  if key == "heldout_loss":  # NLL and MSE are not comparable: only among runs of one kind
-    kinds = {r["eval"]["loss_kind"] for _, r in vals}
-    if len(kinds) > 1:
-      return None, "not comparable (NLL vs MSE)"
-  if not vals:
+def _value(ev: dict, key: str, rule: str) -> float:
+  """The number a table cell shows for one run."""
+  if rule == "real":
+    return mean_of(ev[key]) / mean_of(ev[key + "_real"])
+  if rule == "worst":  # the segment farthest from the data's movement, low or high
+    return max(mean_of(ev["movement_min"]), mean_of(ev["movement_max"]), key=lambda v: abs(v - 1.0))
+  return mean_of(ev[key])
+
+
+def _badness(ev: dict, key: str, rule: str) -> float:
+  """How far one run is from the best possible value (lower is better)."""
+  v = _value(ev, key, rule)
+  if rule in ("one", "worst"):
+    return abs(v - 1.0)
+  if rule.startswith("data:"):
+    return abs(v - mean_of(ev[rule.split(":")[1]]))
+  return v
+
+
+def _stats(values) -> tuple[float, float]:
+  v = np.asarray(values, np.float64)
+  return float(v.mean()), float(v.std(ddof=1)) if len(v) > 1 else 0.0
+
+
+def group_runs(runs) -> list[dict]:
+  """Runs whose configs differ only in ``train.seed`` form one group (their name without ``seed=N``)."""
+  groups: dict[str, dict] = {}
+  for r in runs:
+    cfg = {k: v for k, v in r["config"].items() if k != "name"}
+    cfg["train"] = {k: v for k, v in cfg["train"].items() if k != "seed"}
+    ident = json.dumps(cfg, sort_keys=True) + json.dumps(r["eval"].get("data"))
+    name = re.sub(r"-?\bseed=-?\d+", "", r["name"]).strip("-") or r["name"]
+    groups.setdefault(ident, {"name": name, "runs": []})["runs"].append(r)
+  out = list(groups.values())
+  for g in out:
+    if len(g["runs"]) == 1:
+      g["name"] = g["runs"][0]["name"]
+  return out
+
+
+def _winner(groups, key, rule):
+  """``(group or None, reason)``: the best group, named only where it beats the next beyond the spread."""
+  rows = [g for g in groups if all(r["eval"].get(key) is not None for r in g["runs"])]
+  if key == "heldout_loss" and len({r["eval"]["loss_kind"] for g in rows for r in g["runs"]}) > 1:
+    return None, "not comparable (NLL vs MSE)"
+  if not rows:
     return None, ""
-  if rule == "min":
-    _, r = min(vals, key=lambda x: x[0])
-    return r, "lowest"
-  if rule == "one":
-    _, r = min(vals, key=lambda x: abs(x[0] - 1.0))
-    return r, "closest to 1 (the data's)"
-  ref_key = rule.split(":")[1]
-  _, r = min(vals, key=lambda x: abs(x[0] - mean_of(x[1]["eval"][ref_key])))
-  return r, "closest to the real data's value"
+  scored = sorted(
+    ((_stats([_badness(r["eval"], key, rule) for r in g["runs"]]), g["name"], g) for g in rows), key=lambda x: x[0][0]
+  )
+  why = RULES[rule.split(":")[0]]
+  if len(scored) == 1:
+    return scored[0][2], why
+  (best, sd_best), _, g = scored[0]
+  (second, sd_second), _, _ = scored[1]
+  if min(len(grp["runs"]) for _, _, grp in scored[:2]) < 2:
+    return g, f"{why}; one run: spread unknown"
+  if best + sd_best >= second - sd_second:
+    return (
+      None,
+      f"within noise ({scored[0][1]} {best:.3g} +- {sd_best:.2g} vs {scored[1][1]} {second:.3g} +- {sd_second:.2g})",
+    )
+  return g, why
 
 
 def _loss_plot(plt, runs, path: Path) -> None:
@@ -206,13 +276,17 @@ def _loss_plot(plt, runs, path: Path) -> None:
   save_figure(fig, path)
 
 
-def _movement_plot(plt, runs, path: Path) -> None:
+def _movement_plot(plt, groups, path: Path) -> None:
   from chorjax.render.plot import save_figure
 
   fig, ax = plt.subplots(figsize=(8, 4))
-  for r in runs:
-    curve = r["eval"]["movement_curve"]
-    ax.plot(np.arange(len(curve)) * 1000 + 500, curve, "o-", label=r["name"])
+  for g in groups:
+    curves = [r["eval"]["movement_curve"] for r in g["runs"]]
+    n = min(len(c) for c in curves)
+    mean, sd = np.mean([c[:n] for c in curves], 0), np.std([c[:n] for c in curves], 0)
+    x = np.arange(n) * 1000 + 500
+    ax.plot(x, mean, "o-", label=f"{g['name']} ({len(curves)} runs)")
+    ax.fill_between(x, mean - sd, mean + sd, alpha=0.15)
   ax.axhline(1.0, color="k", lw=0.8, ls=":")
   ax.axhspan(0.6, 1.4, color="g", alpha=0.08)
   ax.set_xlabel("generated frame (centre of each 1,000-frame segment)")
@@ -222,60 +296,90 @@ def _movement_plot(plt, runs, path: Path) -> None:
   save_figure(fig, path)
 
 
-def _table(runs) -> list[str]:
-  e0 = runs[0]["eval"]
+def _cell(g, key, rule) -> str:
+  values = [_value(r["eval"], key, rule) for r in g["runs"] if r["eval"].get(key) is not None]
+  if not values:
+    return "-"
+  mean, sd = _stats(values)
+  return f"{mean:.3g} ± {sd:.2g}" if len(values) > 1 else f"{mean:.4g}"
+
+
+def _table(groups) -> list[str]:
+  e0 = groups[0]["runs"][0]["eval"]
   lines = [
-    f"Samples: {e0['num']} x {e0['frames']} frames per run; compared with {', '.join(e0['data'])}; "
-    f"windows of {e0['window']} frames for FID, Div and novelty; FID spreads over {e0['splits']} splits.",
+    f"Samples: {e0['num']} x {e0['frames']} frames per run and sampling seed {e0['sampling'].get('seeds')}; "
+    f"compared with {', '.join(e0['data'])}; windows of {e0['window']} frames for FID, Div and novelty; "
+    f"FID_real over {e0['splits']} random halves of the reference. Cells: mean ± sd over the training seeds "
+    "of a row (runs whose configs differ only in train.seed).",
     "",
-    "| run | cell | head | steps | " + " | ".join(c[1] for c in COLUMNS) + " |",
+    "| config | runs | cell | head | " + " | ".join(c[1] for c in COLUMNS) + " |",
     "|---" * (4 + len(COLUMNS)) + "|",
   ]
-  for r in runs:
-    m, c = r["eval"], r["config"]
-    cells = [f"{mean_of(m[k]):.4g}" if m.get(k) is not None else "-" for k, _, _ in COLUMNS]
+  for g in groups:
+    c = g["runs"][0]["config"]
+    cells = [_cell(g, k, rule) for k, _, rule in COLUMNS]
     lines.append(
-      f"| {r['name']} | {c['model']['cell']} | {c['model']['head']} | {m['checkpoint_step']} | "
-      + " | ".join(cells)
-      + " |"
+      f"| {g['name']} | {len(g['runs'])} | {c['model']['cell']} | {c['model']['head']} | " + " | ".join(cells) + " |"
     )
   real = lambda k: f"{mean_of(e0[k]):.4g}" if k in e0 else "-"
   lines.append(
     f"| real data (reference) | | | | | 1 | 1 | 1 | 1 | - | {real('data_foot_sliding')} | {real('data_pfc')} | "
-    f"{real('fid_k_real')} (half vs half) | {real('fid_g_real')} (half vs half) | {real('div_k_real')} | "
-    f"{real('novelty_real')} |"
+    f"1 ({real('fid_k_real')}) | 1 ({real('fid_g_real')}) | {real('div_k_real')} | {real('novelty_real')} |"
   )
   return lines
 
 
+def _strips(groups, stem: Path) -> list[str]:
+  """Each group's first run's evaluation sample as a filmstrip (start, middle, end)."""
+  from chorjax.data.npz import read_npz
+  from chorjax.evaluate import metrics_path, sample_path
+  from chorjax.render.plot import plot_strip
+
+  lines = []
+  for i, g in enumerate(groups):
+    npz = sample_path(metrics_path(g["runs"][0]["dir"]))
+    if npz.exists():
+      png = Path(f"{stem}_strip{i}.png")
+      plot_strip(read_npz(npz)[0].replace(name=f"{g['runs'][0]['name']}: evaluation sample"), png)
+      lines += [f"### {g['name']}", "", f"![{g['name']}]({png.name})", ""]
+  return lines
+
+
 def compare(workdirs, output) -> Path:
-  """Writes ``report.md`` with a metrics table, loss and movement plots, and a summary."""
+  """Writes ``report.md``: a table of mean ± sd over training seeds, who wins beyond the spread, loss
+  and movement plots, and each configuration's evaluation sample as filmstrips."""
   from chorjax.render.plot import require_matplotlib
 
   runs = [_read_run(Path(w)) for w in workdirs]
+  groups = group_runs(runs)
   out = Path(output)
   plt = require_matplotlib()
   stem = out.with_suffix("")
   loss_png, movement_png = Path(f"{stem}_loss.png"), Path(f"{stem}_movement.png")
   _loss_plot(plt, runs, loss_png)
-  _movement_plot(plt, runs, movement_png)
+  _movement_plot(plt, groups, movement_png)
   lines = [
-    f"# Comparison: {', '.join(r['name'] for r in runs)}",
+    f"# Comparison: {', '.join(g['name'] for g in groups)}",
     "",
     f"Generated by `chorjax compare` on {datetime.date.today()}; {machine_info()}.",
     "",
-    *_table(runs),
+    *_table(groups),
     "",
-    "Lower is better for held-out loss (NLL and MSE are not comparable), bone CV and FID; movement and "
-    "jitter should be near 1 (movement 0 = trembling in place or frozen); foot sliding, PFC, Div_k and "
-    "novelty should be near the real data's (novelty 0 = copying the training data).",
+    "Lower is better for held-out loss (NLL and MSE are not comparable) and bone CV; movement and jitter "
+    "should be near 1 (movement 0 = trembling in place or frozen); FID / real near 1 or below (the real "
+    "data's own halves differ by 1); foot sliding, PFC, Div_k and novelty near the real data's (novelty "
+    "0 = copying the training data).",
     "",
     "## Who wins",
     "",
+    "A winner is named only where its mean beats the next best by more than both spreads (mean ± sd over "
+    "training seeds); otherwise: within noise.",
+    "",
   ]
   for key, label, rule in COLUMNS:
-    r, why = _winner(runs, key, rule)
-    lines.append(f"- **{label}**: " + (f"{r['name']} ({mean_of(r['eval'][key]):.4g}; {why})" if r else why or "-"))
+    g, why = _winner(groups, key, rule)
+    lines.append(f"- **{label}**: " + (f"{g['name']} ({_cell(g, key, rule)}; {why})" if g else why or "-"))
   lines += ["", f"![loss curves]({loss_png.name})", "", f"![movement over time]({movement_png.name})", ""]
+  lines += ["## What the models dance", "", *_strips(groups, stem)]
   atomic_write(out, lambda p: p.write_text("\n".join(lines)))
   return out

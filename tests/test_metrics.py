@@ -108,24 +108,28 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
   (tmp_path / "base.toml").write_text("")
   sweep = tmp_path / "s.toml"
   sweep.write_text(
-    f'name = "t"\nbase = "base.toml"\n[grid]\n"model.head" = ["mdn", "mse"]\n[set]\n{set_lines}\n'
-    '"log.tensorboard" = false\n[eval]\ndata = ["cmu94/94_10_skeleton_3d.csv"]\nframes = 240\nnum = 2\n'
+    f'name = "t"\nbase = "base.toml"\n[grid]\n"model.head" = ["mdn", "mse"]\n"train.seed" = [0, 1]\n'
+    f'[set]\n{set_lines}\n"log.tensorboard" = false\n'
+    '[eval]\ndata = ["cmu94/94_10_skeleton_3d.csv"]\nframes = 240\nnum = 1\nseeds = [0, 1]\nsplits = 3\n'
   )
   assert cli.main(["sweep", str(sweep)]) == 0
   runs = sorted((tmp_path / "runs" / "t").iterdir())
-  assert [r.name for r in runs] == ["t-head=mdn", "t-head=mse"]
+  assert [r.name for r in runs] == ["t-head=mdn-seed=0", "t-head=mdn-seed=1", "t-head=mse-seed=0", "t-head=mse-seed=1"]
   m = json.loads((runs[0] / "eval" / "metrics.json").read_text())
   for key in ("heldout_loss", *METRIC_KEYS, "fid_k_real", "fid_g_real", "novelty_real"):
     assert np.isfinite(mean_of(m[key])), key
-  assert set(m["fid_k"]) == {"mean", "sd"} and set(m["movement_first_1000"]) == {"mean", "sd"}  # 2 samples
-  assert m["loss_kind"] == "nll" and json.loads((runs[1] / "eval" / "metrics.json").read_text())["loss_kind"] == "mse"
+  assert set(m["fid_k"]) == {"mean", "sd"} and set(m["movement_first_1000"]) == {"mean", "sd"}  # 2 seeds
+  assert m["sampling"]["seeds"] == [0, 1] and (runs[0] / "eval" / "sample.npz").exists()
+  assert m["loss_kind"] == "nll" and json.loads((runs[2] / "eval" / "metrics.json").read_text())["loss_kind"] == "mse"
   capsys.readouterr()
   assert cli.main(["sweep", str(sweep)]) == 0  # finished points are skipped
-  assert capsys.readouterr().out.count("finished, skipped") == 2
+  assert capsys.readouterr().out.count("finished, skipped") == 4
   report = tmp_path / "report.md"
   assert cli.main(["compare", *map(str, runs), "-o", str(report)]) == 0
   text = report.read_text()
-  assert "| t-head=mdn | lnlstm | mdn |" in text and "## Who wins" in text and "not comparable" in text
+  assert "| t-head=mdn | 2 | lnlstm | mdn |" in text and "| t-head=mse | 2 | lnlstm | mse |" in text  # seeds grouped
+  assert "## Who wins" in text and "not comparable" in text and " ± " in text
+  assert (tmp_path / "report_strip0.png").exists() and "![t-head=mse](report_strip1.png)" in text
   assert (tmp_path / "report_loss.png").exists() and (tmp_path / "report_movement.png").exists()
   # eval through the CLI, and its errors
   assert (
