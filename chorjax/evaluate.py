@@ -75,7 +75,9 @@ def evaluate(
 
   if sum(len(p) // max(window // 4, 1) for p in real_c) < 4:
     raise UserError(f"--data: the takes are too short for {window}-frame windows")
-  scored = scoring.score(gen, real_c, sk, fps, train=train_c, window=window, splits=splits, seed=seed)
+  trained = set(run.train_takes)
+  unseen = [y_up(m.positions) for m in real if m.name not in trained] or None
+  scored = scoring.score(gen, real_c, sk, fps, train=train_c, unseen=unseen, window=window, splits=splits, seed=seed)
   return {
     "run": str(workdir),
     "checkpoint_step": run.step,

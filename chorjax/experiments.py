@@ -236,7 +236,8 @@ def group_runs(runs) -> list[dict]:
 
 def _winner(groups, key, rule):
   """``(group or None, reason)``: the best group, named only where it beats the next beyond the spread."""
-  rows = [g for g in groups if all(r["eval"].get(key) is not None for r in g["runs"])]
+  needs = [key, rule.split(":")[1]] if rule.startswith("data:") else [key]
+  rows = [g for g in groups if all(r["eval"].get(k) is not None for r in g["runs"] for k in needs)]
   if key == "heldout_loss" and len({r["eval"]["loss_kind"] for g in rows for r in g["runs"]}) > 1:
     return None, "not comparable (NLL vs MSE)"
   if not rows:
@@ -321,7 +322,7 @@ def _table(groups) -> list[str]:
     lines.append(
       f"| {g['name']} | {len(g['runs'])} | {c['model']['cell']} | {c['model']['head']} | " + " | ".join(cells) + " |"
     )
-  real = lambda k: f"{mean_of(e0[k]):.4g}" if k in e0 else "-"
+  real = lambda k: f"{mean_of(e0[k]):.4g}" if e0.get(k) is not None else "-"
   lines.append(
     f"| real data (reference) | | | | | 1 | 1 | 1 | 1 | - | {real('data_foot_sliding')} | {real('data_pfc')} | "
     f"1 ({real('fid_k_real')}) | 1 ({real('fid_g_real')}) | {real('div_k_real')} | {real('novelty_real')} |"

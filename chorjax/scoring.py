@@ -24,8 +24,8 @@ Keys (a value, or ``{"mean", "sd"}`` over several motions or reference splits):
 * ``pfc``: EDGE's physical foot contact score; ``foot_sliding``: horizontal foot speed in contact
   (both in body sizes per second; ``data_pfc`` and ``data_foot_sliding`` are the reference's).
 * ``novelty``: RMS joint distance (body sizes) from each motion window to its nearest window of the
-  training takes (``chorjax metrics``: of the reference); ``novelty_real``: the same for the
-  reference's windows (``chorjax metrics``: each reference take against the others).
+  training takes (``chorjax metrics``: of the reference); ``novelty_real``: the same for real takes
+  that are not training takes (``chorjax metrics``: each reference take against the others).
 """
 
 from __future__ import annotations
@@ -117,13 +117,13 @@ def _distribution(motions, reference, features, window: int, splits: int, seed: 
   return fids, reals, metrics.diversity(norm(cap(gen))), metrics.diversity(norm(cap(ref_all)))
 
 
-def _novelty(motions, reference, train, skeleton: Skeleton, size: float, window: int) -> dict:
+def _novelty(motions, reference, train, unseen, skeleton: Skeleton, size: float, window: int) -> dict:
   wins = lambda takes, hop: np.concatenate([metrics.windows(t, window, hop) for t in takes]) / size
   if train:
-    ref_nov = metrics.novelty(wins(reference, window // 4), wins(train, window // 4), skeleton.root)
+    real = metrics.novelty(wins(unseen, window // 4), wins(train, window // 4), skeleton.root) if unseen else None
     return {
       "novelty": metrics.novelty(wins(motions, window), wins(train, window // 4), skeleton.root),
-      "novelty_real": ref_nov,
+      "novelty_real": real,
     }
   others = lambda i: [t for k, t in enumerate(reference) if k != i]
   real = (
@@ -147,6 +147,7 @@ def score(
   fps: float,
   *,
   train=None,
+  unseen=None,
   window: int = 60,
   splits: int = 10,
   segment: int = 1000,
@@ -160,6 +161,7 @@ def score(
     skeleton: their skeleton (mpii16 for the geometric features).
     fps: frame rate of all of them.
     train: the training takes, if any (novelty is measured against them).
+    unseen: real takes that are not training takes (``novelty_real`` is theirs; None without any).
     window, splits, segment, seed: see the module docstring.
 
   Returns:
@@ -187,7 +189,7 @@ def score(
     "data_pfc": float(np.mean([metrics.pfc(t, skeleton, fps, size) for t in reference])),
     "foot_sliding": spread([metrics.foot_sliding(m, skeleton, fps, size) for m in motions]),
     "data_foot_sliding": float(np.mean([metrics.foot_sliding(t, skeleton, fps, size) for t in reference])),
-    **_novelty(motions, reference, train, skeleton, size, window),
+    **_novelty(motions, reference, train, unseen, skeleton, size, window),
     "speed_ratio": spread([metrics.freeze_ratio(m, speed) for m in motions]),  # extra: NOT a freeze measure
     "body_size": size,
     "window": window,
