@@ -202,9 +202,9 @@ def _sample(args) -> int:
     prime_BxPxD=prime,
     **sampling,
   )
+  if prime is not None:  # the phrase the dancer gave, then the machine's continuation, decoded as one
+    z = np.concatenate([prime, np.asarray(z)], axis=1)  # (root-motion features integrate across the seam)
   pos = np.asarray(features.decode(z))
-  if phrase is not None:  # the phrase the dancer gave, then the machine's continuation
-    pos = np.concatenate([np.tile(np.asarray(features.decode(phrase))[None], (args.num, 1, 1, 1)), pos], axis=1)
   settings = {
     "workdir": str(args.workdir),
     "checkpoint_step": run.step,

@@ -46,7 +46,11 @@ class DataConfig:
   )
   scale: float = _field(0.01, "multiplies lengths before training (cmu94 units: thigh ~94)", minimum=1e-12)
   representation: str = _field(
-    "bone_relative", "features the model sees", choices=("absolute", "bone_relative", "root_relative")
+    "bone_relative",
+    "features the model sees: per-frame positions (absolute, bone_relative, root_relative), or the root's "
+    "motion plus the pose: canonical (HumanML3D-style: facing frame, joint steps, foot contacts) or "
+    "directions (unit bone directions at the training takes' mean lengths: bones cannot stretch)",
+    choices=("absolute", "bone_relative", "root_relative", "canonical", "directions"),
   )
   seq_length: int = _field(100, "frames per training window (inputs; targets are shifted by one)", minimum=1)
   val_takes: tuple = _field(("auto",), "held-out take names; 'auto' = the last take by name; [] = none")

@@ -82,8 +82,8 @@ def test_transforms_jit_and_vmap():
   np.testing.assert_array_equal(np.asarray(g(batch)), np.asarray(tf.mirror(batch, SK.twins)))
 
 
-@pytest.mark.parametrize("rep", REPRESENTATIONS)
-def test_features_encode_decode_round_trip(rep):
+@pytest.mark.parametrize("rep", [r for r in REPRESENTATIONS if r not in ("canonical", "directions")])
+def test_features_encode_decode_round_trip(rep):  # the per-frame ones; root-motion ones below
   feats = Features(SK, rep, "-y", 0.01, np.zeros(48, np.float32), np.ones(48, np.float32))
   flat = np.concatenate([np.asarray(feats.represent(feats.canonical(t.positions))) for t in TAKES])
   feats = Features(SK, rep, "-y", 0.01, flat.mean(0), flat.std(0, ddof=1))
@@ -97,3 +97,63 @@ def test_features_encode_decode_round_trip(rep):
 def test_bundled_takes_have_rigid_bones():
   for t in TAKES:
     assert np.median(bone_length_cv(t.positions, SK)) <= 0.03
+
+
+# ---------------------------------------------------------------- root-motion representations
+
+
+def _features(representation, take):
+  """A fitted pipeline of one take (the statistics do not matter for exactness)."""
+  from chorjax.data.features import feature_dim
+
+  d = feature_dim(SK, representation)
+  lengths = None
+  if representation == "directions":
+    lengths = np.zeros(SK.num_joints, np.float32)
+    lengths[[c for _, c in SK.bones]] = take.bone_lengths().mean(0) * 0.01
+  return Features(SK, representation, "-y", 0.01, np.zeros(d, np.float32), np.ones(d, np.float32), lengths)
+
+
+@pytest.mark.parametrize("take", TAKES, ids=lambda m: m.name)
+def test_canonical_features_invert_exactly_given_the_recorded_placement(take):
+  from chorjax.data.features import hips
+
+  f = _features("canonical", take)
+  canon = f.canonical(take.positions)
+  z = f.encode(take.positions)
+  assert z.shape == (take.num_frames, 4 + 3 * 15 + 3 * 16 + 2) and bool(jnp.isfinite(z).all())
+  place = tf.placement(canon, SK.root, *hips(SK))
+  assert rel_err(f.decode(z, place), take.positions) < 1e-4
+  # without the placement: the same dance, turned and moved on the floor (heights and shape unchanged)
+  loose = np.asarray(f.decode(z))
+  np.testing.assert_allclose(loose[..., 1], take.positions[..., 1], atol=1e-2)  # -y up: heights kept
+  np.testing.assert_allclose(bone_length_cv(loose, SK), bone_length_cv(take.positions, SK), atol=1e-5)
+  contacts = np.asarray(z[:, -2:])
+  assert set(np.unique(contacts)) <= {0.0, 1.0} and 0.05 < contacts.mean() < 0.95  # feet on and off the floor
+
+
+@pytest.mark.parametrize("take", TAKES[:3], ids=lambda m: m.name)
+def test_direction_features_keep_directions_and_root_path_and_never_stretch_a_bone(take):
+  f = _features("directions", take)
+  assert Features.from_dict(f.to_dict()).to_dict() == f.to_dict()  # lengths saved with the run
+  back = np.asarray(
+    f.decode(f.encode(take.positions), (0.0, *np.asarray(f.canonical(take.positions))[0, SK.root, [0, 2]]))
+  )
+  assert bone_length_cv(back, SK).max() < 1e-5 < bone_length_cv(take.positions, SK).min()
+  unit = lambda p: (
+    (b := p - p[:, [max(q, 0) for q in SK.parents]]) / np.maximum(np.linalg.norm(b, axis=-1, keepdims=True), 1e-9)
+  )
+  np.testing.assert_allclose(
+    unit(back)[:, [c for _, c in SK.bones]], unit(take.positions)[:, [c for _, c in SK.bones]], atol=1e-4
+  )
+  np.testing.assert_allclose(back[:, SK.root], take.positions[:, SK.root], atol=1e-2)
+
+
+def test_heading_turns_with_the_dancer():
+  pos = jnp.asarray(TAKES[0].positions[:1], jnp.float32)
+  from chorjax.data.features import hips
+
+  canon = _features("canonical", TAKES[0]).canonical(pos)
+  h0 = tf.heading(canon, *hips(SK))
+  turned = tf.rotate_y(canon, 0.5)
+  np.testing.assert_allclose(tf.heading(turned, *hips(SK)), h0 + 0.5, atol=1e-5)

@@ -15,8 +15,8 @@ import numpy as np
 
 from chorjax.data import transforms
 from chorjax.data.csv import read_csv
-from chorjax.data.features import Features
-from chorjax.data.motion import Motion
+from chorjax.data.features import Features, feature_dim
+from chorjax.data.motion import Motion, bone_lengths
 from chorjax.data.skeletons import get_skeleton
 from chorjax.errors import UserError
 
@@ -173,9 +173,15 @@ def load_dataset(data_cfg) -> Dataset:
     data_cfg.representation,
     data_cfg.up_axis,
     data_cfg.scale,
-    np.zeros(3 * skeleton.num_joints, np.float32),
-    np.ones(3 * skeleton.num_joints, np.float32),
+    np.zeros(feature_dim(skeleton, data_cfg.representation), np.float32),
+    np.ones(feature_dim(skeleton, data_cfg.representation), np.float32),
   )
+  if data_cfg.representation == "directions":  # every bone at the training takes' mean length
+    canon = [np.asarray(proto.canonical(by_name[n].positions)) for n in train_names]
+    mean_bones = np.concatenate([bone_lengths(c, skeleton) for c in canon]).mean(0)
+    lengths = np.zeros(skeleton.num_joints, np.float32)
+    lengths[[c for _, c in skeleton.bones]] = mean_bones
+    proto = dataclasses.replace(proto, lengths=lengths)
 
   def canon_versions(m: Motion) -> list[np.ndarray]:
     canon = np.asarray(proto.canonical(m.positions))
@@ -189,7 +195,11 @@ def load_dataset(data_cfg) -> Dataset:
   train_raw = [(id_map[n], np.asarray(proto.represent(c))) for n in train_names for c in canon_versions(by_name[n])]
   val_raw = [(id_map[n], np.asarray(proto.represent(proto.canonical(by_name[n].positions)))) for n in val_names]
   stats = transforms.merged_stats([x for _, x in train_raw])
-  features = dataclasses.replace(proto, mean=stats.mean.astype(np.float32), std=stats.std(ddof=1).astype(np.float32))
+  # Root-motion representations hold features that are constant by construction (the hips' depth in
+  # the facing frame, the root's direction slot): a floor keeps float noise in them from being blown up.
+  floor = 1e-3 if data_cfg.representation in ("canonical", "directions") else 1e-8
+  std = stats.std(ddof=1, floor=floor).astype(np.float32)
+  features = dataclasses.replace(proto, mean=stats.mean.astype(np.float32), std=std)
   enc = lambda x: ((x - features.mean) / features.std).astype(np.float32)
   return Dataset(
     id_map,

@@ -13,9 +13,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from chorjax.data import transforms
-from chorjax.data.motion import Skeleton
+from chorjax.data.motion import Skeleton, bone_lengths
 
-REPRESENTATIONS = ("absolute", "bone_relative", "root_relative")
+REPRESENTATIONS = ("absolute", "bone_relative", "root_relative", "canonical", "directions")
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -28,6 +28,14 @@ class Features:
     up_axis: the signed up axis of the data space (rotated to y-up inside).
     scale: multiplies lengths before the representation (e.g. to metres).
     mean, std: ``[D]`` normalization statistics of the training split (ddof=1).
+    lengths: ``[J]`` bone length of each joint from its parent, the training takes' mean (the
+      ``directions`` representation builds every frame with these: bones cannot stretch).
+
+  Representations: ``absolute``, ``bone_relative`` and ``root_relative`` are per-frame ``[J, 3]``;
+  ``canonical`` (HumanML3D-style: heading change, root step in the facing frame, root height, joints
+  in the facing frame, joint steps, foot contacts) and ``directions`` (root step, root height, unit
+  bone directions) describe the root by its motion, which decoding integrates from the first frame's
+  placement (``decode(z, place)``; default: at the origin, facing +z).
   """
 
   skeleton: Skeleton
@@ -36,10 +44,11 @@ class Features:
   scale: float
   mean: np.ndarray
   std: np.ndarray
+  lengths: np.ndarray | None = None
 
   @property
   def dim(self) -> int:
-    return 3 * self.skeleton.num_joints
+    return feature_dim(self.skeleton, self.representation)
 
   def canonical(self, pos_TxJx3):
     """Data space -> y-up, scaled positions (before the representation)."""
@@ -53,17 +62,17 @@ class Features:
   def represent(self, canon_TxJx3):
     """Canonical positions -> un-normalized flat features ``[T, D]``."""
     rep = _represent(canon_TxJx3, self.skeleton, self.representation)
-    return rep.reshape(rep.shape[:-2] + (self.dim,))
+    return rep.reshape(canon_TxJx3.shape[:-2] + (self.dim,))
 
   def encode(self, pos_TxJx3):
     """Data-space positions ``[..., T, J, 3]`` -> normalized features ``[..., T, D]``."""
     return transforms.normalize(self.represent(self.canonical(pos_TxJx3)), self.mean, self.std)
 
-  def decode(self, z_TxD):
-    """Normalized features ``[..., T, D]`` -> data-space positions ``[..., T, J, 3]``."""
+  def decode(self, z_TxD, place=None):
+    """Normalized features ``[..., T, D]`` -> data-space positions ``[..., T, J, 3]`` (``place``: the
+    first frame's ``(heading, x, z)`` for the representations that integrate the root's motion)."""
     rep = transforms.denormalize(z_TxD, self.mean, self.std)
-    rep = rep.reshape(rep.shape[:-1] + (self.skeleton.num_joints, 3))
-    return self.uncanonical(_unrepresent(rep, self.skeleton, self.representation))
+    return self.uncanonical(_unrepresent(rep, self, place))
 
   def to_dict(self) -> dict:
     return {
@@ -73,6 +82,7 @@ class Features:
       "scale": self.scale,
       "mean": np.asarray(self.mean).tolist(),
       "std": np.asarray(self.std).tolist(),
+      **({} if self.lengths is None else {"lengths": np.asarray(self.lengths).tolist()}),
     }
 
   @classmethod
@@ -84,10 +94,47 @@ class Features:
       float(d["scale"]),
       np.asarray(d["mean"], np.float32),
       np.asarray(d["std"], np.float32),
+      None if d.get("lengths") is None else np.asarray(d["lengths"], np.float32),
     )
 
 
+def feature_dim(skeleton: Skeleton, representation: str) -> int:
+  """Features per frame of ``representation`` for ``skeleton``."""
+  j = skeleton.num_joints
+  if representation == "canonical":
+    return 4 + 3 * (j - 1) + 3 * j + len(skeleton.feet)
+  if representation == "directions":
+    return 3 + 3 * j
+  return 3 * j
+
+
+def hips(skeleton: Skeleton) -> tuple[int, int]:
+  """``(left, right)``: the root's children that are each other's twins, the left one by name."""
+  kids = [c for p, c in skeleton.bones if p == skeleton.root]
+  pairs = [(a, skeleton.twins[a]) for a in kids if skeleton.twins[a] != a and skeleton.twins[a] in kids]
+  for a, b in pairs:
+    if "left" in skeleton.joint_names[a].lower():
+      return a, b
+  raise ValueError(f"skeleton {skeleton.name}: no left/right hip pair under the root (needed to find the heading)")
+
+
+def leg_length(pos_TxJx3, skeleton: Skeleton) -> float:
+  """Mean length of the chain from the first foot up to the root."""
+  lengths = dict(zip([c for _, c in skeleton.bones], np.asarray(bone_lengths(np.asarray(pos_TxJx3), skeleton)).mean(0)))
+  total, j = 0.0, skeleton.feet[0]
+  while skeleton.parents[j] >= 0:
+    total, j = total + float(lengths[j]), skeleton.parents[j]
+  return total
+
+
 def _represent(pos, skeleton: Skeleton, representation: str):
+  if representation == "canonical":
+    left, right = hips(skeleton)
+    return transforms.to_canonical(
+      jnp.asarray(pos), skeleton.root, left, right, skeleton.feet, leg_length(pos, skeleton)
+    )
+  if representation == "directions":
+    return transforms.to_directions(jnp.asarray(pos), skeleton.parents)
   if representation == "absolute":
     return jnp.asarray(pos)
   if representation == "bone_relative":
@@ -97,7 +144,14 @@ def _represent(pos, skeleton: Skeleton, representation: str):
   raise ValueError(f"unknown representation {representation!r}; one of {REPRESENTATIONS}")
 
 
-def _unrepresent(rep, skeleton: Skeleton, representation: str):
+def _unrepresent(rep, features: Features, place=None):
+  skeleton, representation = features.skeleton, features.representation
+  if representation == "canonical":
+    return transforms.from_canonical(rep, skeleton.root, skeleton.num_joints, place)
+  if representation == "directions":
+    start = (0.0, 0.0) if place is None else (place[1], place[2])
+    return transforms.from_directions(rep, skeleton.parents, features.lengths, start)
+  rep = rep.reshape(rep.shape[:-1] + (skeleton.num_joints, 3))
   if representation == "absolute":
     return rep
   if representation == "bone_relative":

@@ -162,3 +162,133 @@ def mirror(pos_TxJx3, twins: Sequence[int], lateral_axis: int = 0):
   sign = np.ones(3, np.float32)
   sign[lateral_axis] = -1.0
   return pos_TxJx3[..., np.asarray(twins), :] * sign
+
+
+# ---------------------------------------------------------------- canonical and bone-direction features
+# Both take y-up, scaled positions [T, J, 3] of a whole sequence and return per-frame features [T, F];
+# the inverses integrate the root's motion along time, so they need the whole sequence too.
+
+
+def rotate_y(v_x3, angle):
+  """Rotates vectors ``[..., 3]`` about the up (y) axis by ``angle`` (radians, broadcast over ``...``)."""
+  c, s = jnp.cos(angle), jnp.sin(angle)
+  x, y, z = v_x3[..., 0], v_x3[..., 1], v_x3[..., 2]
+  return jnp.stack([c * x + s * z, y, -s * x + c * z], -1)
+
+
+def heading(pos_TxJx3, left: int, right: int):
+  """``[T]`` the facing angle about y (0 = facing +z), from the right-to-left hip axis: forward = left x up."""
+  across = pos_TxJx3[..., left, :] - pos_TxJx3[..., right, :]
+  return jnp.arctan2(-across[..., 2], across[..., 0])
+
+
+def _wrap(angle):
+  return (angle + jnp.pi) % (2 * jnp.pi) - jnp.pi
+
+
+def _step_back(x_Tx):
+  """``x[t] - x[t-1]`` with 0 at t = 0."""
+  return jnp.concatenate([jnp.zeros_like(x_Tx[:1]), x_Tx[1:] - x_Tx[:-1]], 0)
+
+
+def _previous_frame(x_Tx):
+  return jnp.concatenate([x_Tx[:1], x_Tx[:-1]], 0)
+
+
+def foot_contacts(pos_TxJx3, feet: Sequence[int], leg: float):
+  """``[T, len(feet)]`` 1 where a foot is near the floor (its 10th height percentile + 0.1 leg) and
+  slower than 0.05 leg lengths per frame, else 0."""
+  f = pos_TxJx3[:, jnp.asarray(feet)]
+  floor = jnp.percentile(f[..., 1], 10)
+  speed = jnp.linalg.norm(_step_back(f), axis=-1)
+  return ((f[..., 1] < floor + 0.1 * leg) & (speed < 0.05 * leg)).astype(jnp.float32)
+
+
+def placement(pos_TxJx3, root: int, left: int, right: int):
+  """``(heading, x, z)`` of the first frame: the rigid placement the canonical features leave out."""
+  return jnp.stack([heading(pos_TxJx3[:1], left, right)[0], pos_TxJx3[0, root, 0], pos_TxJx3[0, root, 2]])
+
+
+def to_canonical(pos_TxJx3, root: int, left: int, right: int, feet: Sequence[int], leg: float):
+  """HumanML3D-style features ``[T, 4 + 3(J-1) + 3J + len(feet)]`` per frame t:
+
+  the change of heading since t-1 (1), the root's horizontal step since t-1 in the facing frame of
+  t-1 (2), the root's height (1), every other joint relative to the root's floor point in the facing
+  frame of t (3(J-1)), every joint's step since t-1 in the facing frame of t-1 (3J), foot contacts.
+  Frame 0's changes are 0. :func:`from_canonical` inverts it exactly given :func:`placement`.
+  """
+  theta = heading(pos_TxJx3, left, right)
+  r = pos_TxJx3[:, root]
+  floor_point = r * jnp.array([1.0, 0.0, 1.0])
+  local = rotate_y(pos_TxJx3 - floor_point[:, None], -theta[:, None])
+  prev_theta = _previous_frame(theta)
+  step = rotate_y(_step_back(r), -prev_theta)
+  vel = rotate_y(_step_back(pos_TxJx3), -prev_theta[:, None])
+  others = jnp.asarray([j for j in range(pos_TxJx3.shape[-2]) if j != root])
+  parts = [
+    _wrap(_step_back(theta))[:, None],
+    step[:, [0, 2]],
+    r[:, 1:2],
+    local[:, others].reshape(len(r), -1),
+    vel.reshape(len(r), -1),
+    foot_contacts(pos_TxJx3, feet, leg),
+  ]
+  return jnp.concatenate(parts, -1)
+
+
+def from_canonical(feat_xTxF, root: int, num_joints: int, place=None):
+  """Positions ``[..., T, J, 3]`` from :func:`to_canonical` features, by integrating the heading and
+  the root's steps from ``place = (heading, x, z)`` of frame 0 (default: facing +z at the origin).
+  Joint velocities and foot contacts are not used."""
+  place = jnp.zeros(3) if place is None else jnp.asarray(place)
+  d_theta, step_xz, height = feat_xTxF[..., 0], feat_xTxF[..., 1:3], feat_xTxF[..., 3]
+  theta = place[0] + jnp.cumsum(d_theta, -1)
+  prev_theta = jnp.concatenate([jnp.broadcast_to(place[0], theta[..., :1].shape), theta[..., :-1]], -1)
+  step = jnp.stack([step_xz[..., 0], jnp.zeros_like(height), step_xz[..., 1]], -1)
+  floor_point = jnp.cumsum(rotate_y(step, prev_theta), -2) + jnp.stack([place[1], 0.0, place[2]])
+  others = feat_xTxF[..., 4 : 4 + 3 * (num_joints - 1)].reshape(feat_xTxF.shape[:-1] + (num_joints - 1, 3))
+  root_local = jnp.stack([jnp.zeros_like(height), height, jnp.zeros_like(height)], -1)[..., None, :]
+  local = jnp.concatenate([others[..., :root, :], root_local, others[..., root:, :]], -2)
+  return rotate_y(local, theta[..., None]) + floor_point[..., None, :]
+
+
+def to_directions(pos_TxJx3, parents: Sequence[int]):
+  """``[T, 3 + 3J]``: the root's step since t-1 (0 at t = 0), then per joint the unit direction of its
+  bone from the parent (the root's entry holds its height and two zeros). Lengths are left out."""
+  p = jnp.asarray(parents)
+  root = int(np.flatnonzero(np.asarray(parents) < 0)[0])
+  bone = pos_TxJx3 - pos_TxJx3[:, jnp.where(p < 0, root, p)]
+  unit = bone / jnp.maximum(jnp.linalg.norm(bone, axis=-1, keepdims=True), 1e-9)
+  height = pos_TxJx3[:, root, 1]
+  unit = unit.at[:, root].set(jnp.stack([jnp.zeros_like(height), height, jnp.zeros_like(height)], -1))
+  return jnp.concatenate([_step_back(pos_TxJx3[:, root]), unit.reshape(len(height), -1)], -1)
+
+
+def from_directions(feat_xTxF, parents: Sequence[int], lengths_J, start_xz=(0.0, 0.0)):
+  """Positions from :func:`to_directions` features: the root integrated from ``start_xz`` (its height as
+  given), each joint its parent plus ``lengths[j]`` times its (renormalized) direction. Bones cannot stretch."""
+  num_joints = len(parents)
+  root = int(np.flatnonzero(np.asarray(parents) < 0)[0])
+  step = feat_xTxF[..., :3]
+  dirs = feat_xTxF[..., 3:].reshape(feat_xTxF.shape[:-1] + (num_joints, 3))
+  height = dirs[..., root, 1]
+  root_xz = jnp.cumsum(step, -2) + jnp.array([start_xz[0], 0.0, start_xz[1]])
+  root_pos = root_xz * jnp.array([1.0, 0.0, 1.0]) + jnp.stack(
+    [jnp.zeros_like(height), height, jnp.zeros_like(height)], -1
+  )
+  unit = dirs / jnp.maximum(jnp.linalg.norm(dirs, axis=-1, keepdims=True), 1e-9)
+  joints = {root: root_pos}
+  for j in _topological(parents):  # parents before children
+    if j != root:
+      joints[j] = joints[parents[j]] + lengths_J[j] * unit[..., j, :]
+  return jnp.stack([joints[j] for j in range(num_joints)], -2)
+
+
+def _topological(parents: Sequence[int]) -> list[int]:
+  order, seen = [], set()
+  while len(order) < len(parents):
+    for j, p in enumerate(parents):
+      if j not in seen and (p < 0 or p in seen):
+        order.append(j)
+        seen.add(j)
+  return order
