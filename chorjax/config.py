@@ -104,6 +104,27 @@ class TrainConfig:
     0.0, "std of Gaussian noise on inputs (normalized units), against exposure bias", minimum=0.0
   )
   val_windows: int = _field(64, "most validation windows evaluated", minimum=1)
+  feedback: str = _field(
+    "none",
+    "against exposure bias, feed the model's own outputs back as inputs during training: 'auto' "
+    "(auto-conditioning, Zhou et al. 2018: ground_truth_frames real frames, then condition_frames own "
+    "ones, repeating) or 'scheduled' (scheduled sampling: each frame is the model's own with probability "
+    "feedback_max x the schedule); 'none' = teacher forcing only",
+    choices=("none", "auto", "scheduled"),
+  )
+  ground_truth_frames: int = _field(5, "auto-conditioning: real input frames per cycle", minimum=1)
+  condition_frames: int = _field(5, "auto-conditioning: own output frames per cycle", minimum=1)
+  feedback_max: float = _field(0.5, "scheduled sampling: the final probability of feeding an own frame", minimum=0.0)
+  feedback_warmup: int = _field(0, "steps of teacher forcing before any feedback", minimum=0)
+  feedback_ramp: int = _field(
+    0, "steps over which feedback ramps linearly from none to full after the warm-up (0 = at once)", minimum=0
+  )
+  feedback_draw: str = _field(
+    "sample",
+    "what is fed back: a draw from the MDN at the run's sample temperatures (what generation feeds itself) "
+    "or the mixture mean; always without gradient through it",
+    choices=("sample", "mean"),
+  )
 
 
 @dataclasses.dataclass(frozen=True)

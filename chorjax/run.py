@@ -28,6 +28,38 @@ from chorjax.models import create_model
 
 
 @dataclasses.dataclass(frozen=True)
+class Feedback:
+  """How training feeds the model's own outputs back as inputs (see ``train.feedback``)."""
+
+  mode: str  # "auto" or "scheduled"
+  ground_truth_frames: int
+  condition_frames: int
+  max_fraction: float
+  warmup: int
+  ramp: int
+  draw: str  # "sample" or "mean"
+  pi_temperature: float
+  sigma_temperature: float
+
+  @classmethod
+  def of(cls, cfg: Config) -> Feedback | None:
+    t = cfg.train
+    if t.feedback == "none":
+      return None
+    return cls(
+      t.feedback,
+      t.ground_truth_frames,
+      t.condition_frames,
+      t.feedback_max,
+      t.feedback_warmup,
+      t.feedback_ramp,
+      t.feedback_draw,
+      cfg.sample.pi_temperature,
+      cfg.sample.sigma_temperature,
+    )
+
+
+@dataclasses.dataclass(frozen=True)
 class StepSpec:
   """What the train step needs besides its arrays; hashable, so it is a static jit argument.
 
@@ -37,6 +69,7 @@ class StepSpec:
     schedule: learning rate as a function of the step (logged).
     input_noise: std of Gaussian noise added to the inputs (normalized units).
     dropout: the model's dropout rate (0 = no dropout key is drawn).
+    feedback: own outputs fed back as inputs (None = teacher forcing only).
   """
 
   graphdef: Any
@@ -44,6 +77,7 @@ class StepSpec:
   schedule: optax.Schedule
   input_noise: float
   dropout: float
+  feedback: Feedback | None = None
 
 
 def create_optimizer(cfg: Config) -> tuple[optax.GradientTransformation, optax.Schedule]:
@@ -72,7 +106,7 @@ def create_train_state(cfg: Config, dim: int, num_motions: int) -> tuple[dict, S
   params = nnx.to_pure_dict(params)
   tx, schedule = create_optimizer(cfg)
   state = {"params": params, "opt_state": tx.init(params), "step": jnp.zeros((), jnp.int32)}
-  return state, StepSpec(graphdef, tx, schedule, cfg.train.input_noise, cfg.model.dropout)
+  return state, StepSpec(graphdef, tx, schedule, cfg.train.input_noise, cfg.model.dropout, Feedback.of(cfg))
 
 
 def model_template(cfg: Config, dim: int, num_motions: int) -> tuple[Any, dict]:

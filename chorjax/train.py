@@ -37,7 +37,7 @@ from chorjax.config import Config, config_diff, config_from_dict, resumable_keys
 from chorjax.data.dataset import Dataset, WindowSampler, eval_windows, load_dataset
 from chorjax.errors import UserError, atomic_write
 from chorjax.models import motion_weight_vector
-from chorjax.run import StepSpec, create_train_state, run_meta
+from chorjax.run import Feedback, StepSpec, create_train_state, run_meta
 from chorjax.sample import generate
 
 
@@ -55,12 +55,71 @@ def _loss_fn(params, batch, key, spec: StepSpec):
   return model.loss(out, batch["targets"])
 
 
+def feedback_mask(fb: Feedback, key, step, batch: int, frames: int):
+  """``[B, T]`` True where input frame t is the model's own output (never t = 0).
+
+  The schedule ramps from 0 to 1 over ``fb.ramp`` steps after ``fb.warmup``. Auto-conditioning
+  feeds ``condition_frames`` own frames after every ``ground_truth_frames`` real ones, in a sequence
+  chosen with the schedule's probability; scheduled sampling feeds each frame with probability
+  ``max_fraction`` x the schedule.
+  """
+  after = (step - fb.warmup + 1).astype(jnp.float32)
+  ramp = jnp.clip(after / fb.ramp, 0.0, 1.0) if fb.ramp > 0 else (after > 0).astype(jnp.float32)
+  t = jnp.arange(frames)
+  if fb.mode == "auto":
+    own = (t % (fb.ground_truth_frames + fb.condition_frames)) >= fb.ground_truth_frames
+    chosen = jax.random.uniform(key, (batch, 1)) < ramp
+    mask = own[None] & chosen
+  else:
+    mask = jax.random.uniform(key, (batch, frames)) < fb.max_fraction * ramp
+  return mask & (t > 0)[None]
+
+
+def _feedback_loss_fn(params, batch, key, step, spec: StepSpec):
+  """The loss with the model's own outputs fed back as inputs where ``feedback_mask`` says.
+
+  The window runs frame by frame (``model.step``), since an input may be the previous output. What is
+  fed back is a draw at the run's sample temperatures (as generation feeds itself) or the mixture
+  mean, under ``stop_gradient``: a draw has no gradient, and the gradient through hundreds of fed-back
+  frames would be that of a much deeper, unstable network.
+  """
+  assert spec.feedback is not None
+  fb, model = spec.feedback, nnx.merge(spec.graphdef, params)
+  x_BxTxD = batch["inputs"]
+  noise_key, mask_key, draw_key = jax.random.split(key, 3)
+  if spec.input_noise > 0:
+    x_BxTxD = x_BxTxD + spec.input_noise * jax.random.normal(noise_key, x_BxTxD.shape, x_BxTxD.dtype)
+  b, t, _ = x_BxTxD.shape
+  mask_BxT = feedback_mask(fb, mask_key, step, b, t)
+
+  def body(c, inputs):
+    carry, prev_BxP = c
+    x_BxD, own_B, k = inputs
+    if fb.draw == "sample":
+      drawn = model.sample(prev_BxP, k, fb.pi_temperature, fb.sigma_temperature)
+    else:
+      drawn = model.mean(prev_BxP)
+    x_in = jnp.where(own_B[:, None], jax.lax.stop_gradient(drawn), x_BxD)
+    carry, out_BxP = model.step(carry, x_in)
+    return (carry, out_BxP), out_BxP
+
+  init = (model.initial_carry(batch["motion_ids"]), jnp.zeros((b, model.num_outputs), x_BxTxD.dtype))
+  xs = (jnp.swapaxes(x_BxTxD, 0, 1), mask_BxT.T, jax.random.split(draw_key, t))
+  _, out_TxBxP = jax.lax.scan(body, init, xs)
+  loss, aux = model.loss(jnp.swapaxes(out_TxBxP, 0, 1), batch["targets"])
+  return loss, {**aux, "feedback": mask_BxT.mean()}
+
+
 def _train_step(state, batch, key, spec: StepSpec):
   if not jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
     key = jax.random.wrap_key_data(key)  # raw uint32 key data (replicated across processes)
   key = jax.random.fold_in(key, state["step"])
-  grad_fn = jax.value_and_grad(_loss_fn, has_aux=True)
-  (loss, aux), grads = grad_fn(state["params"], batch, key, spec)
+  if spec.feedback is None:  # teacher forcing: the fused layers over whole windows
+    grad_fn = jax.value_and_grad(_loss_fn, has_aux=True)
+    (loss, aux), grads = grad_fn(state["params"], batch, key, spec)
+  else:
+    grad_fn = jax.value_and_grad(_feedback_loss_fn, has_aux=True)
+    (loss, aux), grads = grad_fn(state["params"], batch, key, state["step"], spec)
   updates, opt_state = spec.tx.update(grads, state["opt_state"], state["params"])
   params = optax.apply_updates(state["params"], updates)
   metrics = {
@@ -419,6 +478,8 @@ def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=No
     ds = load_dataset(cfg.data)
     if cfg.sample.frames > 0:  # fail now, not after hours of training, if the end sample cannot be drawn
       motion_weight_vector(ds.num_motions, cfg.sample.motion, source="sample.motion =")
+    if cfg.train.feedback != "none" and cfg.model.dropout > 0:
+      raise UserError("train.feedback runs the cells frame by frame, without dropout: set model.dropout = 0")
     manager = ckpt.create_manager(workdir, keep=cfg.train.keep_checkpoints)
     with contextlib.ExitStack() as cleanup:
       cleanup.callback(manager.close)

@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from helpers import TINY, tiny_config
@@ -273,3 +274,77 @@ def test_root_motion_representations_train_and_sample(tmp_path, representation):
     from chorjax.data.motion import bone_length_cv
 
     assert bone_length_cv(sample, run.features.skeleton).max() < 1e-4
+
+
+# ---------------------------------------------------------------- feeding the model's own outputs back
+
+
+def _feedback(**kw):
+  from chorjax.run import Feedback
+
+  base = {
+    "mode": "auto",
+    "ground_truth_frames": 2,
+    "condition_frames": 3,
+    "max_fraction": 0.5,
+    "warmup": 0,
+    "ramp": 0,
+    "draw": "mean",
+    "pi_temperature": 1.0,
+    "sigma_temperature": 1.0,
+  }
+  return Feedback(**{**base, **kw})
+
+
+def test_feedback_masks_follow_the_mode_and_the_schedule():
+  from chorjax.train import feedback_mask
+
+  key, step = jax.random.key(0), jnp.asarray(10)
+  auto = np.asarray(feedback_mask(_feedback(), key, step, 4, 12))
+  assert auto[0].tolist() == [False, False, True, True, True, False, False, True, True, True, False, False]
+  assert (auto == auto[0]).all()  # the same cycle in every sequence once the schedule is full
+  sched = np.asarray(feedback_mask(_feedback(mode="scheduled"), key, step, 64, 100))
+  assert not sched[:, 0].any() and abs(sched[:, 1:].mean() - 0.5) < 0.03
+  assert not np.asarray(feedback_mask(_feedback(mode="scheduled", warmup=11), key, step, 64, 100)).any()
+  half = np.asarray(feedback_mask(_feedback(mode="scheduled", warmup=1, ramp=20, max_fraction=1.0), key, step, 64, 100))
+  assert abs(half[:, 1:].mean() - 0.5) < 0.03  # 10 of 20 ramp steps done
+
+
+def test_feedback_replaces_inputs_with_own_outputs_and_is_teacher_forcing_when_off(tiny_setup):
+  from chorjax.run import StepSpec
+  from chorjax.train import _feedback_loss_fn, _loss_fn
+
+  cfg, ds = tiny_setup
+  state, spec = create_train_state(cfg, 48, ds.num_motions)
+  batch = WindowSampler(ds.train, cfg.data.seq_length, 4, seed=0).batch(0)
+  key, step = jax.random.key(1), jnp.asarray(5)
+  teacher = float(_loss_fn(state["params"], batch, key, spec)[0])
+  off = StepSpec(spec.graphdef, spec.tx, spec.schedule, 0.0, 0.0, _feedback(mode="scheduled", max_fraction=0.0))
+  assert float(_feedback_loss_fn(state["params"], batch, key, step, off)[0]) == pytest.approx(teacher, rel=1e-5)
+  every = StepSpec(spec.graphdef, spec.tx, spec.schedule, 0.0, 0.0, _feedback(mode="scheduled", max_fraction=1.0))
+
+  def loss_of_inputs(x):
+    return _feedback_loss_fn(state["params"], {**batch, "inputs": x}, key, step, every)[0]
+
+  grad = np.asarray(jax.grad(loss_of_inputs)(jnp.asarray(batch["inputs"])))
+  assert np.abs(grad[:, 0]).sum() > 0 and not grad[:, 1:].any()  # only frame 0 is real; own frames carry no gradient
+  assert float(loss_of_inputs(jnp.asarray(batch["inputs"]))) != pytest.approx(teacher, rel=1e-3)
+
+
+@pytest.mark.parametrize("feedback", ["auto", "scheduled"])
+def test_training_with_feedback_lowers_the_loss_and_samples(tmp_path, feedback):
+  cfg = tiny_config(
+    f"train.feedback={feedback!r}",
+    "train.num_steps=30",
+    "optim.lr=3e-3",
+    "log.tensorboard=false",
+    "sample.frames=30",
+    "train.feedback_ramp=10",
+    "train.log_every=5",
+  )
+  summary = train_and_evaluate(cfg, tmp_path)
+  losses = summary["train_losses"]
+  assert np.mean([losses[s] for s in range(26, 31)]) < np.mean([losses[s] for s in range(1, 6)]) - 1.0
+  rows = [json.loads(l) for l in (tmp_path / "metrics.jsonl").read_text().splitlines()]
+  assert rows[0]["feedback"] < rows[-1]["feedback"] and rows[-1]["feedback"] > 0.2  # the ramp, logged
+  assert np.isfinite(read_csv(summary["samples"]["csv"]).positions).all()

@@ -33,6 +33,9 @@ class MSEHead(nnx.Module):
     del key, pi_temperature, sigma_temperature, greedy  # a point estimate has nothing to draw
     return out_BxD
 
+  def mean(self, out_xD):
+    return out_xD
+
 
 def mdn_params(out_xP, num_mixtures: int, dim: int, isotropic: bool, min_scale: float):
   """Raw head outputs -> ``(logpi_xK, mu_xKxD, scale_xKxS)`` with S = 1 (isotropic) or D."""
@@ -117,3 +120,8 @@ class MDNHead(nnx.Module):
   def sample(self, out_BxP, key, pi_temperature=1.0, sigma_temperature=1.0, greedy=False):
     logpi, mu, scale = self.params(out_BxP)
     return mdn_sample(key, logpi, mu, scale, pi_temperature, sigma_temperature, greedy)
+
+  def mean(self, out_xP):
+    """The mixture's mean frame."""
+    logpi, mu, _ = self.params(out_xP)
+    return jnp.sum(jnp.exp(logpi)[..., None] * mu, axis=-2)

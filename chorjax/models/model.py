@@ -69,6 +69,14 @@ class ChorModel(nnx.Module):
   def sample(self, out_BxP, key, pi_temperature=1.0, sigma_temperature=1.0, greedy=False):
     return self.head.sample(out_BxP, key, pi_temperature, sigma_temperature, greedy)
 
+  def mean(self, out_xP):
+    """The expected next frame (the MDN's mixture mean; the MSE head's output)."""
+    return self.head.mean(out_xP)
+
+  @property
+  def num_outputs(self) -> int:
+    return self.head.out.out_features
+
 
 def create_model(model_cfg, dim: int, num_motions: int, seed: int) -> ChorModel:
   return ChorModel(model_cfg, dim, num_motions, rngs=nnx.Rngs(params=seed))
