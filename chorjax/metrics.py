@@ -4,14 +4,17 @@ Positions are ``[T, J, 3]`` y-up arrays. Metrics that compare motions of differe
 lengths by the body size (root->foot plus root->head along the bones), so numbers are in body sizes
 (and body sizes per second).
 
-* freezing: mean joint speed in consecutive windows / the data's mean joint speed;
-* anatomy: per-bone length coefficient of variation;
-* foot sliding: horizontal foot speed while the foot is on the ground;
+* movement: root-relative joint displacement over a lag (0.5 s), per 1,000-frame segment;
+* jitter: the second difference of joint positions (roughness);
+* foot sliding: horizontal foot speed while the foot is on the ground; PFC (EDGE);
 * FID_k / Div_k: on the AIST++ kinetic features (per joint: mean horizontal and vertical kinetic
   energy and mean acceleration magnitude, over a +-2 frame sliding window). The AIST++ API computes
   the acceleration's first velocity as ``(p[t] - p[t-1] / dt)`` — the division binds to one term
   only; here it is ``(p[t] - p[t-1]) / dt``, so the acceleration is the plain second difference / dt^2;
+* geometric features: yes/no relations of a pose (``GEOMETRIC_FEATURES``), for FID_g / Div_g;
 * novelty: distance from each generated window to its nearest training window.
+
+``chorjax.scoring`` turns these into the numbers ``chorjax eval`` and ``chorjax metrics`` report.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ import itertools
 
 import numpy as np
 
-from chorjax.data.motion import Skeleton, bone_length_cv, bone_lengths
+from chorjax.data.motion import Skeleton, bone_lengths
 
 
 def body_size(pos_TxJx3, skeleton: Skeleton) -> float:
@@ -45,20 +48,10 @@ def joint_speed(pos_TxJx3) -> np.ndarray:
   return np.linalg.norm(np.diff(pos_TxJx3, axis=0), axis=-1).mean(-1)
 
 
-def freeze_curve(pos_TxJx3, data_speed: float, window: int = 100) -> np.ndarray:
-  """Mean joint speed per consecutive window, divided by the data's mean joint speed."""
-  s = joint_speed(pos_TxJx3)
-  n = len(s) // window
-  return s[: n * window].reshape(n, window).mean(-1) / data_speed
-
-
-def freeze_ratio(pos_TxJx3, data_speed: float) -> float:
+def speed_ratio(pos_TxJx3, data_speed: float) -> float:
+  """Mean frame-to-frame joint speed / the data's. Not a measure of freezing: trembling in place is
+  fast; see :func:`displacement`."""
   return float(joint_speed(pos_TxJx3).mean() / data_speed)
-
-
-def bone_cv(pos_TxJx3, skeleton: Skeleton) -> dict:
-  cv = bone_length_cv(np.asarray(pos_TxJx3), skeleton)
-  return {"median": float(np.median(cv)), "max": float(cv.max())}
 
 
 def foot_sliding(
@@ -127,13 +120,6 @@ def diversity(feats) -> float:
   sq = np.sum(feats**2, 1)
   d = np.sqrt(np.maximum(sq[:, None] + sq[None] - 2 * feats @ feats.T, 0))
   return float(d.sum() / (n * (n - 1)))
-
-
-def fid_k(real_feats, gen_feats) -> dict:
-  """FID_k and Div_k with features normalized by the real set's statistics (as in Bailando)."""
-  mean, std = real_feats.mean(0), real_feats.std(0) + 1e-10
-  r, g = (real_feats - mean) / std, (gen_feats - mean) / std
-  return {"fid_k": frechet_distance(r, g), "div_k": diversity(g), "real_div_k": diversity(r)}
 
 
 def windows(pos_TxJx3, length: int, hop: int) -> np.ndarray:
@@ -279,11 +265,6 @@ def geometric_features(pos_TxJx3, skeleton: Skeleton, size: float) -> np.ndarray
     lean > 20,
   ]
   return np.stack(answers, -1).astype(np.float64)
-
-
-def window_geometric_features(wins_NxLxJx3, skeleton: Skeleton, size: float) -> np.ndarray:
-  """``[N, F]``: per window, the fraction of frames for which each geometric feature holds."""
-  return np.stack([geometric_features(w, skeleton, size).mean(0) for w in wins_NxLxJx3])
 
 
 # ---------------------------------------------------------------- physical foot contact (EDGE)

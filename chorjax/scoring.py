@@ -190,7 +190,7 @@ def score(
     "foot_sliding": spread([metrics.foot_sliding(m, skeleton, fps, size) for m in motions]),
     "data_foot_sliding": float(np.mean([metrics.foot_sliding(t, skeleton, fps, size) for t in reference])),
     **_novelty(motions, reference, train, unseen, skeleton, size, window),
-    "speed_ratio": spread([metrics.freeze_ratio(m, speed) for m in motions]),  # extra: NOT a freeze measure
+    "speed_ratio": spread([metrics.speed_ratio(m, speed) for m in motions]),  # extra: NOT a freeze measure
     "body_size": size,
     "window": window,
     "splits": splits,
