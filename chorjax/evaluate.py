@@ -59,15 +59,8 @@ def evaluate(
     raise UserError(f"--frames {frames}: need at least {2 * window} frames")
 
   loss = heldout_loss(run, real)
-  ids = [run.id_map[m.name] for m in train] or [0]
-  motion = np.array([ids[k % len(ids)] for k in range(num)])
   seeds = list(seeds) if seeds else [seed]
-  decoded = [
-    np.asarray(
-      feats.decode(generate(run.graphdef, run.params, motion, jax.random.key(s), num_frames=frames, **sampling))
-    )
-    for s in seeds
-  ]
+  decoded = [generate_positions(run, train, num, frames, s, sampling) for s in seeds]
   y_up = lambda pos: np.asarray(to_y_up(pos, feats.up_axis))  # data space -> y-up: what the metrics measure
   gen = [y_up(p) for d in decoded for p in d]
   real_c = [y_up(m.positions) for m in real]
@@ -91,6 +84,14 @@ def evaluate(
     "heldout_loss": loss,
     **scored,
   }
+
+
+def generate_positions(run: Run, train, num: int, frames: int, seed: int, sampling: dict) -> np.ndarray:
+  """``[num, frames, J, 3]`` data-space positions; dancer k is conditioned on the k-th training take."""
+  ids = [run.id_map[m.name] for m in train] or [0]
+  motion = np.array([ids[k % len(ids)] for k in range(num)])
+  z = generate(run.graphdef, run.params, motion, jax.random.key(seed), num_frames=frames, **sampling)
+  return np.asarray(run.features.decode(z))
 
 
 def read_reference(run: Run, data: Sequence[str]) -> tuple[list, list]:
