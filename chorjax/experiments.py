@@ -249,14 +249,12 @@ def _winner(groups, key, rule):
   if len(scored) == 1:
     return scored[0][2], why
   (best, sd_best), _, g = scored[0]
-  (second, sd_second), _, _ = scored[1]
+  (second, sd_second), _, runner_up = scored[1]
   if min(len(grp["runs"]) for _, _, grp in scored[:2]) < 2:
     return g, f"{why}; one run: spread unknown"
   if best + sd_best >= second - sd_second:
-    return (
-      None,
-      f"within noise ({scored[0][1]} {best:.3g} +- {sd_best:.2g} vs {scored[1][1]} {second:.3g} +- {sd_second:.2g})",
-    )
+    values = f"{g['name']} {_cell(g, key, rule)} vs {runner_up['name']} {_cell(runner_up, key, rule)}"
+    return None, f"within noise ({values})"
   return g, why
 
 
