@@ -230,6 +230,7 @@ METRIC_KEYS = (
   "jitter_max",
   "bone_cv_mean",
   "bone_cv_max",
+  "root_step_max",
   "fid_k",
   "div_k",
   "fid_g",

@@ -12,6 +12,7 @@ Keys (a value, or ``{"mean", "sd"}`` over several motions or reference splits):
 * ``jitter``, ``jitter_max``: mean magnitude of the second difference of joint positions / the
   reference's, over the whole motion and in its roughest segment.
 * ``bone_cv_mean``, ``bone_cv_max`` (and ``bone_cv_median``): per-bone length CV, mean and max over bones.
+* ``root_step_max``: the largest per-frame root displacement / the reference's largest (> 1.5: teleports).
 * ``fid_k`` / ``fid_g``: Frechet distances on kinetic / geometric window features, normalized by the
   statistics of all reference windows (Bailando; the geometric features' std floored at 0.05).
   ``fid_k_real`` / ``fid_g_real``: the same figure between two disjoint halves of the real
@@ -64,6 +65,13 @@ def _movement_and_jitter(motions, reference, skeleton: Skeleton, fps: float, seg
     "movement_curve": np.mean([c for c in moves if len(c) == len(moves[0])], axis=0).tolist(),
     "movement_lag_frames": lag,
   }
+
+
+def _root_steps(motions, reference, skeleton: Skeleton) -> dict:
+  """The largest per-frame root displacement of each motion / the largest in the reference (teleports)."""
+  largest = lambda p: float(np.linalg.norm(np.diff(p[:, skeleton.root], axis=0), axis=-1).max())
+  ref = max(largest(t) for t in reference)
+  return {"root_step_max": spread([largest(m) / ref for m in motions])}
 
 
 def _bones(motions, skeleton: Skeleton) -> dict:
@@ -177,6 +185,7 @@ def score(
   return {
     **_movement_and_jitter(motions, reference, skeleton, fps, segment),
     **_bones(motions, skeleton),
+    **_root_steps(motions, reference, skeleton),
     "fid_k": spread(fid_k),
     "fid_k_real": spread(fid_k_real),
     "div_k": div_k,

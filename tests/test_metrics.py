@@ -188,6 +188,9 @@ def test_a_held_pose_that_trembles_scores_as_trembling(takes):
   fake = np.repeat(take[100:101], 3000, 0) + np.random.default_rng(0).normal(0, 1.0, (3000, 16, 3))
   r = _score(fake, takes)
   assert r["movement_max"] < 0.2 and r["jitter"] > 2
+  teleport = fake.copy()
+  teleport[1500:] += np.array([300.0, 0.0, 0.0])  # the whole body jumps 300 units (a thigh is ~94) in one frame
+  assert _score(fake, takes)["root_step_max"] < 1 < 1.5 < _score(teleport, takes)["root_step_max"]
   # the old frame-to-frame speed ratio counts the trembling as movement: why it is no freeze measure
   assert r["speed_ratio"] > 4 * r["movement_max"]
   for k in ("fid_k", "fid_g"):  # far outside the real spread
