@@ -16,6 +16,15 @@ A sweep file (TOML)::
     num = 1
     seeds = [0, 1, 2, 3]                      # sampling seeds, scored together
 
+Named ``[candidates.NAME]`` tables (config overrides each) are crossed with the grid, so a comparison
+of different recipes is one file::
+
+    [candidates.quickstart]
+    [candidates.auto_conditioning]
+    "train.feedback" = "auto"
+    [grid]
+    "train.seed" = [0, 1, 2]
+
 Every point is an ordinary run directory (``<root>/<name>-<key>=<value>...``) with its evaluation in
 ``eval/metrics.json`` (and its first sample in ``eval/sample.npz``); re-running a sweep skips finished
 points and resumes unfinished ones. ``chorjax compare`` groups points that differ only in
@@ -39,7 +48,7 @@ from chorjax.config import load_config, valid_keys
 from chorjax.errors import UserError, atomic_write
 from chorjax.scoring import mean_of
 
-SWEEP_KEYS = {"name", "base", "root", "grid", "set", "eval"}
+SWEEP_KEYS = {"name", "base", "root", "grid", "set", "eval", "candidates"}
 EVAL_KEYS = {
   "data",
   "frames",
@@ -76,6 +85,12 @@ def load_sweep(path) -> dict:
       raise UserError(f"{path}: [grid] key {key!r} is not a config key")
     if not isinstance(values, list) or not values:
       raise UserError(f"{path}: [grid] {key!r} must be a non-empty list")
+  for name, body in sweep.get("candidates", {}).items():
+    if not isinstance(body, dict):
+      raise UserError(f"{path}: [candidates.{name}] must be a table of KEY = value")
+    for key in body:
+      if key not in valid_keys():
+        raise UserError(f"{path}: [candidates.{name}] key {key!r} is not a config key")
   bad = set(sweep.get("eval", {})) - EVAL_KEYS
   if bad:
     raise UserError(f"{path}: unknown [eval] key {sorted(bad)[0]!r}; one of {', '.join(sorted(EVAL_KEYS))}")
@@ -86,13 +101,17 @@ def load_sweep(path) -> dict:
 
 
 def sweep_points(sweep: dict) -> list[tuple[str, list[str]]]:
-  """``(point name, overrides)`` for every grid point."""
+  """``(point name, overrides)`` for every candidate (``[candidates.NAME]`` tables; one unnamed if none)
+  crossed with every grid point."""
   keys = list(sweep["grid"])
   fixed = [f"{k}={_fmt(v)}" for k, v in sweep.get("set", {}).items()]
+  candidates = sweep.get("candidates") or {"": {}}
   points = []
-  for values in itertools.product(*(sweep["grid"][k] for k in keys)):
-    tag = "-".join(f"{k.split('.')[-1]}={v}" for k, v in zip(keys, values))
-    points.append((f"{sweep['name']}-{tag}", fixed + [f"{k}={_fmt(v)}" for k, v in zip(keys, values)]))
+  for cand, body in candidates.items():
+    own = [f"{k}={_fmt(v)}" for k, v in body.items()]
+    for values in itertools.product(*(sweep["grid"][k] for k in keys)):
+      tag = "-".join([cand] * bool(cand) + [f"{k.split('.')[-1]}={v}" for k, v in zip(keys, values)])
+      points.append((f"{sweep['name']}-{tag}", fixed + own + [f"{k}={_fmt(v)}" for k, v in zip(keys, values)]))
   return points
 
 

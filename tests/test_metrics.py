@@ -242,3 +242,26 @@ def test_chorjax_metrics_separates_a_real_take_from_a_trembling_fake(tmp_path, t
     assert real[k]["mean"] <= ref["mean"] + 2 * ref["sd"] < ref["mean"] + 3 * ref["sd"] < fake[k]["mean"], k
   assert "movement_min" in capsys.readouterr().out
   assert cli.main(["metrics", str(tmp_path / "nope.csv"), "--data", *refs]) == 2
+
+
+def test_sweep_candidates_cross_the_grid_and_bad_keys_are_named(tmp_path):
+  from chorjax.experiments import load_sweep, sweep_points
+
+  path = tmp_path / "s.toml"
+  path.write_text(
+    'name = "lh"\n[grid]\n"train.seed" = [0, 1]\n[set]\n"train.num_steps" = 5\n'
+    '[candidates.base]\n[candidates.auto]\n"train.feedback" = "auto"\n"data.representation" = "canonical"\n'
+  )
+  points = sweep_points(load_sweep(path))
+  assert [n for n, _ in points] == ["lh-base-seed=0", "lh-base-seed=1", "lh-auto-seed=0", "lh-auto-seed=1"]
+  assert points[3][1] == [
+    "train.num_steps=5",
+    'train.feedback="auto"',
+    'data.representation="canonical"',
+    "train.seed=1",
+  ]
+  path.write_text('[grid]\n"train.seed" = [0]\n[candidates.x]\n"train.feedbak" = "auto"\n')
+  from chorjax.errors import UserError
+
+  with pytest.raises(UserError, match=r"\[candidates.x\] key 'train.feedbak' is not a config key"):
+    load_sweep(path)
