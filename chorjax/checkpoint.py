@@ -13,6 +13,7 @@ The manager keeps the latest ``keep`` steps plus the best one by validation loss
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import jax
@@ -20,6 +21,16 @@ import orbax.checkpoint as ocp
 from orbax.checkpoint.checkpoint_managers import preservation_policy as pp
 
 from chorjax.errors import UserError
+
+
+class _ReadOnlyNotice(logging.Filter):
+  """Drops orbax's warning that a directory opened read-only is read-only (we asked for that)."""
+
+  def filter(self, record: logging.LogRecord) -> bool:
+    return not str(record.msg).startswith("Given directory is read only")
+
+
+logging.getLogger("absl").addFilter(_ReadOnlyNotice())
 
 
 def checkpoint_dir(workdir) -> Path:
@@ -34,7 +45,11 @@ def create_manager(workdir, keep: int = 3, read_only: bool = False) -> ocp.Check
     ]
   )
   options = ocp.CheckpointManagerOptions(
-    preservation_policy=policy, cleanup_tmp_directories=not read_only, create=not read_only, read_only=read_only
+    preservation_policy=policy,
+    cleanup_tmp_directories=not read_only,
+    create=not read_only,
+    read_only=read_only,
+    save_interval_steps=0 if read_only else 1,  # (orbax warns when it has to set this itself)
   )
   return ocp.CheckpointManager(checkpoint_dir(workdir), options=options)
 

@@ -272,3 +272,17 @@ def test_an_impossible_end_sample_fails_before_training(tmp_path, capsys):
   assert cli.main(["train", str(cfg), "--workdir", str(tmp_path / "w")]) == 2
   assert "sample.motion = 12: out of range (0..9)" in capsys.readouterr().err
   assert not (tmp_path / "w" / "checkpoints").exists()
+
+
+def test_sample_and_eval_print_nothing_on_stderr_for_a_good_run(run_dir, tmp_path):
+  import sys
+
+  cmd = [sys.executable, "-m", "chorjax.cli"]
+  out = tmp_path / "quiet.csv"
+  r = subprocess.run([*cmd, "sample", str(run_dir), "-o", str(out), "--frames", "10"], capture_output=True, text=True)
+  assert r.returncode == 0 and r.stderr == "" and out.exists()
+  args = ["--data", "cmu94/94_10_skeleton_3d.csv", "--frames", "120", "--num", "1", "--splits", "2"]
+  r = subprocess.run(
+    [*cmd, "eval", str(run_dir), *args[:-2], "-o", str(tmp_path / "m.json")], capture_output=True, text=True
+  )
+  assert r.returncode == 0 and r.stderr == "", r.stderr[-500:]
