@@ -23,24 +23,16 @@ import itertools
 
 import numpy as np
 
-from chorjax.data.motion import Skeleton, bone_lengths
+from chorjax.data.motion import Skeleton, chain_length, mean_bone_lengths
 
 
 def body_size(pos_TxJx3, skeleton: Skeleton) -> float:
   """Root->first foot plus root->highest end joint, along the bones (mean bone lengths)."""
-  children = [c for _, c in skeleton.bones]
-  length = dict(zip(children, bone_lengths(pos_TxJx3, skeleton).mean(0)))
-
-  def chain(j):
-    total = 0.0
-    while skeleton.parents[j] >= 0:
-      total, j = total + length[j], skeleton.parents[j]
-    return total
-
+  length = mean_bone_lengths(pos_TxJx3, skeleton)
   ends = skeleton.end_joints or tuple(range(skeleton.num_joints))
   head = max(ends, key=lambda j: pos_TxJx3[:, j, 1].mean())
   foot = skeleton.feet[0] if skeleton.feet else min(ends, key=lambda j: pos_TxJx3[:, j, 1].mean())
-  return float(chain(foot) + chain(head))
+  return float(chain_length(length, skeleton, foot) + chain_length(length, skeleton, head))
 
 
 def joint_speed(pos_TxJx3) -> np.ndarray:

@@ -83,18 +83,29 @@ def _bones(motions, skeleton: Skeleton) -> dict:
   }
 
 
-def _window_sets(takes, window: int, hop: int, features) -> np.ndarray:
-  rows = [features(w) for t in takes for w in metrics.windows(t, window, hop)]
+def _window_rows(takes, window: int, hop: int, features) -> list:
+  return [features(w) for t in takes for w in metrics.windows(t, window, hop)]
+
+
+def _stack(rows) -> np.ndarray:
   return np.stack(rows) if rows else np.zeros((0, 0))
 
 
-def _halves(reference, rng) -> tuple[list, list]:
+def _pieces(reference) -> list:
+  """What the reference is split into: its takes, or a single take's first and second half in time."""
+  if len(reference) >= 2:
+    return list(reference)
+  t = reference[0]
+  return [t[: len(t) // 2], t[len(t) // 2 :]]
+
+
+def _halves(reference, rng) -> tuple:
+  """Indices into :func:`_pieces` of two random halves of the takes (a single take: its two halves)."""
   if len(reference) >= 2:
     order = rng.permutation(len(reference))
     k = len(reference) // 2
-    return [reference[i] for i in order[:k]], [reference[i] for i in order[k:]]
-  t = reference[0]
-  return [t[: len(t) // 2]], [t[len(t) // 2 :]]
+    return order[:k], order[k:]
+  return [0], [1]
 
 
 def _distribution(motions, reference, features, window: int, splits: int, seed: int, std_floor: float) -> tuple:
@@ -104,15 +115,18 @@ def _distribution(motions, reference, features, window: int, splits: int, seed: 
   feature the reference never varies (a pose it never takes) must not divide by zero.
   """
   hop = max(window // 4, 1)
-  ref_all = _window_sets(reference, window, hop, features)
-  gen = _window_sets(motions, window, max(window // 2, 1), features)
+  piece_rows = [_window_rows([p], window, hop, features) for p in _pieces(reference)]  # once, not per split
+  ref_all = _stack(
+    [r for rows in piece_rows for r in rows] if len(reference) >= 2 else _window_rows(reference, window, hop, features)
+  )
+  gen = _stack(_window_rows(motions, window, max(window // 2, 1), features))
   mean, std = ref_all.mean(0), np.maximum(ref_all.std(0), std_floor)
   norm = lambda f: (f - mean) / std
   rng = np.random.default_rng(seed)
   fids, reals = [], []
   for _ in range(splits):
     a, b = _halves(reference, rng)
-    fa, fb = _window_sets(a, window, hop, features), _window_sets(b, window, hop, features)
+    fa, fb = (_stack([r for i in half for r in piece_rows[i]]) for half in (a, b))
     n = min(len(fb), len(gen))
     if n < 2 or len(fa) < 2:
       continue
@@ -128,11 +142,9 @@ def _distribution(motions, reference, features, window: int, splits: int, seed: 
 def _novelty(motions, reference, train, unseen, skeleton: Skeleton, size: float, window: int) -> dict:
   wins = lambda takes, hop: np.concatenate([metrics.windows(t, window, hop) for t in takes]) / size
   if train:
-    real = metrics.novelty(wins(unseen, window // 4), wins(train, window // 4), skeleton.root) if unseen else None
-    return {
-      "novelty": metrics.novelty(wins(motions, window), wins(train, window // 4), skeleton.root),
-      "novelty_real": real,
-    }
+    train_w = wins(train, window // 4)
+    real = metrics.novelty(wins(unseen, window // 4), train_w, skeleton.root) if unseen else None
+    return {"novelty": metrics.novelty(wins(motions, window), train_w, skeleton.root), "novelty_real": real}
   others = lambda i: [t for k, t in enumerate(reference) if k != i]
   real = (
     [

@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from chorjax.data import transforms
-from chorjax.data.motion import Skeleton, bone_lengths
+from chorjax.data.motion import Skeleton, chain_length, mean_bone_lengths
 
 REPRESENTATIONS = ("absolute", "bone_relative", "root_relative", "canonical", "directions")
 
@@ -120,11 +120,8 @@ def hips(skeleton: Skeleton) -> tuple[int, int]:
 
 def leg_length(pos_TxJx3, skeleton: Skeleton) -> float:
   """Mean length of the chain from the first foot up to the root."""
-  lengths = dict(zip([c for _, c in skeleton.bones], np.asarray(bone_lengths(np.asarray(pos_TxJx3), skeleton)).mean(0)))
-  total, j = 0.0, skeleton.feet[0]
-  while skeleton.parents[j] >= 0:
-    total, j = total + float(lengths[j]), skeleton.parents[j]
-  return total
+  lengths = {j: float(v) for j, v in mean_bone_lengths(pos_TxJx3, skeleton).items()}  # summed in float64
+  return float(chain_length(lengths, skeleton, skeleton.feet[0]))
 
 
 def _represent(pos, skeleton: Skeleton, representation: str):

@@ -56,15 +56,10 @@ class Skeleton:
   @property
   def topological_order(self) -> tuple[int, ...]:
     """Joints ordered so that every parent comes before its children."""
-    order = []
-    frontier = [j for j, p in enumerate(self.parents) if p < 0]
-    while frontier:
-      j = frontier.pop(0)
-      order.append(j)
-      frontier.extend(c for c, p in enumerate(self.parents) if p == j)
-    if len(order) != self.num_joints:
-      raise ValueError(f"skeleton {self.name}: parents do not form a tree")
-    return tuple(order)
+    try:
+      return topological_order(self.parents)
+    except ValueError:
+      raise ValueError(f"skeleton {self.name}: parents do not form a tree") from None
 
   def to_dict(self) -> dict:
     return dataclasses.asdict(self)
@@ -132,3 +127,29 @@ def bone_length_cv(positions: np.ndarray, skeleton: Skeleton, eps: float = 1e-9)
   """
   lengths = bone_lengths(positions, skeleton)
   return lengths.std(axis=0) / np.maximum(lengths.mean(axis=0), eps)
+
+
+def topological_order(parents) -> tuple[int, ...]:
+  """Joints ordered so that every parent comes before its children (ValueError if not a tree)."""
+  order = []
+  frontier = [j for j, p in enumerate(parents) if p < 0]
+  while frontier:
+    j = frontier.pop(0)
+    order.append(j)
+    frontier.extend(c for c, p in enumerate(parents) if p == j)
+  if len(order) != len(parents):
+    raise ValueError("parents do not form a tree")
+  return tuple(order)
+
+
+def mean_bone_lengths(positions_TxJx3, skeleton: Skeleton) -> dict:
+  """Child joint -> the mean length of the bone from its parent."""
+  return dict(zip([c for _, c in skeleton.bones], bone_lengths(np.asarray(positions_TxJx3), skeleton).mean(0)))
+
+
+def chain_length(lengths: dict, skeleton: Skeleton, joint: int):
+  """The summed ``lengths`` of the bones from ``joint`` up to the root."""
+  total = 0.0
+  while skeleton.parents[joint] >= 0:
+    total, joint = total + lengths[joint], skeleton.parents[joint]
+  return total

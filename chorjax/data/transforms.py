@@ -16,6 +16,8 @@ from collections.abc import Sequence
 import jax.numpy as jnp
 import numpy as np
 
+from chorjax.data.motion import topological_order
+
 # ---------------------------------------------------------------- normalization statistics
 
 
@@ -278,17 +280,7 @@ def from_directions(feat_xTxF, parents: Sequence[int], lengths_J, start_xz=(0.0,
   )
   unit = dirs / jnp.maximum(jnp.linalg.norm(dirs, axis=-1, keepdims=True), 1e-9)
   joints = {root: root_pos}
-  for j in _topological(parents):  # parents before children
+  for j in topological_order(parents):  # parents before children
     if j != root:
       joints[j] = joints[parents[j]] + lengths_J[j] * unit[..., j, :]
   return jnp.stack([joints[j] for j in range(num_joints)], -2)
-
-
-def _topological(parents: Sequence[int]) -> list[int]:
-  order, seen = [], set()
-  while len(order) < len(parents):
-    for j, p in enumerate(parents):
-      if j not in seen and (p < 0 or p in seen):
-        order.append(j)
-        seen.add(j)
-  return order
