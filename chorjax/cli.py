@@ -6,6 +6,7 @@ User errors print one line (``chorjax: error: ...``) and exit with code 2, witho
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -180,7 +181,7 @@ def _sample(args) -> int:
 
   from chorjax.models import motion_weight_vector
   from chorjax.run import load_run
-  from chorjax.sample import generate, read_prime
+  from chorjax.sample import dance, read_prime
 
   out, _ = _output(args.output, (".csv", ".npz", ".bvh", ".html"))
   paths = _sample_paths(out, args.num)
@@ -192,19 +193,8 @@ def _sample(args) -> int:
   if args.prime:
     phrase = read_prime(args.prime, features, run.config.data)
     prime = np.tile(phrase[None], (args.num, 1, 1))
-  sampling = run.sampling(args.pi_temperature, args.sigma_temperature, True if args.greedy else None)
-  z = generate(
-    run.graphdef,
-    run.params,
-    motion_BxM,
-    jax.random.key(args.seed),
-    num_frames=args.frames,
-    prime_BxPxD=prime,
-    **sampling,
-  )
-  if prime is not None:  # the phrase the dancer gave, then the machine's continuation, decoded as one
-    z = np.concatenate([prime, np.asarray(z)], axis=1)  # (root-motion features integrate across the seam)
-  pos = np.asarray(features.decode(z))
+  sampling = run.sampling(**_controls(args))
+  pos = dance(run.graphdef, run.params, features, motion_BxM, jax.random.key(args.seed), args.frames, sampling, prime)
   settings = {
     "workdir": str(args.workdir),
     "checkpoint_step": run.step,
@@ -336,9 +326,7 @@ def _eval(args) -> int:
     checkpoint=args.checkpoint,
     seed=args.seed,
     seeds=args.seeds,
-    pi_temperature=args.pi_temperature,
-    sigma_temperature=args.sigma_temperature,
-    greedy=True if args.greedy else None,
+    **_controls(args),
   )
   write_metrics(result, out)
   _print_metrics(result, ("heldout_loss", *METRIC_KEYS))
@@ -379,6 +367,22 @@ def _compare(args) -> int:
   return 0
 
 
+def _controls(args) -> dict:
+  """The sampling flags given on the command line, checked (unset ones are None: the run's config)."""
+  checks = {
+    "pi_temperature": (0.0, math.inf, "a temperature >= 0"),
+    "sigma_temperature": (0.0, math.inf, "a multiplier >= 0"),
+    "noise_smoothing": (0.0, 1.0, "0 <= RHO < 1"),
+    "persistence": (0.0, math.inf, "a log-weight bonus >= 0"),
+  }
+  for name, (low, high, what) in checks.items():
+    v = getattr(args, name)
+    if v is not None and not (low <= v < high):
+      raise UserError(f"--{name.replace('_', '-')} {v}: must be {what} (finite)")
+  given = {k: getattr(args, k) for k in checks}
+  return {**given, "greedy": True if args.greedy else None, "rigid_bones": args.rigid_bones}
+
+
 def _add_sampling_args(p) -> None:
   """Sampling controls shared by `sample` and `eval`; unset ones come from the run's [sample] config."""
   p.add_argument(
@@ -390,7 +394,23 @@ def _add_sampling_args(p) -> None:
     "--sigma-temperature", type=float, help="MDN scale multiplier (default: the run's sample.sigma_temperature)"
   )
   p.add_argument("--greedy", action="store_true", help="mean of the most likely component (no noise)")
-  p.add_argument("--seed", type=int, default=0)
+  p.add_argument(
+    "--noise-smoothing",
+    type=float,
+    metavar="RHO",
+    help="MDN noise correlated over frames, 0 <= RHO < 1 (default: the run's sample.noise_smoothing)",
+  )
+  p.add_argument(
+    "--persistence",
+    type=float,
+    help="bonus to the previous frame's mixture component, >= 0 (default: the run's sample.persistence)",
+  )
+  p.add_argument(
+    "--rigid-bones",
+    action=argparse.BooleanOptionalAction,
+    help="decode with the training takes' bone lengths (default: the run's sample.rigid_bones)",
+  )
+  p.add_argument("--seed", type=int, default=0, help="sampling seed: the same seed draws the same dance")
   p.add_argument("--checkpoint", default="latest", metavar="STEP|best|latest")
   p.add_argument("--force", action="store_true", help="overwrite the output if it exists")
 

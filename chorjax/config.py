@@ -21,11 +21,23 @@ from chorjax.errors import UserError
 
 
 def _field(
-  default, help: str, choices: Sequence | None = None, minimum: float | None = None, resumable: bool = False
+  default,
+  help: str,
+  choices: Sequence | None = None,
+  minimum: float | None = None,
+  resumable: bool = False,
+  below: float | None = None,
 ) -> Any:
   """A config field: its default, help text and checks. ``choices`` of a list field apply to each of its
-  elements; ``resumable`` keys may change when a run is continued without --force (e.g. to train longer)."""
-  meta = {"help": help, "choices": tuple(choices) if choices else None, "minimum": minimum, "resumable": resumable}
+  elements; ``resumable`` keys may change when a run is continued without --force (e.g. to train longer);
+  ``below``: an exclusive upper bound."""
+  meta = {
+    "help": help,
+    "choices": tuple(choices) if choices else None,
+    "minimum": minimum,
+    "below": below,
+    "resumable": resumable,
+  }
   if isinstance(default, (list, tuple)):
     return dataclasses.field(default_factory=lambda: tuple(default), metadata=meta)
   return dataclasses.field(default=default, metadata=meta)
@@ -135,7 +147,37 @@ class SampleConfig:
   pi_temperature: float = _field(1.0, "MDN mixture-weight temperature (0 = most likely component)", minimum=0.0)
   sigma_temperature: float = _field(1.0, "MDN scale multiplier", minimum=0.0)
   greedy: bool = _field(False, "take the mean of the most likely component (no noise)")
+  noise_smoothing: float = _field(
+    0.0,
+    "MDN noise correlated over frames: each frame's standard-normal draw passes two cascaded AR(1) filters "
+    "with this coefficient (unit variance kept), so a full-temperature sample moves smoothly instead of "
+    "trembling; 0 = independent noise per frame",
+    minimum=0.0,
+    below=1.0,
+    resumable=True,
+  )
+  persistence: float = _field(
+    0.0,
+    "MDN component persistence: added to the log-weight of the component drawn for the previous frame, so "
+    "the dancer does not hop between components every frame (0 = off)",
+    minimum=0.0,
+    resumable=True,
+  )
+  rigid_bones: bool = _field(
+    False,
+    "decode every generated frame with the training takes' mean bone lengths (each bone keeps its "
+    "direction): bones cannot stretch",
+    resumable=True,
+  )
   seed: int = _field(0, "sampling seed", resumable=True)
+
+  def controls(self, **given) -> dict:
+    """How to draw and decode a dance (``sample.dance``): each of ``CONTROLS`` as given, where given and
+    not None, else this config's."""
+    out = {k: getattr(self, k) if given.get(k) is None else given[k] for k in self.CONTROLS}
+    return {**out, "greedy": bool(out["greedy"]), "rigid_bones": bool(out["rigid_bones"])}
+
+  CONTROLS = ("pi_temperature", "sigma_temperature", "greedy", "noise_smoothing", "persistence", "rigid_bones")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -229,6 +271,8 @@ def _check_value(where: str, key: str, field: dataclasses.Field, value: Any):
       )
   if meta.get("minimum") is not None and value < meta["minimum"]:
     raise UserError(f"{where}: key {key!r}: {value!r} is below the minimum {meta['minimum']}")
+  if meta.get("below") is not None and not value < meta["below"]:
+    raise UserError(f"{where}: key {key!r}: {value!r} must be below {meta['below']}")
   return value
 
 

@@ -15,7 +15,7 @@ from chorjax.data.motion import Motion
 from chorjax.data.transforms import to_y_up
 from chorjax.errors import UserError, atomic_write
 from chorjax.run import Run, load_run
-from chorjax.sample import generate
+from chorjax.sample import dance
 from chorjax.train import eval_step
 
 
@@ -28,11 +28,9 @@ def evaluate(
   checkpoint="latest",
   seed: int = 0,
   seeds: Sequence[int] | None = None,
-  pi_temperature=None,
-  sigma_temperature=None,
-  greedy=None,
   window: int = 60,
   splits: int = 10,
+  **controls,
 ) -> dict:
   """Samples ``num`` dancers of ``frames`` frames and measures them against the takes in ``data``.
 
@@ -44,7 +42,8 @@ def evaluate(
     seed, seeds: sampling seed(s); with several, ``num`` dancers are drawn with each and all are
       scored together (every key then carries a mean and sd over them).
     window, splits: windows and reference splits of the distribution metrics (``chorjax.scoring``).
-    pi_temperature, sigma_temperature, greedy: sampling controls; default: the run's ``[sample]``.
+    controls: sampling controls (``SampleConfig.CONTROLS``: temperatures, greedy, noise smoothing,
+      persistence, rigid bones); unset or None: the run's ``[sample]``.
 
   Returns:
     The held-out loss and every key of :func:`chorjax.scoring.score` (JSON-ready): the generated
@@ -53,7 +52,7 @@ def evaluate(
   run = load_run(workdir, checkpoint)
   feats = run.features
   sk, fps = feats.skeleton, run.fps
-  sampling = run.sampling(pi_temperature, sigma_temperature, greedy)
+  sampling = run.sampling(**controls)
   real, train = read_reference(run, data)
   if frames < 2 * window:
     raise UserError(f"--frames {frames}: need at least {2 * window} frames")
@@ -90,8 +89,7 @@ def generate_positions(run: Run, train, num: int, frames: int, seed: int, sampli
   """``[num, frames, J, 3]`` data-space positions; dancer k is conditioned on the k-th training take."""
   ids = [run.id_map[m.name] for m in train] or [0]
   motion = np.array([ids[k % len(ids)] for k in range(num)])
-  z = generate(run.graphdef, run.params, motion, jax.random.key(seed), num_frames=frames, **sampling)
-  return np.asarray(run.features.decode(z))
+  return dance(run.graphdef, run.params, run.features, motion, jax.random.key(seed), frames, sampling)
 
 
 def read_reference(run: Run, data: Sequence[str]) -> tuple[list, list]:

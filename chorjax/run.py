@@ -164,14 +164,9 @@ class Run:
   def fps(self) -> float:
     return self.config.data.fps
 
-  def sampling(self, pi_temperature=None, sigma_temperature=None, greedy=None) -> dict:
-    """Sampling controls: the ones given, else the run's ``[sample]`` config."""
-    s = self.config.sample
-    return {
-      "pi_temperature": s.pi_temperature if pi_temperature is None else pi_temperature,
-      "sigma_temperature": s.sigma_temperature if sigma_temperature is None else sigma_temperature,
-      "greedy": bool(s.greedy if greedy is None else greedy),
-    }
+  def sampling(self, **given) -> dict:
+    """Sampling controls: the ones given (not None), else the run's ``[sample]`` config."""
+    return self.config.sample.controls(**given)
 
 
 def load_run(workdir, which: str | int = "latest") -> Run:

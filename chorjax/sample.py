@@ -20,7 +20,7 @@ from chorjax.data.dataset import conform, read_takes
 from chorjax.errors import UserError
 
 
-@functools.partial(jax.jit, static_argnames=("graphdef", "num_frames", "greedy"))
+@functools.partial(jax.jit, static_argnames=("graphdef", "num_frames", "greedy", "noise_smoothing", "persistence"))
 def generate(
   graphdef,
   params,
@@ -32,6 +32,8 @@ def generate(
   pi_temperature=1.0,
   sigma_temperature=1.0,
   greedy: bool = False,
+  noise_smoothing: float = 0.0,
+  persistence: float = 0.0,
 ):
   """Generates ``num_frames`` normalized frames per dancer.
 
@@ -44,6 +46,8 @@ def generate(
     prime_BxPxD: optional real phrase (normalized); generation continues after its last frame.
       Without it, generation starts from the zero frame (the mean pose) and the id's state.
     pi_temperature, sigma_temperature, greedy: MDN sampling controls (see ``heads.mdn_sample``).
+    noise_smoothing: the MDN noise's AR(1) coefficient (:func:`smooth_noise`; 0 = independent per frame).
+    persistence: added to the log-weight of the previous frame's mixture component.
 
   Returns:
     ``[B, num_frames, D]`` normalized frames.
@@ -56,14 +60,55 @@ def generate(
   else:
     x0 = jnp.zeros((jnp.shape(motion)[0], model.dim), jnp.float32)
 
-  def body(c, k):
-    carry, x = c
-    carry, out = model.step(carry, x)
-    x = model.sample(out, k, pi_temperature, sigma_temperature, greedy)
-    return (carry, x), x
+  if greedy or (noise_smoothing == 0 and persistence == 0):
 
-  _, xs_NxBxD = jax.lax.scan(body, (carry, x0), jax.random.split(key, num_frames))
+    def body(c, k):
+      carry, x = c
+      carry, out = model.step(carry, x)
+      x = model.sample(out, k, pi_temperature, sigma_temperature, greedy)
+      return (carry, x), x
+
+    _, xs_NxBxD = jax.lax.scan(body, (carry, x0), jax.random.split(key, num_frames))
+    return jnp.swapaxes(xs_NxBxD, 0, 1)
+
+  controls = {"pi_temperature": pi_temperature, "sigma_temperature": sigma_temperature, "persistence": persistence}
+
+  def smooth_body(c, k):
+    carry, x, noise, comp = c
+    carry, out = model.step(carry, x)
+    k_comp, k_noise = jax.random.split(k)
+    noise, eps_BxD = smooth_noise(noise, k_noise, noise_smoothing)
+    x, comp = model.draw(out, k_comp, eps_BxD, comp, **controls)
+    return (carry, x, noise, comp), x
+
+  batch = x0.shape[0]
+  init = (carry, x0, (jnp.zeros_like(x0), jnp.zeros_like(x0)), jnp.full((batch,), -1))  # -1: no component yet
+  _, xs_NxBxD = jax.lax.scan(smooth_body, init, jax.random.split(key, num_frames))
   return jnp.swapaxes(xs_NxBxD, 0, 1)
+
+
+def smooth_noise(state, key, rho: float):
+  """Standard-normal noise correlated over frames: white noise through two cascaded AR(1) filters with
+  coefficient ``rho`` (a smooth, low-pass process), scaled to unit stationary variance (the impulse
+  response ``(k + 1) rho^k`` has energy ``(1 + rho^2) / (1 - rho^2)^3``). ``rho = 0``: white noise.
+  ``state`` is ``(first filter, second filter)``; returns ``(state, noise)``."""
+  first, second = state
+  first = rho * first + jax.random.normal(key, first.shape, first.dtype)
+  second = rho * second + first
+  return (first, second), second * ((1 - rho**2) ** 3 / (1 + rho**2)) ** 0.5
+
+
+def dance(graphdef, params, features, motion, key, num_frames: int, controls: dict, prime_BxPxD=None) -> np.ndarray:
+  """Dancers in data space ``[B, T, J, 3]``: :func:`generate` with ``controls`` (``SampleConfig.controls``),
+  decoded (with rigid bones if asked). A prime phrase comes first, decoded as one with its continuation
+  (root-motion features integrate across the seam)."""
+  if controls["rigid_bones"] and features.lengths is None:
+    raise UserError("rigid_bones: this run records no bone lengths (trained before the option existed)")
+  drawn = {k: v for k, v in controls.items() if k != "rigid_bones"}
+  z = generate(graphdef, params, motion, key, num_frames=num_frames, prime_BxPxD=prime_BxPxD, **drawn)
+  if prime_BxPxD is not None:
+    z = np.concatenate([prime_BxPxD, np.asarray(z)], axis=1)
+  return np.asarray(features.decode(z, rigid=controls["rigid_bones"]))
 
 
 def read_prime(spec: str, features, data_cfg) -> np.ndarray:

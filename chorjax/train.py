@@ -38,7 +38,7 @@ from chorjax.data.dataset import Dataset, WindowSampler, eval_windows, load_data
 from chorjax.errors import UserError, atomic_write
 from chorjax.models import motion_weight_vector
 from chorjax.run import Feedback, StepSpec, create_train_state, run_meta
-from chorjax.sample import generate
+from chorjax.sample import dance
 
 
 class TrainingDiverged(UserError):
@@ -403,19 +403,11 @@ def figure_hook(writer, graphdef, host_params, ds: Dataset, cfg: Config):
   def draw(loop: Loop) -> None:
     n, s, sk = 120, cfg.sample, ds.features.skeleton
     real_id, real_z = (ds.val or ds.train)[0]
-    z = generate(
-      graphdef,
-      host_params(loop.state["params"]),
-      np.array([real_id]),
-      jax.random.key(loop.step),
-      num_frames=n,
-      pi_temperature=s.pi_temperature,
-      sigma_temperature=s.sigma_temperature,
-      greedy=s.greedy,
-    )  # drawn as the run's own samples are
+    key = jax.random.key(loop.step)
+    gen = dance(graphdef, host_params(loop.state["params"]), ds.features, np.array([real_id]), key, n, s.controls())
     fig, axes = plt.subplots(1, 2, figsize=(10, 3), sharey=True)
-    for ax, z_TxD, title in ((axes[0], real_z[:n], "real"), (axes[1], z[0], "generated")):
-      pos_TxJx3 = np.asarray(ds.features.decode(z_TxD))
+    real = np.asarray(ds.features.decode(real_z[:n]))
+    for ax, pos_TxJx3, title in ((axes[0], real, "real"), (axes[1], gen[0], "generated")):  # drawn as samples are
       for j in sk.end_joints:
         ax.plot(pos_TxJx3[:, j, 1], lw=1, label=sk.joint_names[j])
       ax.set_title(f"{title}: end joints, vertical axis")
@@ -433,17 +425,9 @@ def write_end_sample(workdir: Path, graphdef, params, ds: Dataset, cfg: Config) 
   from chorjax.render.html import write_player
 
   s = cfg.sample
-  z = generate(
-    graphdef,
-    params,
-    np.full((s.num,), s.motion),
-    jax.random.key(s.seed),
-    num_frames=s.frames,
-    pi_temperature=s.pi_temperature,
-    sigma_temperature=s.sigma_temperature,
-    greedy=s.greedy,
+  pos = dance(
+    graphdef, params, ds.features, np.full((s.num,), s.motion), jax.random.key(s.seed), s.frames, s.controls()
   )
-  pos = np.asarray(ds.features.decode(z))
   out = workdir / "samples"
   csv = write_csv(pos[0], out / "sample.csv")
   name = {v: k for k, v in ds.id_map.items()}[s.motion]

@@ -286,3 +286,55 @@ def test_sample_and_eval_print_nothing_on_stderr_for_a_good_run(run_dir, tmp_pat
     [*cmd, "eval", str(run_dir), *args[:-2], "-o", str(tmp_path / "m.json")], capture_output=True, text=True
   )
   assert r.returncode == 0 and r.stderr == "", r.stderr[-500:]
+
+
+def test_smooth_noise_has_unit_variance_and_is_smooth_and_white_at_zero():
+  from chorjax.sample import smooth_noise
+
+  def draw(rho, n=4000):
+    state = (jnp.zeros(256), jnp.zeros(256))
+    out = []
+    for k in jax.random.split(jax.random.key(0), n):
+      state, e = smooth_noise(state, k, rho)
+      out.append(e)
+    return np.asarray(out)[500:]  # past the start from rest
+
+  smooth, white = draw(0.9), draw(0.0)
+  assert 0.9 < smooth.var() < 1.1 and 0.95 < white.var() < 1.05
+  lag1 = lambda e: np.mean(e[1:] * e[:-1]) / e.var()
+  assert lag1(smooth) > 0.95 and abs(lag1(white)) < 0.02
+  rough = lambda e: np.mean(np.abs(e[2:] - 2 * e[1:-1] + e[:-2]))
+  assert rough(smooth) < 0.1 * rough(white)  # what the eye calls trembling
+
+
+def test_persistence_and_smoothing_keep_the_default_path_and_make_a_smoother_dance(loaded):
+  graphdef, params = loaded.graphdef, loaded.params
+  w = jnp.tile(as_weights(jnp.array([3]), 10), (4, 1))
+  gen = lambda **kw: np.asarray(generate(graphdef, params, w, jax.random.key(0), num_frames=300, **kw))
+  plain = gen(pi_temperature=1.0, sigma_temperature=1.0)
+  np.testing.assert_array_equal(plain, gen(pi_temperature=1.0, sigma_temperature=1.0, noise_smoothing=0.0))
+  smooth = gen(pi_temperature=1.0, sigma_temperature=1.0, noise_smoothing=0.9, persistence=4.0)
+  assert smooth.shape == plain.shape and np.isfinite(smooth).all()
+  np.testing.assert_array_equal(
+    smooth, gen(pi_temperature=1.0, sigma_temperature=1.0, noise_smoothing=0.9, persistence=4.0)
+  )
+  rough = lambda z: np.mean(np.abs(z[:, 2:] - 2 * z[:, 1:-1] + z[:, :-2]))
+  assert rough(smooth) < 0.5 * rough(plain)
+
+
+def test_sample_cli_smoothing_persistence_and_rigid_bones(run_dir, tmp_path, capsys):
+  from chorjax.data.motion import bone_length_cv
+
+  out = tmp_path / "s.npz"
+  flags = ["--frames", "200", "--noise-smoothing", "0.9", "--persistence", "4", "--pi-temperature", "1"]
+  assert cli.main(["sample", str(run_dir), "-o", str(out), *flags, "--rigid-bones"]) == 0
+  m = read_npz(out)[0]
+  assert bone_length_cv(m.positions, m.skeleton).max() < 1e-4
+  assert json.loads(str(np.load(out)["meta"]))["settings"]["noise_smoothing"] == 0.9
+  loose = tmp_path / "loose.npz"
+  assert cli.main(["sample", str(run_dir), "-o", str(loose), *flags]) == 0
+  assert bone_length_cv(read_npz(loose)[0].positions, m.skeleton).max() > 1e-3
+  for bad in (["--noise-smoothing", "1"], ["--persistence", "-1"], ["--pi-temperature", "nan"]):
+    assert cli.main(["sample", str(run_dir), "-o", str(tmp_path / "bad.csv"), *bad]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+  assert not (tmp_path / "bad.csv").exists()

@@ -157,3 +157,23 @@ def test_heading_turns_with_the_dancer():
   h0 = tf.heading(canon, *hips(SK))
   turned = tf.rotate_y(canon, 0.5)
   np.testing.assert_allclose(tf.heading(turned, *hips(SK)), h0 + 0.5, atol=1e-5)
+
+
+@pytest.mark.parametrize("take", TAKES[:3], ids=lambda m: m.name)
+def test_rigid_bones_sets_every_length_and_keeps_directions_and_root(take):
+  pos = np.asarray(take.positions, np.float64)
+  lengths = np.zeros(SK.num_joints)
+  lengths[[c for _, c in SK.bones]] = take.bone_lengths().mean(0)
+  fixed = np.asarray(tf.rigid_bones(pos, SK.parents, lengths))
+  assert bone_length_cv(fixed, SK).max() < 1e-5 < bone_length_cv(pos, SK).min()
+  np.testing.assert_allclose(fixed[:, SK.root], pos[:, SK.root], rtol=1e-6)
+  bones = lambda p: p - p[:, [max(q, 0) for q in SK.parents]]
+  cos = np.sum(bones(fixed) * bones(pos), -1) / (
+    np.linalg.norm(bones(fixed), axis=-1) * np.linalg.norm(bones(pos), axis=-1) + 1e-12
+  )
+  assert cos[:, [c for _, c in SK.bones]].min() > 1 - 1e-6  # every bone points where it pointed
+  np.testing.assert_allclose(tf.rigid_bones(fixed, SK.parents, lengths), fixed, atol=1e-3)  # idempotent
+  # a dancer whose bones do not stretch keeps her pose exactly
+  own = np.zeros(SK.num_joints)
+  own[[c for _, c in SK.bones]] = take.bone_lengths()[0]
+  np.testing.assert_allclose(tf.rigid_bones(pos[:1], SK.parents, own), pos[:1], atol=1e-3)

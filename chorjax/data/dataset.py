@@ -176,12 +176,11 @@ def load_dataset(data_cfg) -> Dataset:
     np.zeros(feature_dim(skeleton, data_cfg.representation), np.float32),
     np.ones(feature_dim(skeleton, data_cfg.representation), np.float32),
   )
-  if data_cfg.representation == "directions":  # every bone at the training takes' mean length
-    canon = [np.asarray(proto.canonical(by_name[n].positions)) for n in train_names]
-    mean_bones = np.concatenate([bone_lengths(c, skeleton) for c in canon]).mean(0)
-    lengths = np.zeros(skeleton.num_joints, np.float32)
-    lengths[[c for _, c in skeleton.bones]] = mean_bones
-    proto = dataclasses.replace(proto, lengths=lengths)
+  # the training takes' mean bone lengths: `directions` builds every frame with them, rigid decoding too
+  canon = [np.asarray(proto.canonical(by_name[n].positions)) for n in train_names]
+  lengths = np.zeros(skeleton.num_joints, np.float32)
+  lengths[[c for _, c in skeleton.bones]] = np.concatenate([bone_lengths(c, skeleton) for c in canon]).mean(0)
+  proto = dataclasses.replace(proto, lengths=lengths)
 
   def canon_versions(m: Motion) -> list[np.ndarray]:
     canon = np.asarray(proto.canonical(m.positions))

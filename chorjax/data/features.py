@@ -29,7 +29,8 @@ class Features:
     scale: multiplies lengths before the representation (e.g. to metres).
     mean, std: ``[D]`` normalization statistics of the training split (ddof=1).
     lengths: ``[J]`` bone length of each joint from its parent, the training takes' mean (the
-      ``directions`` representation builds every frame with these: bones cannot stretch).
+      ``directions`` representation builds every frame with these, and ``decode(z, rigid=True)`` sets
+      any representation's bones to them: bones cannot stretch).
 
   Representations: ``absolute``, ``bone_relative`` and ``root_relative`` are per-frame ``[J, 3]``;
   ``canonical`` (HumanML3D-style: heading change, root step in the facing frame, root height, joints
@@ -68,11 +69,16 @@ class Features:
     """Data-space positions ``[..., T, J, 3]`` -> normalized features ``[..., T, D]``."""
     return transforms.normalize(self.represent(self.canonical(pos_TxJx3)), self.mean, self.std)
 
-  def decode(self, z_TxD, place=None):
+  def decode(self, z_TxD, place=None, rigid: bool = False):
     """Normalized features ``[..., T, D]`` -> data-space positions ``[..., T, J, 3]`` (``place``: the
-    first frame's ``(heading, x, z)`` for the representations that integrate the root's motion)."""
-    rep = transforms.denormalize(z_TxD, self.mean, self.std)
-    return self.uncanonical(_unrepresent(rep, self, place))
+    first frame's ``(heading, x, z)`` for the representations that integrate the root's motion;
+    ``rigid``: every bone at the training takes' mean length, see ``transforms.rigid_bones``)."""
+    pos = _unrepresent(transforms.denormalize(z_TxD, self.mean, self.std), self, place)
+    if rigid:
+      if self.lengths is None:
+        raise ValueError("no bone lengths recorded (a run trained before sample.rigid_bones existed)")
+      pos = transforms.rigid_bones(pos, self.skeleton.parents, self.lengths)
+    return self.uncanonical(pos)
 
   def to_dict(self) -> dict:
     return {

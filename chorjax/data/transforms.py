@@ -278,9 +278,24 @@ def from_directions(feat_xTxF, parents: Sequence[int], lengths_J, start_xz=(0.0,
   root_pos = root_xz * jnp.array([1.0, 0.0, 1.0]) + jnp.stack(
     [jnp.zeros_like(height), height, jnp.zeros_like(height)], -1
   )
-  unit = dirs / jnp.maximum(jnp.linalg.norm(dirs, axis=-1, keepdims=True), 1e-9)
+  return _build(root_pos, dirs, parents, lengths_J)
+
+
+def rigid_bones(pos_xTxJx3, parents: Sequence[int], lengths_J):
+  """The same poses with every bone at ``lengths[j]``: each bone keeps its direction from its parent,
+  the root stays where it is (built from the root outwards)."""
+  p = np.asarray(parents)
+  root = int(np.flatnonzero(p < 0)[0])
+  bones = pos_xTxJx3 - pos_xTxJx3[..., np.where(p < 0, root, p), :]
+  return _build(pos_xTxJx3[..., root, :], bones, parents, lengths_J)
+
+
+def _build(root_pos, dirs_xJx3, parents: Sequence[int], lengths_J):
+  """Joint positions from the root's and, per joint, the direction of its bone (renormalized)."""
+  root = int(np.flatnonzero(np.asarray(parents) < 0)[0])
+  unit = dirs_xJx3 / jnp.maximum(jnp.linalg.norm(dirs_xJx3, axis=-1, keepdims=True), 1e-9)
   joints = {root: root_pos}
   for j in topological_order(parents):  # parents before children
     if j != root:
       joints[j] = joints[parents[j]] + lengths_J[j] * unit[..., j, :]
-  return jnp.stack([joints[j] for j in range(num_joints)], -2)
+  return jnp.stack([joints[j] for j in range(len(parents))], -2)

@@ -9,6 +9,7 @@ scales pass through softplus and are floored at ``min_scale`` so the likelihood 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -32,6 +33,10 @@ class MSEHead(nnx.Module):
   def sample(self, out_BxD, key, pi_temperature=1.0, sigma_temperature=1.0, greedy=False):
     del key, pi_temperature, sigma_temperature, greedy  # a point estimate has nothing to draw
     return out_BxD
+
+  def draw(self, out_BxD, key, noise_BxD, previous_B, **_):
+    del key, noise_BxD  # nothing to draw
+    return out_BxD, previous_B
 
   def mean(self, out_xD):
     return out_xD
@@ -72,12 +77,22 @@ def mdn_sample(key, logpi_BxK, mu_BxKxD, scale_BxKxS, pi_temperature=1.0, sigma_
   if greedy:
     return jnp.take_along_axis(mu_BxKxD, best[:, None, None], axis=1)[:, 0]
   k_key, n_key = jax.random.split(key)
+  noise_BxD = jax.random.normal(n_key, mu_BxKxD[:, 0].shape, mu_BxKxD.dtype)
+  return mdn_draw(k_key, logpi_BxK, mu_BxKxD, scale_BxKxS, noise_BxD, pi_temperature, sigma_temperature)[0]
+
+
+def mdn_draw(
+  key, logpi_BxK, mu_BxKxD, scale_BxKxS, noise_BxD, pi_temperature=1.0, sigma_temperature=1.0, bias_BxK: Any = 0.0
+):
+  """One frame per row from the component drawn with ``key`` and the given standard-normal ``noise_BxD``
+  (smoothed noise makes smooth motion); ``bias_BxK`` is added to the tempered log-weights (persistence).
+  Returns ``(frame [B, D], component [B])``."""
   t = jnp.asarray(pi_temperature, jnp.float32)
-  drawn = jax.random.categorical(k_key, logpi_BxK / jnp.maximum(t, 1e-6), axis=-1)
-  comp = jnp.where(t > 0, drawn, best)
+  drawn = jax.random.categorical(key, logpi_BxK / jnp.maximum(t, 1e-6) + bias_BxK, axis=-1)
+  comp = jnp.where(t > 0, drawn, jnp.argmax(logpi_BxK + bias_BxK, axis=-1))
   mu = jnp.take_along_axis(mu_BxKxD, comp[:, None, None], axis=1)[:, 0]
   scale = jnp.take_along_axis(scale_BxKxS, comp[:, None, None], axis=1)[:, 0]
-  return mu + scale * sigma_temperature * jax.random.normal(n_key, mu.shape, mu.dtype)
+  return mu + scale * sigma_temperature * noise_BxD, comp
 
 
 class MDNHead(nnx.Module):
@@ -120,6 +135,13 @@ class MDNHead(nnx.Module):
   def sample(self, out_BxP, key, pi_temperature=1.0, sigma_temperature=1.0, greedy=False):
     logpi, mu, scale = self.params(out_BxP)
     return mdn_sample(key, logpi, mu, scale, pi_temperature, sigma_temperature, greedy)
+
+  def draw(self, out_BxP, key, noise_BxD, previous_B, *, pi_temperature=1.0, sigma_temperature=1.0, persistence=0.0):
+    """A frame drawn with the given noise, the previous frame's component favoured by ``persistence``
+    (added to its log-weight): ``(frame [B, D], component [B])``."""
+    logpi, mu, scale = self.params(out_BxP)
+    bias = persistence * jax.nn.one_hot(previous_B, self.num_mixtures)
+    return mdn_draw(key, logpi, mu, scale, noise_BxD, pi_temperature, sigma_temperature, bias)
 
   def mean(self, out_xP):
     """The mixture's mean frame."""
