@@ -411,7 +411,12 @@ def _add_sampling_args(p) -> None:
     help="decode with the training takes' bone lengths (default: the run's sample.rigid_bones)",
   )
   p.add_argument("--seed", type=int, default=0, help="sampling seed: the same seed draws the same dance")
-  p.add_argument("--checkpoint", default="latest", metavar="STEP|best|latest")
+  p.add_argument(
+    "--checkpoint",
+    default="latest",
+    metavar="STEP|best|latest",
+    help="which checkpoint: a step, the best validation loss, or the latest (default latest)",
+  )
   p.add_argument("--force", action="store_true", help="overwrite the output if it exists")
 
 
@@ -426,7 +431,7 @@ def _add_data_commands(sub) -> None:
   info.set_defaults(func=_data_info)
   plot = dsub.add_parser("plot", help="pelvis and end joints over time (first 200 frames, the rest) as PNG")
   plot.add_argument("input", metavar="PATH", help="one motion file")
-  plot.add_argument("-o", "--output", required=True, metavar="FILE.png")
+  plot.add_argument("-o", "--output", required=True, metavar="FILE.png", help="the PNG to write (required)")
   plot.add_argument("--split", type=int, default=200, help="frames in the first row (default 200)")
   plot.set_defaults(func=_data_plot)
   conv = dsub.add_parser("convert", help="convert BVH, ASF/AMC, C3D or CSV takes to the training CSV layout or to BVH")
@@ -518,7 +523,13 @@ def _add_run_commands(sub) -> None:
   render.add_argument(
     "inputs", nargs="+", metavar="INPUT", help="motion files (.csv, .npz, .bvh, .amc, .c3d), folders or cmu94"
   )
-  render.add_argument("-o", "--output", required=True, metavar="OUT.(png|gif|mp4|html)")
+  render.add_argument(
+    "-o",
+    "--output",
+    required=True,
+    metavar="OUT.(png|gif|mp4|html)",
+    help="the file to write; its suffix picks the format",
+  )
   render.add_argument("--frames", type=int, help="render only the first N frames")
   render.add_argument("--fps", type=float, default=30.0, help="frame rate of CSV inputs (default 30)")
   render.add_argument("--columns", type=int, help="HTML grid columns (default: up to 4)")
@@ -535,10 +546,31 @@ def _add_run_commands(sub) -> None:
   render.set_defaults(func=_render)
 
 
+SWEEP_FORMAT = """Train and evaluate every point of a grid over config keys. Points already finished are
+skipped, so an interrupted sweep continues where it stopped.
+
+The sweep file (TOML):
+  name = "lr_sweep"                      # run directories are named NAME-KEY=VALUE-...
+  base = "../configs/quickstart.toml"    # the config every point starts from (relative to this file)
+  root = "runs/lr_sweep"                 # where the run directories go (relative to the working directory)
+  [set]                                  # keys set for every point (optional)
+  "train.num_steps" = 1000
+  [grid]                                 # every combination of these values is one point
+  "optim.lr" = [1e-3, 3e-3]
+  "train.seed" = [0, 1, 2]
+  [candidates.canonical]                 # named variants, each crossed with the grid (optional)
+  "data.representation" = "canonical"
+  [eval]                                 # chorjax eval after training (optional): data, frames,
+  data = ["cmu94"]                       # num, seed, seeds, splits, window and the sampling
+  seeds = [0, 1, 2, 3]                   # controls (pi_temperature, noise_smoothing, ...)
+
+Then: chorjax compare ROOT/* -o report.md"""
+
+
 def _add_report_commands(sub) -> None:
   """`chorjax eval`, `sweep` and `compare`."""
   ev = sub.add_parser("eval", help="held-out likelihood and generation metrics of a trained run")
-  ev.add_argument("workdir", metavar="WORKDIR")
+  ev.add_argument("workdir", metavar="WORKDIR", help="a run directory with checkpoints")
   ev.add_argument(
     "--data",
     nargs="+",
@@ -580,13 +612,18 @@ def _add_report_commands(sub) -> None:
   me.add_argument("--force", action="store_true", help="overwrite the output if it exists")
   me.set_defaults(func=_metrics)
 
-  sw = sub.add_parser("sweep", help="train and evaluate every point of a grid over config keys")
-  sw.add_argument("sweep", metavar="SWEEP.toml")
+  sw = sub.add_parser(
+    "sweep",
+    help="train and evaluate every point of a grid over config keys",
+    description=SWEEP_FORMAT,
+    formatter_class=argparse.RawDescriptionHelpFormatter,
+  )
+  sw.add_argument("sweep", metavar="SWEEP.toml", help="the sweep file (format above)")
   sw.set_defaults(func=_sweep)
 
   cmp_ = sub.add_parser("compare", help="a markdown report comparing evaluated runs, with plots")
-  cmp_.add_argument("workdirs", nargs="+", metavar="WORKDIR")
-  cmp_.add_argument("-o", "--output", required=True, metavar="report.md")
+  cmp_.add_argument("workdirs", nargs="+", metavar="WORKDIR", help="evaluated run directories (chorjax eval or sweep)")
+  cmp_.add_argument("-o", "--output", required=True, metavar="report.md", help="the markdown report to write")
   cmp_.add_argument("--force", action="store_true", help="overwrite the report if it exists")
   cmp_.set_defaults(func=_compare)
 

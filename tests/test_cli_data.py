@@ -33,3 +33,22 @@ def test_data_plot_writes_a_png(tmp_path):
   take = bundled_path("cmu94") / "94_01_skeleton_3d.csv"
   assert cli.main(["data", "plot", str(take), "-o", str(out)]) == 0
   assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 10_000
+
+
+def test_every_flag_of_every_subcommand_has_help():
+  import argparse
+
+  from chorjax.cli import build_parser
+
+  missing = []
+
+  def walk(parser, name):
+    for action in parser._actions:
+      if isinstance(action, argparse._SubParsersAction):
+        for sub, p in action.choices.items():
+          walk(p, f"{name} {sub}")
+      elif not isinstance(action, argparse._HelpAction) and not action.help:
+        missing.append(f"{name} {'/'.join(action.option_strings) or action.dest}")
+
+  walk(build_parser(), "chorjax")
+  assert not missing
