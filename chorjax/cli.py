@@ -532,7 +532,7 @@ def _add_run_commands(sub) -> None:
   )
   render.add_argument("--frames", type=int, help="render only the first N frames")
   render.add_argument("--fps", type=float, default=30.0, help="frame rate of CSV inputs (default 30)")
-  render.add_argument("--columns", type=int, help="HTML grid columns (default: up to 4)")
+  render.add_argument("--columns", type=int, help="HTML grid columns (default: as many side by side as fit the window)")
   render.add_argument("--title", help="HTML page title")
   render.add_argument(
     "--strip",

@@ -438,10 +438,7 @@ def write_end_sample(workdir: Path, graphdef, params, ds: Dataset, cfg: Config) 
     Motion(p, real.fps, sk, real.up_axis, real.units, name=f"generated #{i} (motion {s.motion})")
     for i, p in enumerate(pos)
   ]
-  # originals above, generated below (the reference notebook's catalog page)
-  html = write_player(
-    motions, out / "player.html", title=f"chorjax: {cfg.name}", columns=max(s.num, 1), rows=[0] + [1] * s.num
-  )
+  html = write_player(motions, out / "player.html", title=f"chorjax: {cfg.name}")  # side by side
   return {"csv": str(csv), "html": str(html)}
 
 

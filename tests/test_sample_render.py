@@ -195,21 +195,8 @@ def chromium():
 
 def test_html_player_in_headless_chromium(run_dir, tmp_path):
   html = tmp_path / "player.html"
-  assert (
-    cli.main(
-      [
-        "render",
-        str(TAKE),
-        str(bundled_path("cmu94") / "94_01_skeleton_3d.csv"),
-        str(run_dir / "samples" / "sample.csv"),
-        "-o",
-        str(html),
-        "--columns",
-        "2",
-      ]
-    )
-    == 0
-  )
+  takes = [str(TAKE), str(bundled_path("cmu94") / "94_01_skeleton_3d.csv"), str(run_dir / "samples" / "sample.csv")]
+  assert cli.main(["render", *takes, "-o", str(html)]) == 0
   text = html.read_text()
   assert "http://" not in text and "https://" not in text and "<script src" not in text  # offline
   flags = [
@@ -221,21 +208,45 @@ def test_html_player_in_headless_chromium(run_dir, tmp_path):
     "--no-first-run",
     f"--user-data-dir={tmp_path / 'profile'}",
   ]
-  dom = subprocess.run(
-    [chromium(), *flags, "--virtual-time-budget=3000", "--dump-dom", f"file://{html}#selftest"],
-    capture_output=True,
-    text=True,
-    timeout=120,
-  ).stdout
-  report = json.loads(dom.split('<pre id="selftest">')[1].split("</pre>")[0])
-  assert report["errors"] == []
-  assert report["nonblank"] > 1000  # stick figures and floor were drawn
-  assert report["changed"] and report["frames"][1] > report["frames"][0]  # playing changes the picture
+  # the end-of-training player (original beside generated) and a render of three, on two screens
+  for page, panels in ((run_dir / "samples" / "player.html", 2), (html, 3)):
+    for width, height in ((1280, 800), (1920, 1080)):
+      dom = subprocess.run(
+        [
+          chromium(),
+          *flags,
+          f"--window-size={width},{height}",
+          "--virtual-time-budget=3000",
+          "--dump-dom",
+          f"file://{page}#selftest",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+      ).stdout
+      report = json.loads(dom.split('<pre id="selftest">')[1].split("</pre>")[0])
+      assert report["errors"] == []
+      assert report["nonblank"] > 1000  # stick figures and floor were drawn
+      assert report["changed"] and report["frames"][1] > report["frames"][0]  # it plays by itself
+      w, h = report["viewport"]
+      boxes = report["boxes"]
+      assert len(boxes) == panels
+      for left, top, right, bottom in boxes:  # every dancer fully visible without scrolling
+        assert 0 <= left < right <= w and 0 <= top < bottom <= h and bottom - top > 0.4 * h
+      assert len({round(top) for _, top, _, _ in boxes}) == 1  # side by side, one row
+      for (px, py), (left, top, right, bottom) in zip(report["pixels"], boxes):
+        assert px >= right - left - 1 and py >= bottom - top - 1  # canvas pixels match the box: crisp
   artifacts = ROOT / "test-artifacts"
   artifacts.mkdir(exist_ok=True)
   shot = artifacts / "player.png"
   subprocess.run(
-    [chromium(), *flags, "--window-size=1200,900", f"--screenshot={shot}", f"file://{html}"],
+    [
+      chromium(),
+      *flags,
+      "--window-size=1280,800",
+      f"--screenshot={shot}",
+      f"file://{run_dir / 'samples' / 'player.html'}",
+    ],
     capture_output=True,
     timeout=120,
   )

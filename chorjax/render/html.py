@@ -2,12 +2,13 @@
 
 No network and no CDN: the motions are embedded as base64 float32 arrays and drawn with a small
 perspective projection on 2D canvases. Controls: play/pause, scrub bar, speed, mouse drag to orbit,
-wheel to zoom; several motions side by side in a grid with titles (originals above, generated
-below, like the reference notebook's catalog page).
+wheel to zoom. It starts playing (looped). Motions sit side by side, each in a labelled panel; panels
+wrap onto further rows on narrow screens, and each canvas is sized to its box at the device pixel
+ratio (crisp) and to the window's height (a dancer is never cut off below the fold).
 
 Opening the file with ``#selftest`` appended plays it briefly and writes a JSON report into the
 ``<pre id="selftest">`` element (JavaScript errors, non-blank pixels, whether playing changed the
-picture); the browser test reads it.
+picture, the canvases' boxes and the window's size); the browser test reads it.
 """
 
 from __future__ import annotations
@@ -39,25 +40,17 @@ def _payload(m: Motion) -> dict:
   }
 
 
-def player_html(
-  motions: Sequence[Motion], title: str = "chorjax", columns: int | None = None, rows: Sequence[int] | None = None
-) -> str:
-  """The player page as a string; ``rows`` optionally pins each motion to a grid row (0 = top)."""
-  cols = columns or min(len(motions), 4)
-  payloads = [_payload(m) for m in motions]
-  for p, r in zip(payloads, rows or []):
-    p["row"] = int(r)
-  data = json.dumps(payloads)
-  return (
-    _TEMPLATE.replace("__TITLE__", html_lib.escape(title)).replace("__COLUMNS__", str(cols)).replace("__DATA__", data)
-  )
+def player_html(motions: Sequence[Motion], title: str = "chorjax", columns: int | None = None) -> str:
+  """The player page as a string; ``columns`` fixes the grid's columns (default: as many side by side
+  as fit, each at least 300 CSS pixels wide)."""
+  grid = f"repeat({columns}, minmax(0, 1fr))" if columns else "repeat(auto-fit, minmax(min(100%, 300px), 1fr))"
+  data = json.dumps([_payload(m) for m in motions])
+  return _TEMPLATE.replace("__TITLE__", html_lib.escape(title)).replace("__GRID__", grid).replace("__DATA__", data)
 
 
-def write_player(
-  motions: Sequence[Motion], path, title: str = "chorjax", columns: int | None = None, rows: Sequence[int] | None = None
-) -> Path:
+def write_player(motions: Sequence[Motion], path, title: str = "chorjax", columns: int | None = None) -> Path:
   """Writes the player page atomically."""
-  text = player_html(motions, title, columns, rows)
+  text = player_html(motions, title, columns)
   return atomic_write(path, lambda p: p.write_text(text, encoding="utf-8"))
 
 
@@ -66,12 +59,13 @@ _TEMPLATE = r"""<!DOCTYPE html>
 <script>window.__errors = []; window.addEventListener('error', function (e) { window.__errors.push(String(e.message)); });</script>
 <style>
 body { font-family: system-ui, sans-serif; margin: 12px; background: #fafafa; color: #222; }
+h3 { margin: 0 0 8px; }
 #controls { display: flex; gap: 10px; align-items: center; margin-bottom: 10px; }
 #scrub { flex: 1; }
-#grid { display: grid; grid-template-columns: repeat(__COLUMNS__, 1fr); gap: 8px; }
+#grid { display: grid; grid-template-columns: __GRID__; gap: 8px; }
 figure { margin: 0; background: #fff; border: 1px solid #ddd; }
 figcaption { font-size: 13px; padding: 4px 8px; border-bottom: 1px solid #eee; }
-canvas { width: 100%; height: auto; display: block; cursor: grab; }
+canvas { width: 100%; height: 360px; display: block; cursor: grab; }
 </style></head><body>
 <h3>__TITLE__</h3>
 <div id="controls">
@@ -91,13 +85,12 @@ canvas { width: 100%; height: auto; display: block; cursor: grab; }
     for (var i = 0; i < s.length; i++) bytes[i] = s.charCodeAt(i);
     return new Float32Array(bytes.buffer);
   }
-  var view = { yaw: 0.6, pitch: 0.25, zoom: 1.0 };
+  var view = { yaw: 0.6, pitch: 0.25, zoom: 1.5 };
   var players = MOTIONS.map(function (m) {
     var fig = document.createElement('figure');
     var cap = document.createElement('figcaption'); cap.textContent = m.title + ' (' + m.frames + ' frames, ' + m.fps + ' fps)';
-    var cv = document.createElement('canvas'); cv.width = 480; cv.height = 400;
+    var cv = document.createElement('canvas');
     fig.appendChild(cap); fig.appendChild(cv); document.getElementById('grid').appendChild(fig);
-    if (m.row !== undefined) fig.style.gridRow = String(m.row + 1);
     var pos = decode(m.data), J = m.joints, cx = 0, cz = 0, ymin = Infinity;
     for (var t = 0; t < m.frames; t++) {  // fixed camera: centre of the whole take on the floor
       cx += pos[(t * J) * 3]; cz += pos[(t * J) * 3 + 2];
@@ -115,23 +108,32 @@ canvas { width: 100%; height: auto; display: block; cursor: grab; }
     var cy = Math.cos(view.yaw), sy = Math.sin(view.yaw), cp = Math.cos(view.pitch), sp = Math.sin(view.pitch);
     var x1 = cy * x + sy * z, z1 = -sy * x + cy * z;
     var y2 = cp * y - sp * z1, z2 = sp * y + cp * z1;
-    var d = 6.0 / view.zoom, f = p.cv.height * 1.1 / (d - z2);
+    var d = 6.0 / view.zoom, f = Math.min(p.cv.height, p.cv.width * 1.25) * 1.1 / (d - z2);
     return [p.cv.width / 2 + x1 * f, p.cv.height / 2 - y2 * f];
   }
+  function fit() {  // each canvas: its box's width, as tall as the window allows, at the device pixel ratio
+    var dpr = window.devicePixelRatio || 1;
+    players.forEach(function (p) {
+      var top = p.cv.getBoundingClientRect().top + window.scrollY;
+      var h = Math.max(160, Math.min(window.innerHeight - top - 14, p.cv.clientWidth * 1.25));
+      p.cv.style.height = Math.floor(h) + 'px';
+      p.cv.width = Math.round(p.cv.clientWidth * dpr); p.cv.height = Math.round(h * dpr); p.dpr = dpr;
+    });
+  }
   function draw(p) {
-    var ctx = p.ctx, W = p.cv.width, H = p.cv.height, J = p.m.joints;
+    var ctx = p.ctx, W = p.cv.width, H = p.cv.height, J = p.m.joints, px = p.dpr || 1;
     ctx.fillStyle = '#ffffff'; ctx.fillRect(0, 0, W, H);
-    ctx.strokeStyle = '#e4e4e4'; ctx.lineWidth = 1;  // floor grid
+    ctx.strokeStyle = '#e4e4e4'; ctx.lineWidth = px;  // floor grid
     for (var g = -4; g <= 4; g++) {
       var a = proj3(p, g, 0, -4), b = proj3(p, g, 0, 4), c = proj3(p, -4, 0, g), d = proj3(p, 4, 0, g);
       line(ctx, a, b); line(ctx, c, d);
     }
     var t = Math.min(state.frame, p.m.frames - 1), base = t * J * 3, pts = [];
     for (var j = 0; j < J; j++) pts.push(project(p, p.pos[base + 3 * j], p.pos[base + 3 * j + 1], p.pos[base + 3 * j + 2]));
-    ctx.strokeStyle = '#1f5fa8'; ctx.lineWidth = 3;
+    ctx.strokeStyle = '#1f5fa8'; ctx.lineWidth = 3 * px;
     p.m.bones.forEach(function (bn) { line(ctx, pts[bn[0]], pts[bn[1]]); });
     ctx.fillStyle = '#c0392b';
-    pts.forEach(function (q) { ctx.beginPath(); ctx.arc(q[0], q[1], 3, 0, 2 * Math.PI); ctx.fill(); });
+    pts.forEach(function (q) { ctx.beginPath(); ctx.arc(q[0], q[1], 3 * px, 0, 2 * Math.PI); ctx.fill(); });
   }
   function proj3(p, gx, gy, gz) {  // grid points are in viewer units around the take's centre
     return project(p, p.cx + gx / (p.m.scale * 2), p.y0, p.cz + gz / (p.m.scale * 2));
@@ -160,7 +162,9 @@ canvas { width: 100%; height: auto; display: block; cursor: grab; }
     });
     p.cv.addEventListener('wheel', function (e) { e.preventDefault(); view.zoom = Math.max(0.3, Math.min(5, view.zoom * (e.deltaY > 0 ? 0.9 : 1.1))); render(); }, { passive: false });
   });
-  render();
+  fit(); render();
+  window.addEventListener('resize', function () { fit(); render(); });
+  setPlaying(true);  // autoplay, looped
 
   if (location.hash === '#selftest') {
     var signature = function () {
@@ -174,12 +178,14 @@ canvas { width: 100%; height: auto; display: block; cursor: grab; }
       return [sig, nonblank];
     };
     var before = signature(), f0 = state.frame;
-    setPlaying(true);
     setTimeout(function () {
       setPlaying(false);
       var after = signature();
       document.getElementById('selftest').textContent = JSON.stringify({
-        errors: window.__errors, nonblank: before[1], changed: before[0] !== after[0], frames: [f0, state.frame]
+        errors: window.__errors, nonblank: before[1], changed: before[0] !== after[0], frames: [f0, state.frame],
+        viewport: [window.innerWidth, window.innerHeight],
+        boxes: players.map(function (p) { var r = p.cv.getBoundingClientRect(); return [r.left, r.top, r.right, r.bottom]; }),
+        pixels: players.map(function (p) { return [p.cv.width, p.cv.height]; })
       });
     }, 700);
   }
