@@ -212,8 +212,8 @@ def _sample(args) -> int:
 
 # The keys `chorjax metrics` and `chorjax eval` print (every one is in the JSON; see chorjax/scoring.py).
 METRIC_KEYS = (
-  "movement_first_1000",
-  "movement_last_1000",
+  "movement_first",
+  "movement_last",
   "movement_min",
   "movement_max",
   "jitter",
@@ -234,6 +234,8 @@ METRIC_KEYS = (
 def _print_metrics(result: dict, keys) -> None:
   from chorjax.scoring import mean_of
 
+  if "segment_frames" in result:
+    print(f"segments of {result['segment_frames']} frames (movement_first/last/min/max, jitter_max)")
   for k in keys:
     real = result.get(k + "_real")
     print(f"{k:22s} {mean_of(result[k]):10.4g}" + (f"   (real: {mean_of(real):.4g})" if real is not None else ""))

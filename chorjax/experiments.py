@@ -46,7 +46,7 @@ import numpy as np
 
 from chorjax.config import load_config, valid_keys
 from chorjax.errors import UserError, atomic_write
-from chorjax.scoring import mean_of
+from chorjax.scoring import mean_of, upgrade
 
 SWEEP_KEYS = {"name", "base", "root", "grid", "set", "eval", "candidates"}
 EVAL_KEYS = {
@@ -155,9 +155,9 @@ def run_sweep(path, log=print) -> list[Path]:
 # metric -> (label, how to pick the winner)
 COLUMNS = [
   ("heldout_loss", "held-out loss", "min"),
-  ("movement_first_1000", "movement first 1k", "one"),
-  ("movement_last_1000", "movement last 1k", "one"),
-  ("movement_min", "movement worst 1k", "worst"),
+  ("movement_first", "movement first segment", "one"),
+  ("movement_last", "movement last segment", "one"),
+  ("movement_min", "movement worst segment", "worst"),
   ("jitter", "jitter", "one"),
   ("bone_cv_mean", "bone CV mean", "min"),
   ("root_step_max", "root step max", "min"),
@@ -212,7 +212,7 @@ def _read_run(workdir: Path) -> dict:
     "name": workdir.name,
     "dir": workdir,
     "config": json.loads(cfg_path.read_text()),
-    "eval": json.loads(ev_path.read_text()),
+    "eval": upgrade(json.loads(ev_path.read_text())),
     "history": rows,
   }
 
@@ -304,14 +304,14 @@ def _movement_plot(plt, groups, path: Path) -> None:
   fig, ax = plt.subplots(figsize=(8, 4))
   for g in groups:
     curves = [r["eval"]["movement_curve"] for r in g["runs"]]
-    n = min(len(c) for c in curves)
+    n, seg = min(len(c) for c in curves), g["runs"][0]["eval"]["segment_frames"]
     mean, sd = np.mean([c[:n] for c in curves], 0), np.std([c[:n] for c in curves], 0)
-    x = np.arange(n) * 1000 + 500
+    x = np.arange(n) * seg + seg / 2
     ax.plot(x, mean, "o-", label=f"{g['name']} ({len(curves)} runs)")
     ax.fill_between(x, mean - sd, mean + sd, alpha=0.15)
   ax.axhline(1.0, color="k", lw=0.8, ls=":")
   ax.axhspan(0.6, 1.4, color="g", alpha=0.08)
-  ax.set_xlabel("generated frame (centre of each 1,000-frame segment)")
+  ax.set_xlabel("generated frame (centre of each segment)")
   ax.set_ylabel("movement over 0.5 s / data's")
   ax.legend(fontsize=7)
   fig.tight_layout()
@@ -326,13 +326,29 @@ def _cell(g, key, rule) -> str:
   return f"{mean:.3g} ± {sd:.2g}" if len(values) > 1 else f"{mean:.4g}"
 
 
+def _settings(e: dict) -> str:
+  """One run's evaluation settings, as the report states them."""
+  sampling = ", ".join(f"{k} {v}" for k, v in e["sampling"].items() if k not in ("seed", "seeds"))
+  return (
+    f"{e['num']} x {e['frames']} frames per sampling seed {e['sampling'].get('seeds')}, compared with "
+    f"{', '.join(e['data'])}; segments of {e['segment_frames']} frames; windows of {e['window']} frames for "
+    f"FID, Div and novelty; FID_real over {e['splits']} random halves of the reference; sampling: {sampling}"
+  )
+
+
 def _table(groups) -> list[str]:
-  e0 = groups[0]["runs"][0]["eval"]
+  settings: dict[str, list[str]] = {}
+  for g in groups:
+    for r in g["runs"]:
+      settings.setdefault(_settings(r["eval"]), []).append(r["name"])
+  if len(settings) == 1:
+    said = [f"Evaluation of every run: {next(iter(settings))}."]
+  else:
+    said = ["Evaluation settings differ between runs:"] + [f"- {', '.join(n)}: {s}." for s, n in settings.items()]
   lines = [
-    f"Samples: {e0['num']} x {e0['frames']} frames per run and sampling seed {e0['sampling'].get('seeds')}; "
-    f"compared with {', '.join(e0['data'])}; windows of {e0['window']} frames for FID, Div and novelty; "
-    f"FID_real over {e0['splits']} random halves of the reference. Cells: mean ± sd over the training seeds "
-    "of a row (runs whose configs differ only in train.seed).",
+    *said,
+    "",
+    "Cells: mean ± sd over the training seeds of a row (runs whose configs differ only in train.seed).",
     "",
     "| config | runs | cell | head | " + " | ".join(c[1] for c in COLUMNS) + " |",
     "|---" * (4 + len(COLUMNS)) + "|",
@@ -343,6 +359,7 @@ def _table(groups) -> list[str]:
     lines.append(
       f"| {g['name']} | {len(g['runs'])} | {c['model']['cell']} | {c['model']['head']} | " + " | ".join(cells) + " |"
     )
+  e0 = groups[0]["runs"][0]["eval"]
   real = lambda k: f"{mean_of(e0[k]):.4g}" if e0.get(k) is not None else "-"
   lines.append(
     f"| real data (reference) | | | | | 1 | 1 | 1 | 1 | - | <= 1 | {real('data_foot_sliding')} | {real('data_pfc')} | "

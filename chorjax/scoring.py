@@ -6,9 +6,11 @@ units; lengths are divided by the reference's body size where sizes matter.
 
 Keys (a value, or ``{"mean", "sd"}`` over several motions or reference splits):
 
-* ``movement_first_1000``, ``movement_last_1000``, ``movement_min``, ``movement_max``: per consecutive
-  1,000-frame segment (the whole motion if shorter), the mean root-relative joint displacement over
-  0.5 s divided by the reference's; 1 = moves as much as the data, trembling in place -> 0.
+* ``movement_first``, ``movement_last``, ``movement_min``, ``movement_max``: per consecutive segment of
+  ``segment_frames`` frames (``segment``, default 1,000; the shortest motion's length if that is shorter),
+  the mean root-relative joint displacement over 0.5 s divided by the reference's; 1 = moves as much as
+  the data, trembling in place -> 0. (Files written before 2026-11-23 call the first two
+  ``movement_first_1000`` and ``movement_last_1000``; :func:`upgrade` renames them.)
 * ``jitter``, ``jitter_max``: mean magnitude of the second difference of joint positions / the
   reference's, over the whole motion and in its roughest segment.
 * ``bone_cv_mean``, ``bone_cv_max`` (and ``bone_cv_median``): per-bone length CV, mean and max over bones.
@@ -50,14 +52,26 @@ def mean_of(value) -> float:
   return float(value["mean"]) if isinstance(value, dict) else float(value)
 
 
+def upgrade(result: dict) -> dict:
+  """A metrics dict in today's key names (older files named the first and last segment after 1,000 frames)."""
+  out = dict(result)
+  for old, new in (("movement_first_1000", "movement_first"), ("movement_last_1000", "movement_last")):
+    if old in out and new not in out:
+      out[new] = out.pop(old)
+  out.setdefault("segment_frames", 1000)
+  return out
+
+
 def _movement_and_jitter(motions, reference, skeleton: Skeleton, fps: float, segment: int) -> dict:
   lag = max(round(0.5 * fps), 1)
   ref_disp, ref_rough = metrics.reference_rates(reference, skeleton.root, lag)
+  segment = min(segment, min(len(m) for m in motions))
   moves = [metrics.movement_curve(m, skeleton.root, lag, ref_disp, segment) for m in motions]
   jitters = [metrics.jitter_curve(m, ref_rough, segment) for m in motions]
   return {
-    "movement_first_1000": spread([c[0] for c in moves]),
-    "movement_last_1000": spread([c[-1] for c in moves]),
+    "segment_frames": segment,
+    "movement_first": spread([c[0] for c in moves]),
+    "movement_last": spread([c[-1] for c in moves]),
     "movement_min": spread([c.min() for c in moves]),
     "movement_max": spread([c.max() for c in moves]),
     "jitter": spread([metrics.roughness(m) / ref_rough for m in motions]),

@@ -120,7 +120,7 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
   m = json.loads((runs[0] / "eval" / "metrics.json").read_text())
   for key in ("heldout_loss", *METRIC_KEYS, "fid_k_real", "fid_g_real", "novelty_real"):
     assert np.isfinite(mean_of(m[key])), key
-  assert set(m["fid_k"]) == {"mean", "sd"} and set(m["movement_first_1000"]) == {"mean", "sd"}  # 2 seeds
+  assert set(m["fid_k"]) == {"mean", "sd"} and set(m["movement_first"]) == {"mean", "sd"}  # 2 seeds
   assert m["sampling"]["seeds"] == [0, 1] and (runs[0] / "eval" / "sample.npz").exists()
   assert m["loss_kind"] == "nll" and json.loads((runs[2] / "eval" / "metrics.json").read_text())["loss_kind"] == "mse"
   capsys.readouterr()
@@ -131,6 +131,8 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
   text = report.read_text()
   assert "| t-head=mdn | 2 | lnlstm | mdn |" in text and "| t-head=mse | 2 | lnlstm | mse |" in text  # seeds grouped
   assert "## Who wins" in text and "not comparable" in text and " ± " in text
+  assert m["segment_frames"] == 240 and "Evaluation of every run: 1 x 240 frames" in text  # what was measured
+  assert "segments of 240 frames" in text and "movement first segment" in text
   assert (tmp_path / "report_strip0.png").exists() and "![t-head=mse](report_strip1.png)" in text
   assert (tmp_path / "report_loss.png").exists() and (tmp_path / "report_movement.png").exists()
   # eval through the CLI, and its errors
@@ -157,6 +159,12 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
   assert np.isfinite(m["heldout_loss"])
   assert cli.main(["eval", str(runs[0]), "--data", "nope.csv", "-o", str(tmp_path / "m2.json")]) == 2
   assert cli.main(["compare", str(tmp_path), "-o", str(tmp_path / "r2.md")]) == 2
+  # one run re-evaluated otherwise: the report says which run was measured how
+  args = ["eval", str(runs[1]), "--data", "cmu94/94_10_skeleton_3d.csv", "--frames", "300", "--num", "1", "--force"]
+  assert cli.main(args) == 0
+  assert cli.main(["compare", *map(str, runs), "-o", str(tmp_path / "r3.md")]) == 0
+  text = (tmp_path / "r3.md").read_text()
+  assert "Evaluation settings differ between runs:" in text and "- t-head=mdn-seed=1: 1 x 300 frames" in text
 
 
 # ---------------------------------------------------------------- movement, jitter, bones, FID on constructed cases
@@ -178,7 +186,7 @@ def test_an_unseen_real_take_scores_like_the_data_and_so_do_its_mirror_and_rever
   take = takes["94_10_skeleton_3d"]
   for motion in (take, np.asarray(tf.mirror(take, MPII16.twins)), take[::-1]):
     r = _score(motion, takes)
-    assert 0.8 <= r["movement_first_1000"] <= 1.25 and 0.8 <= r["jitter"] <= 1.25, r
+    assert 0.8 <= r["movement_first"] <= 1.25 and 0.8 <= r["jitter"] <= 1.25, r
     for k in ("fid_k", "fid_g"):  # inside the real reference's own spread
       assert r[k]["mean"] <= r[k + "_real"]["mean"] + 2 * r[k + "_real"]["sd"], (k, r[k], r[k + "_real"])
 
@@ -204,7 +212,7 @@ def test_movement_per_segment_sees_a_dance_that_stops():
   r = score([stopped], [walk], MPII16, 30.0, splits=2, window=30)
   curve = r["movement_curve"]
   assert len(curve) == 4 and curve[0] == pytest.approx(1.0, rel=0.1) and curve[-1] == 0.0
-  assert r["movement_first_1000"] == curve[0] and r["movement_last_1000"] == 0.0 and r["movement_min"] == 0.0
+  assert r["movement_first"] == curve[0] and r["movement_last"] == 0.0 and r["movement_min"] == 0.0
 
 
 def test_rigid_bones_have_zero_cv_and_the_mean_and_max_see_one_bad_bone(takes):
@@ -230,7 +238,7 @@ def test_chorjax_metrics_separates_a_real_take_from_a_trembling_fake(tmp_path, t
     assert cli.main(["metrics", str(path), "--data", *refs, "--splits", "5", "-o", str(tmp_path / f"{name}.json")]) == 0
     out[name] = json.loads((tmp_path / f"{name}.json").read_text())
   keys = set(  # issue 14's list, verbatim
-    "movement_first_1000 movement_last_1000 movement_min movement_max jitter jitter_max bone_cv_mean bone_cv_max "
+    "movement_first movement_last movement_min movement_max jitter jitter_max bone_cv_mean bone_cv_max "
     "fid_k fid_k_real div_k fid_g fid_g_real div_g pfc foot_sliding novelty novelty_real".split()
   )
   assert keys <= set(out["real"]) and keys <= set(out["fake"])
