@@ -296,23 +296,31 @@ def _render(args) -> int:
     from chorjax.render.html import write_player
 
     written = write_player(motions, out, title=args.title or out.stem, columns=args.columns)
+  elif suffix in (".gif", ".mp4"):
+    from chorjax.render.video import write_animation
+
+    written = write_animation(motions, out, size=_size(args.size))
   else:
     if len(motions) > 1:
       print(f"note: {suffix} shows one motion; rendering {motions[0].name}", file=sys.stderr)
-    if suffix == ".png" and args.strip:
+    if args.strip:
       from chorjax.render.plot import plot_strip
 
       written = plot_strip(motions[0], out, every=args.every, poses=args.poses)
-    elif suffix == ".png":
+    else:
       from chorjax.render.plot import plot_trajectories
 
       written = plot_trajectories(motions[0], out)
-    else:
-      from chorjax.render.video import write_animation
-
-      written = write_animation(motions[0], out)
   print(f"wrote {written}")
   return 0
+
+
+def _size(text: str) -> tuple[int, int]:
+  """``WxH`` -> (W, H), both even and at least 64 (video codecs want even sizes)."""
+  w, _, h = text.lower().partition("x")
+  if not (w.isdigit() and h.isdigit()) or int(w) < 64 or int(h) < 64:
+    raise UserError(f"--size {text}: expected WIDTHxHEIGHT in pixels, e.g. 1280x720 (at least 64x64)")
+  return int(w) // 2 * 2, int(h) // 2 * 2
 
 
 def _eval(args) -> int:
@@ -534,6 +542,9 @@ def _add_run_commands(sub) -> None:
   )
   render.add_argument("--frames", type=int, help="render only the first N frames")
   render.add_argument("--fps", type=float, default=30.0, help="frame rate of CSV inputs (default 30)")
+  render.add_argument(
+    "--size", default="1280x720", metavar="WxH", help="GIF/MP4: frame size in pixels (default 1280x720)"
+  )
   render.add_argument("--columns", type=int, help="HTML grid columns (default: as many side by side as fit the window)")
   render.add_argument("--title", help="HTML page title")
   render.add_argument(

@@ -153,18 +153,26 @@ def test_sample_cli_writes_csv_npz_with_blends_and_primes(run_dir, tmp_path, cap
   assert settings["pi_temperature"] == 0.3 and settings["sigma_temperature"] == 1.0  # the run's [sample] defaults
 
 
-def test_render_gif_and_mp4_are_valid(tmp_path):
+def test_render_gif_and_mp4_are_valid_720p_side_by_side_and_fork_free(tmp_path, recwarn):
   gif, mp4 = tmp_path / "a.gif", tmp_path / "a.mp4"
-  assert cli.main(["render", str(TAKE), "-o", str(gif), "--frames", "12"]) == 0
+  assert cli.main(["render", str(TAKE), "-o", str(gif), "--frames", "12", "--size", "480x360"]) == 0
   frames = iio.imread(gif, index=None)
-  assert frames.shape[0] == 12 and frames.shape[1:3] == (400, 400)
-  assert cli.main(["render", str(TAKE), "-o", str(mp4), "--frames", "12"]) == 0
+  assert frames.shape[0] == 12 and frames.shape[1:3] == (360, 480)
+  other = bundled_path("cmu94") / "94_01_skeleton_3d.csv"
+  assert cli.main(["render", str(TAKE), str(other), "-o", str(mp4), "--frames", "12"]) == 0
+  assert not [w for w in recwarn if "fork" in str(w.message)]  # no deadlock warning from the ffmpeg subprocess
   import imageio_ffmpeg
 
   reader = imageio_ffmpeg.read_frames(str(mp4))
   meta = next(reader)
-  assert tuple(meta["size"]) == (400, 400) and meta["fps"] == pytest.approx(30)
-  assert sum(1 for _ in reader) == 12
+  assert tuple(meta["size"]) == (1280, 720) and meta["fps"] == pytest.approx(30)  # 720p by default
+  first = np.frombuffer(next(reader), np.uint8).reshape(720, 1280, 3)
+  assert sum(1 for _ in reader) == 11
+  ink = (first.min(-1) < 150).any(0)  # columns holding a dark stroke: a dancer in each half
+  assert ink[:640].sum() > 40 and ink[640:].sum() > 40
+  rows = np.flatnonzero((first.min(-1) < 150).any(1))
+  assert rows.max() - rows.min() > 0.4 * 720  # the figure fills the frame's height, not a corner
+  assert cli.main(["render", str(TAKE), "-o", str(tmp_path / "b.mp4"), "--size", "12"]) == 2
   png = tmp_path / "a.png"
   assert cli.main(["render", str(TAKE), "-o", str(png)]) == 0 and png.read_bytes()[:4] == b"\x89PNG"
 

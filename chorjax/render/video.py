@@ -1,10 +1,13 @@
 """Stick-figure animations as GIF or MP4 (needs the ``viz`` extra: matplotlib, imageio, imageio-ffmpeg).
 
-Fixed camera and equal axes over the whole take, at the motion's own frame rate.
+Several motions side by side in one video (720p by default), each with a fixed camera and equal axes
+framing its whole take, at the first motion's frame rate.
 """
 
 from __future__ import annotations
 
+import warnings
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -16,51 +19,59 @@ from chorjax.errors import UserError, atomic_write
 from chorjax.render.plot import require_matplotlib
 
 
-def _frames_rgb(motion: Motion, size: int = 400, max_frames: int | None = None):
+def _frames_rgb(motions: Sequence[Motion], size: tuple[int, int] = (1280, 720), max_frames: int | None = None):
+  """RGB frames ``[H, W, 3]`` of the motions side by side, each in its own 3D panel with a fixed camera
+  framing its whole take (the panel's cube is the take's extent, so the figure fills the panel)."""
   plt = require_matplotlib()
-  pos = np.asarray(transforms.to_y_up(motion.positions, motion.up_axis))
-  if max_frames:
-    pos = pos[:max_frames]
   # matplotlib's 3D axes are z-up: plot (x, z, y)
-  pts = pos[..., [0, 2, 1]]
-  lo, hi = pts.reshape(-1, 3).min(0), pts.reshape(-1, 3).max(0)
-  centre, half = (lo + hi) / 2, (hi - lo).max() / 2 or 1.0
-  fig: Any = plt.figure(figsize=(size / 100, size / 100), dpi=100)
-  ax: Any = fig.add_subplot(projection="3d")  # Axes3D: matplotlib's stubs type it as 2D axes
-  ax.set_box_aspect((1, 1, 1))
-  bones = motion.skeleton.bones
-  lines: list[Any] = [ax.plot([], [], [], color="#1f5fa8", lw=2)[0] for _ in bones]
-  dots: Any = ax.plot([], [], [], "o", color="#c0392b", ms=2)[0]
-  for a, c in zip("xyz", range(3)):
-    getattr(ax, f"set_{a}lim")(centre[c] - half, centre[c] + half)
-  ax.set_xticklabels([])
-  ax.set_yticklabels([])
-  ax.set_zticklabels([])
-  ax.view_init(elev=15, azim=-60)
-  title = ax.set_title(motion.name, fontsize=8)
-  for t in range(pos.shape[0]):
-    for line, (p, c) in zip(lines, bones):
-      line.set_data_3d(pts[t, [p, c], 0], pts[t, [p, c], 1], pts[t, [p, c], 2])
-    dots.set_data_3d(pts[t, :, 0], pts[t, :, 1], pts[t, :, 2])
-    title.set_text(f"{motion.name}  {t}/{pos.shape[0]}")
+  pts = [np.asarray(transforms.to_y_up(m.positions, m.up_axis))[:max_frames][..., [0, 2, 1]] for m in motions]
+  n = max(len(p) for p in pts)
+  fig: Any = plt.figure(figsize=(size[0] / 100, size[1] / 100), dpi=100)
+  fig.subplots_adjust(left=0, right=1, bottom=0, top=1, wspace=0)
+  panels = []
+  for k, (m, p) in enumerate(zip(motions, pts)):
+    ax: Any = fig.add_subplot(1, len(motions), k + 1, projection="3d")  # Axes3D (stubs type it as 2D)
+    lo, hi = p.reshape(-1, 3).min(0), p.reshape(-1, 3).max(0)
+    centre, half = (lo + hi) / 2, (hi - lo).max() / 2 or 1.0
+    for a, c in zip("xyz", range(3)):
+      getattr(ax, f"set_{a}lim")(centre[c] - half, centre[c] + half)
+    ax.set_box_aspect((1, 1, 1), zoom=1.1)
+    ax.set_xticklabels([])
+    ax.set_yticklabels([])
+    ax.set_zticklabels([])
+    ax.view_init(elev=15, azim=-60)
+    lines = [ax.plot([], [], [], color="#1f5fa8", lw=2.5)[0] for _ in m.skeleton.bones]
+    dots = ax.plot([], [], [], "o", color="#c0392b", ms=3)[0]
+    title = ax.text2D(0.5, 0.95, m.name, transform=ax.transAxes, ha="center", fontsize=11)
+    panels.append((m, p, lines, dots, title))
+  for t in range(n):
+    for m, p, lines, dots, title in panels:
+      f = p[min(t, len(p) - 1)]  # a shorter take holds its last frame
+      for line, (a, b) in zip(lines, m.skeleton.bones):
+        line.set_data_3d(f[[a, b], 0], f[[a, b], 1], f[[a, b], 2])
+      dots.set_data_3d(f[:, 0], f[:, 1], f[:, 2])
+      title.set_text(f"{m.name}  {min(t, len(p) - 1)}/{len(p)}")
     fig.canvas.draw()
     yield np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
   plt.close(fig)
 
 
-def write_animation(motion: Motion, path, size: int = 400, max_frames: int | None = None) -> Path:
-  """Writes a GIF or MP4 (by suffix) atomically."""
+def write_animation(
+  motions: Sequence[Motion], path, size: tuple[int, int] = (1280, 720), max_frames: int | None = None
+) -> Path:
+  """Writes a GIF or MP4 (by suffix) of the motions side by side, atomically, at the first one's rate."""
   path = Path(path)
   suffix = path.suffix.lower()
+  fps = motions[0].fps
   try:
     import imageio.v3 as iio
   except ImportError:
     raise UserError("this needs imageio: pip install 'chorjax[viz]'") from None
-  frames = _frames_rgb(motion, size, max_frames)
+  frames = _frames_rgb(motions, size, max_frames)
   if suffix == ".gif":
 
     def write(tmp):
-      iio.imwrite(tmp, np.stack(list(frames)), extension=".gif", duration=1000.0 / motion.fps, loop=0)
+      iio.imwrite(tmp, np.stack(list(frames)), extension=".gif", duration=1000.0 / fps, loop=0)
   elif suffix == ".mp4":
     try:
       import imageio_ffmpeg
@@ -70,16 +81,20 @@ def write_animation(motion: Motion, path, size: int = 400, max_frames: int | Non
     def write(tmp):
       first = next(frames)
       h, w = first.shape[:2]
-      writer = imageio_ffmpeg.write_frames(
-        str(tmp),
-        (w, h),
-        fps=motion.fps,  # pyright: ignore[reportArgumentType] - a float rate is passed to ffmpeg as is
-        codec="libx264",
-        pix_fmt_out="yuv420p",
-        macro_block_size=8,
-        output_params=["-f", "mp4"],
-      )
-      writer.send(None)
+      with warnings.catch_warnings():
+        # ffmpeg runs as a subprocess: CPython forks and at once execs ffmpeg in C, no Python code runs
+        # in the child, so JAX's warning about os.fork() in a multithreaded process does not apply.
+        warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called", category=RuntimeWarning)
+        writer = imageio_ffmpeg.write_frames(
+          str(tmp),
+          (w, h),
+          fps=fps,  # pyright: ignore[reportArgumentType] - a float rate is passed to ffmpeg as is
+          codec="libx264",
+          pix_fmt_out="yuv420p",
+          macro_block_size=8,
+          output_params=["-f", "mp4"],
+        )
+        writer.send(None)
       writer.send(first)
       for f in frames:
         writer.send(f)
