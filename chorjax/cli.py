@@ -390,7 +390,12 @@ def _controls(args) -> dict:
     if v is not None and not (low <= v < high):
       raise UserError(f"--{name.replace('_', '-')} {v}: must be {what} (finite)")
   given = {k: getattr(args, k) for k in checks}
-  return {**given, "greedy": True if args.greedy else None, "rigid_bones": args.rigid_bones}
+  return {
+    **given,
+    "greedy": True if args.greedy else None,
+    "rigid_bones": args.rigid_bones,
+    "foot_lock": args.foot_lock,
+  }
 
 
 def _add_sampling_args(p) -> None:
@@ -419,6 +424,11 @@ def _add_sampling_args(p) -> None:
     "--rigid-bones",
     action=argparse.BooleanOptionalAction,
     help="decode with the training takes' bone lengths (default: the run's sample.rigid_bones)",
+  )
+  p.add_argument(
+    "--foot-lock",
+    action=argparse.BooleanOptionalAction,
+    help="canonical runs: feet in contact do not slide (default: the run's sample.foot_lock)",
   )
   p.add_argument("--seed", type=int, default=0, help="sampling seed: the same seed draws the same dance")
   p.add_argument(

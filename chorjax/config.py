@@ -169,15 +169,30 @@ class SampleConfig:
     "direction): bones cannot stretch",
     resumable=True,
   )
+  foot_lock: bool = _field(
+    False,
+    "canonical features: a foot the model says is in contact with the floor does not slide; the body "
+    "travels by what its legs do",
+    resumable=True,
+  )
   seed: int = _field(0, "sampling seed", resumable=True)
 
   def controls(self, **given) -> dict:
     """How to draw and decode a dance (``sample.dance``): each of ``CONTROLS`` as given, where given and
     not None, else this config's."""
     out = {k: getattr(self, k) if given.get(k) is None else given[k] for k in self.CONTROLS}
-    return {**out, "greedy": bool(out["greedy"]), "rigid_bones": bool(out["rigid_bones"])}
+    flags = ("greedy", "rigid_bones", "foot_lock")
+    return {**out, **{k: bool(out[k]) for k in flags}}
 
-  CONTROLS = ("pi_temperature", "sigma_temperature", "greedy", "noise_smoothing", "persistence", "rigid_bones")
+  CONTROLS = (
+    "pi_temperature",
+    "sigma_temperature",
+    "greedy",
+    "noise_smoothing",
+    "persistence",
+    "rigid_bones",
+    "foot_lock",
+  )
 
 
 @dataclasses.dataclass(frozen=True)

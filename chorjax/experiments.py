@@ -60,6 +60,7 @@ EVAL_KEYS = {
   "noise_smoothing",
   "persistence",
   "rigid_bones",
+  "foot_lock",
   "seeds",
   "splits",
   "window",

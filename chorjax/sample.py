@@ -100,15 +100,17 @@ def smooth_noise(state, key, rho: float):
 
 def dance(graphdef, params, features, motion, key, num_frames: int, controls: dict, prime_BxPxD=None) -> np.ndarray:
   """Dancers in data space ``[B, T, J, 3]``: :func:`generate` with ``controls`` (``SampleConfig.controls``),
-  decoded (with rigid bones if asked). A prime phrase comes first, decoded as one with its continuation
+  decoded (with rigid bones and locked feet if asked). A prime phrase comes first, decoded as one with its continuation
   (root-motion features integrate across the seam)."""
   if controls["rigid_bones"] and features.lengths is None:
     raise UserError("rigid_bones: this run records no bone lengths (trained before the option existed)")
-  drawn = {k: v for k, v in controls.items() if k != "rigid_bones"}
+  if controls["foot_lock"] and features.representation != "canonical":
+    raise UserError(f"foot_lock: needs data.representation = canonical (this run: {features.representation})")
+  drawn = {k: v for k, v in controls.items() if k not in ("rigid_bones", "foot_lock")}
   z = generate(graphdef, params, motion, key, num_frames=num_frames, prime_BxPxD=prime_BxPxD, **drawn)
   if prime_BxPxD is not None:
     z = np.concatenate([prime_BxPxD, np.asarray(z)], axis=1)
-  return np.asarray(features.decode(z, rigid=controls["rigid_bones"]))
+  return np.asarray(features.decode(z, rigid=controls["rigid_bones"], lock_feet=controls["foot_lock"]))
 
 
 def read_prime(spec: str, features, data_cfg) -> np.ndarray:

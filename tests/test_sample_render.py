@@ -357,3 +357,9 @@ def test_sample_cli_smoothing_persistence_and_rigid_bones(run_dir, tmp_path, cap
     assert cli.main(["sample", str(run_dir), "-o", str(tmp_path / "bad.csv"), *bad]) == 2
     assert capsys.readouterr().err.count("\n") == 1
   assert not (tmp_path / "bad.csv").exists()
+
+
+def test_foot_lock_needs_the_canonical_representation(run_dir, tmp_path, capsys):
+  assert cli.main(["sample", str(run_dir), "-o", str(tmp_path / "s.csv"), "--foot-lock"]) == 2
+  err = capsys.readouterr().err
+  assert err.count("\n") == 1 and "canonical" in err and not (tmp_path / "s.csv").exists()

@@ -177,3 +177,25 @@ def test_rigid_bones_sets_every_length_and_keeps_directions_and_root(take):
   own = np.zeros(SK.num_joints)
   own[[c for _, c in SK.bones]] = take.bone_lengths()[0]
   np.testing.assert_allclose(tf.rigid_bones(pos[:1], SK.parents, own), pos[:1], atol=1e-3)
+
+
+@pytest.mark.parametrize("take", TAKES[:3], ids=lambda m: m.name)
+def test_locked_feet_do_not_slide_and_poses_are_kept(take):
+  from chorjax.data.features import leg_length
+
+  canon = np.asarray(_features("canonical", take).canonical(take.positions), np.float64)
+  contacts = np.asarray(tf.foot_contacts(canon, SK.feet, leg_length(canon, SK)))
+  # a dancer sliding across the floor: every frame moved on by a constant drift
+  drift = np.arange(len(canon))[:, None, None] * np.array([0.1, 0.0, 0.05])
+  locked = np.asarray(tf.lock_feet(canon + drift, contacts, SK.feet))
+  root = SK.root
+  np.testing.assert_allclose(locked - locked[:, root : root + 1], canon - canon[:, root : root + 1], atol=1e-4)
+  np.testing.assert_allclose(locked[..., 1], canon[..., 1], atol=1e-5)  # heights untouched
+  feet = locked[:, SK.feet][..., [0, 2]]
+  held = (contacts[1:] > 0.5) & (contacts[:-1] > 0.5)
+  one = held.sum(-1) == 1  # frames with one foot held: it stays exactly where it was
+  step = np.linalg.norm(feet[1:] - feet[:-1], axis=-1)
+  assert one.sum() > 50 and step[one][held[one]].max() < 1e-4
+  own = np.linalg.norm(np.diff(canon[:, SK.feet][..., [0, 2]], axis=0), axis=-1)  # the take's own, undrifted
+  drifted = np.linalg.norm(np.diff((canon + drift)[:, SK.feet][..., [0, 2]], axis=0), axis=-1)
+  assert step[held].mean() <= own[held].mean() < 0.5 * drifted[held].mean()  # the drift is gone, and more

@@ -69,15 +69,21 @@ class Features:
     """Data-space positions ``[..., T, J, 3]`` -> normalized features ``[..., T, D]``."""
     return transforms.normalize(self.represent(self.canonical(pos_TxJx3)), self.mean, self.std)
 
-  def decode(self, z_TxD, place=None, rigid: bool = False):
+  def decode(self, z_TxD, place=None, rigid: bool = False, lock_feet: bool = False):
     """Normalized features ``[..., T, D]`` -> data-space positions ``[..., T, J, 3]`` (``place``: the
     first frame's ``(heading, x, z)`` for the representations that integrate the root's motion;
-    ``rigid``: every bone at the training takes' mean length, see ``transforms.rigid_bones``)."""
-    pos = _unrepresent(transforms.denormalize(z_TxD, self.mean, self.std), self, place)
+    ``rigid``: every bone at the training takes' mean length, see ``transforms.rigid_bones``;
+    ``lock_feet``: feet the features call in contact do not slide, see ``transforms.lock_feet``)."""
+    rep = transforms.denormalize(z_TxD, self.mean, self.std)
+    pos = _unrepresent(rep, self, place)
     if rigid:
       if self.lengths is None:
         raise ValueError("no bone lengths recorded (a run trained before sample.rigid_bones existed)")
       pos = transforms.rigid_bones(pos, self.skeleton.parents, self.lengths)
+    if lock_feet:
+      if self.representation != "canonical":
+        raise ValueError("foot locking needs the canonical representation (the one that predicts foot contacts)")
+      pos = transforms.lock_feet(pos, rep[..., -len(self.skeleton.feet) :], self.skeleton.feet)
     return self.uncanonical(pos)
 
   def to_dict(self) -> dict:
