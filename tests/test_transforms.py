@@ -199,3 +199,11 @@ def test_locked_feet_do_not_slide_and_poses_are_kept(take):
   own = np.linalg.norm(np.diff(canon[:, SK.feet][..., [0, 2]], axis=0), axis=-1)  # the take's own, undrifted
   drifted = np.linalg.norm(np.diff((canon + drift)[:, SK.feet][..., [0, 2]], axis=0), axis=-1)
   assert step[held].mean() <= own[held].mean() < 0.5 * drifted[held].mean()  # the drift is gone, and more
+
+
+def test_a_swinging_foot_called_planted_does_not_drag_the_body():
+  pos = np.zeros((3, SK.num_joints, 3), np.float32)
+  pos[2, SK.feet[0], 0] = 1.0  # the foot swings a whole unit in one frame
+  contacts = np.ones((3, len(SK.feet)), np.float32)
+  np.testing.assert_allclose(tf.lock_feet(pos, contacts, SK.feet, max_step=0.1), pos)
+  assert np.asarray(tf.lock_feet(pos, contacts, SK.feet))[2, SK.root, 0] != 0.0  # uncapped, it would

@@ -83,7 +83,9 @@ class Features:
     if lock_feet:
       if self.representation != "canonical":
         raise ValueError("foot locking needs the canonical representation (the one that predicts foot contacts)")
-      pos = transforms.lock_feet(pos, rep[..., -len(self.skeleton.feet) :], self.skeleton.feet)
+      leg = leg_length(np.asarray(pos).reshape(-1, *pos.shape[-2:]), self.skeleton)
+      contacts = rep[..., -len(self.skeleton.feet) :]
+      pos = transforms.lock_feet(pos, contacts, self.skeleton.feet, max_step=0.05 * leg)  # foot_contacts' speed
     return self.uncanonical(pos)
 
   def to_dict(self) -> dict:

@@ -290,16 +290,17 @@ def rigid_bones(pos_xTxJx3, parents: Sequence[int], lengths_J):
   return _build(pos_xTxJx3[..., root, :], bones, parents, lengths_J)
 
 
-def lock_feet(pos_xTxJx3, contacts_xTxF, feet: Sequence[int]):
+def lock_feet(pos_xTxJx3, contacts_xTxF, feet: Sequence[int], max_step: float = float("inf")):
   """The dance moved on the floor so that no foot in contact slides: at each frame where feet are in
-  contact (> 0.5) both then and one frame before, their mean horizontal step is taken back from every
-  joint, accumulated over time. Poses and bone lengths are unchanged; the body then travels by what its
-  legs do (frames without contact keep their own root motion)."""
+  contact (> 0.5) both then and one frame before, and moved less than ``max_step`` horizontally (a
+  faster foot is swinging, whatever the contact says), their mean horizontal step is taken back from
+  every joint, accumulated over time. Poses and bone lengths are unchanged; the body then travels by
+  what its legs do (frames without contact keep their own root motion)."""
   f = pos_xTxJx3[..., jnp.asarray(feet), :]
-  step = f[..., 1:, :, :] - f[..., :-1, :, :]
-  held = ((contacts_xTxF[..., 1:, :] > 0.5) & (contacts_xTxF[..., :-1, :] > 0.5)).astype(pos_xTxJx3.dtype)
+  step = (f[..., 1:, :, :] - f[..., :-1, :, :]) * jnp.array([1.0, 0.0, 1.0])
+  held = (contacts_xTxF[..., 1:, :] > 0.5) & (contacts_xTxF[..., :-1, :] > 0.5)
+  held = jnp.where(held & (jnp.linalg.norm(step, axis=-1) < max_step), 1.0, 0.0)
   slide = jnp.sum(held[..., None] * step, -2) / jnp.maximum(jnp.sum(held, -1), 1.0)[..., None]
-  slide = slide * jnp.array([1.0, 0.0, 1.0])
   back = -jnp.cumsum(slide, -2)
   return pos_xTxJx3 + jnp.concatenate([jnp.zeros_like(back[..., :1, :]), back], -2)[..., None, :]
 
