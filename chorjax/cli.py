@@ -10,7 +10,7 @@ import math
 import sys
 from pathlib import Path
 
-from chorjax.errors import UserError
+from chorjax.errors import Interrupted, UserError
 from chorjax.runtime import keep_freed_memory
 
 
@@ -682,6 +682,9 @@ def main(argv=None) -> int:
   except UserError as e:
     print(f"chorjax: error: {e}", file=sys.stderr)
     return 2
+  except Interrupted as e:
+    print(f"chorjax: {e}", file=sys.stderr)
+    return e.code
   except KeyboardInterrupt:
     print("chorjax: interrupted", file=sys.stderr)
     return 130

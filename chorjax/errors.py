@@ -16,6 +16,14 @@ class UserError(Exception):
   """Bad input from the user; its message is one line that names the file/line or key."""
 
 
+class Interrupted(Exception):
+  """Work stopped by a signal after saving what it had; ``code`` is the exit status (128 + signal)."""
+
+  def __init__(self, message: str, code: int):
+    super().__init__(message)
+    self.code = code
+
+
 def atomic_write(path: str | os.PathLike, write: Callable[[Path], object], *, overwrite: bool = True) -> Path:
   """Writes a file through a temporary sibling and renames it into place.
 

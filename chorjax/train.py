@@ -20,7 +20,9 @@ import functools
 import json
 import math
 import os
+import signal
 import sys
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -35,7 +37,7 @@ from flax import nnx
 from chorjax import checkpoint as ckpt
 from chorjax.config import Config, config_diff, config_from_dict, resumable_keys
 from chorjax.data.dataset import Dataset, WindowSampler, eval_windows, load_dataset
-from chorjax.errors import UserError, atomic_write
+from chorjax.errors import Interrupted, UserError, atomic_write
 from chorjax.models import motion_weight_vector
 from chorjax.run import Feedback, StepSpec, create_train_state, run_meta
 from chorjax.sample import dance
@@ -198,6 +200,8 @@ class Loop:
     self.last_good: int | None = start if start > 0 else None
     self.losses: dict[int, float] = {}
     self.compile_s: float | None = None
+    self.stop: Callable[[], int | None] = lambda: None  # a signal number once one asks to stop
+    self.on_stop: Callable[[Loop], None] = lambda loop: None
 
   def add_hook(self, fn, every: int, at_last: bool = True) -> None:
     self.hooks.append(Hook(fn, every, at_last))
@@ -231,9 +235,42 @@ class Loop:
       for hook in self.hooks:
         if hook.is_due(self.step, self.total):
           hook.fn(self)
+      signum = self.stop()
+      if signum is not None and self.step < self.total:
+        self.flush()
+        self.on_stop(self)
+        name = signal.Signals(signum).name
+        raise Interrupted(
+          f"{name} at step {self.step}/{self.total}: checkpoint saved; the same command resumes", 128 + signum
+        )
     self.flush()
     for fn in self.end_hooks:
       fn(self)
+
+
+@contextlib.contextmanager
+def stop_on_signals():
+  """Yields a function that returns SIGINT's or SIGTERM's number once one has arrived (else None).
+
+  The first signal asks the loop to finish its step and save; a second one stops at once (the usual
+  Ctrl-C). Off the main thread (where Python cannot install handlers) nothing changes.
+  """
+  if threading.current_thread() is not threading.main_thread():
+    yield lambda: None
+    return
+  got: list[int] = []
+
+  def handler(signum, frame):
+    if got:  # a second signal: stop now
+      raise KeyboardInterrupt
+    got.append(signum)
+
+  old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+  try:
+    yield lambda: got[0] if got else None
+  finally:
+    for s, h in old.items():
+      signal.signal(s, h)
 
 
 # ---------------------------------------------------------------- run directory
@@ -509,12 +546,22 @@ def _train(cfg: Config, workdir: Path, ds: Dataset, manager, parallel, cleanup: 
   if log is not None and log.writer is not None and cfg.train.figure_every:
     loop.add_hook(figure_hook(log.writer, spec.graphdef, host_params, ds, cfg), cfg.train.figure_every, at_last=False)
   loop.end_hooks.append(lambda loop: manager.wait_until_finished())
+  save = checkpoint_hook(manager, meta_of)
+
+  def save_now(loop: Loop) -> None:  # on SIGINT/SIGTERM: this step's checkpoint, unless just written
+    if manager.latest_step() != loop.step:
+      save(loop)
+    manager.wait_until_finished()
+
+  loop.on_stop = save_now
   samples: dict = {}
   if is_main and cfg.sample.frames > 0 and total > 0:
     loop.end_hooks.append(
       lambda loop: samples.update(write_end_sample(workdir, spec.graphdef, host_params(loop.state["params"]), ds, cfg))
     )
-  loop.run()
+  with stop_on_signals() as stop:
+    loop.stop = stop if parallel is None else (lambda: None)  # several processes: see docs/parallel.md
+    loop.run()
   summary = {
     "start_step": start,
     "final_step": loop.step,

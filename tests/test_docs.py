@@ -57,12 +57,3 @@ def test_every_readme_command_runs(tmp_path, monkeypatch):
     except SystemExit as e:  # argparse
       code = e.code
     assert code == 0, f"README command failed: {line}"
-
-
-def test_every_shipped_config_loads():
-  from chorjax.config import load_config
-
-  configs = sorted((ROOT / "configs").glob("*.toml"))
-  assert len(configs) >= 3
-  for path in configs:
-    assert load_config(path, []).name == path.stem

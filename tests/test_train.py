@@ -253,6 +253,52 @@ def test_resume_after_sigkill_is_bit_identical(tmp_path):
     np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
 
 
+def test_sigint_and_sigterm_save_a_checkpoint_and_resume_exactly(tmp_path, monkeypatch, capsys):
+  cfg = write_config(
+    tmp_path / "c.toml",
+    "train.num_steps=200",
+    "train.checkpoint_every=1000",
+    "log.tensorboard=false",
+    "sample.frames=1",
+  )
+  run, straight = tmp_path / "run", tmp_path / "straight"
+  import chorjax.train as train_mod
+
+  # Ctrl-C (in this process) once step 5 is logged: the step finishes, a checkpoint is saved, exit 130
+  log_call = train_mod.MetricsLog.__call__
+
+  def ctrl_c_at_5(self, step, *rest):
+    log_call(self, step, *rest)
+    if step == 5:
+      os.kill(os.getpid(), signal.SIGINT)
+
+  monkeypatch.setattr(train_mod.MetricsLog, "__call__", ctrl_c_at_5)
+  assert cli.main(["train", str(cfg), "--workdir", str(run)]) == 130
+  err = capsys.readouterr().err
+  assert err.count("\n") == 1 and "SIGINT at step" in err and "checkpoint saved" in err
+  first = sorted(int(p.name) for p in (run / "checkpoints").iterdir() if p.name.isdigit())
+  assert len(first) == 1 and 5 <= first[0] < 200 and not (run / "samples").exists()
+  monkeypatch.setattr(train_mod.MetricsLog, "__call__", log_call)
+  # SIGTERM (a cluster's preemption) to a resumed run in its own process: exit 143, one line
+  cmd = [sys.executable, "-m", "chorjax.cli", "train", str(cfg), "--workdir", str(run)]
+  proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+  rows = lambda: len((run / "metrics.jsonl").read_text().splitlines())
+  deadline = time.time() + 120
+  while rows() <= first[0] + 2:
+    assert proc.poll() is None and time.time() < deadline, "training ended before it could be stopped"
+    time.sleep(0.01)
+  proc.send_signal(signal.SIGTERM)
+  _, err = proc.communicate(timeout=120)
+  assert proc.returncode == 143 and err.count("\n") == 1 and "SIGTERM at step" in err, err
+  second = max(int(p.name) for p in (run / "checkpoints").iterdir() if p.name.isdigit())
+  assert first[0] < second < 200
+  # resumed to the end, the run equals one never interrupted, bit for bit
+  assert cli.main(["train", str(cfg), "--workdir", str(run)]) == 0
+  assert cli.main(["train", str(cfg), "--workdir", str(straight)]) == 0
+  for x, y in zip(jax.tree.leaves(load_run(run, 200).params), jax.tree.leaves(load_run(straight, 200).params)):
+    np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+
+
 def train_tiny_and_check_it_learns(workdir, *overrides) -> dict:
   """Trains a tiny model for 30 steps; asserts the loss fell and the end sample is finite."""
   cfg = tiny_config("train.num_steps=30", "optim.lr=3e-3", "log.tensorboard=false", "train.log_every=5", *overrides)
