@@ -183,6 +183,7 @@ def _sample(args) -> int:
   from chorjax.run import load_run
   from chorjax.sample import dance, read_prime
 
+  _counts(args, frames=1, num=1)
   out, _ = _output(args.output, (".csv", ".npz", ".bvh", ".html"))
   paths = _sample_paths(out, args.num)
   _refuse_existing(paths, args.force)  # the files really written (OUT_k.csv for several dancers)
@@ -285,6 +286,7 @@ def _write_sample(out: Path, paths, pos, fps, sk, up, settings) -> list:
 def _render(args) -> int:
   from chorjax.data.dataset import read_motions, resolve_files
 
+  _counts(args, frames=1, every=1, poses=1)
   out, suffix = _output(args.output, (".png", ".gif", ".mp4", ".html"))
   if args.strip and suffix != ".png":
     raise UserError(f"{out}: --strip draws a PNG")
@@ -326,6 +328,7 @@ def _size(text: str) -> tuple[int, int]:
 def _eval(args) -> int:
   from chorjax.evaluate import evaluate, metrics_path, sample_path, write_metrics
 
+  _counts(args, frames=2, num=1)
   out = Path(args.output) if args.output else metrics_path(args.workdir)
   _refuse_existing([out, sample_path(out)], args.force)
   result = evaluate(
@@ -375,6 +378,14 @@ def _compare(args) -> int:
   _refuse_existing([args.output], args.force)
   print(f"wrote {compare(args.workdirs, args.output)}")
   return 0
+
+
+def _counts(args, **minimum) -> None:
+  """Refuses count flags below their minimum (``--frames 0``, ``--num -2``) with one line."""
+  for name, low in minimum.items():
+    v = getattr(args, name)
+    if v is not None and v < low:
+      raise UserError(f"--{name} {v}: must be at least {low}")
 
 
 def _controls(args) -> dict:
@@ -532,7 +543,9 @@ def _add_run_commands(sub) -> None:
   sample.add_argument("--num", type=int, default=1, help="dancers generated in parallel (default 1)")
   ids = sample.add_mutually_exclusive_group()
   ids.add_argument("--motion", type=int, help="motion id that conditions the dance (default 0)")
-  ids.add_argument("--mix", metavar="ID:W,ID:W", help="blend motion ids, e.g. 4:0.5,5:0.5")
+  ids.add_argument(
+    "--mix", metavar="ID:W,ID:W", help="blend motion ids, e.g. 4:0.5,5:0.5 (weights >= 0, normalized to sum 1)"
+  )
   sample.add_argument(
     "--prime", metavar="FILE[:START:LEN]", help="continue a real phrase (chor-rnn's collaboration mode)"
   )

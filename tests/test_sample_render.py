@@ -363,3 +363,31 @@ def test_foot_lock_needs_the_canonical_representation(run_dir, tmp_path, capsys)
   assert cli.main(["sample", str(run_dir), "-o", str(tmp_path / "s.csv"), "--foot-lock"]) == 2
   err = capsys.readouterr().err
   assert err.count("\n") == 1 and "canonical" in err and not (tmp_path / "s.csv").exists()
+
+
+@pytest.mark.parametrize(
+  "command",
+  [
+    "sample RUN -o OUT.csv --frames 0",
+    "sample RUN -o OUT.csv --frames -5",
+    "sample RUN -o OUT.csv --num 0",
+    "sample RUN -o OUT.csv --num -2",
+    "sample RUN -o OUT.csv --mix 4:-1,5:2",
+    "sample RUN -o OUT.csv --mix 4:nan",
+    "sample RUN -o OUT.csv --pi-temperature -1",
+    "sample RUN -o OUT.csv --sigma-temperature inf",
+    "eval RUN --data cmu94 -o OUT.json --num 0",
+    "eval RUN --data cmu94 -o OUT.json --frames 1",
+    "render TAKE -o OUT.png --frames 0",
+    "render TAKE -o OUT.png --strip --every 0",
+    "render TAKE -o OUT.mp4 --size 100",
+  ],
+)
+def test_impossible_counts_and_weights_are_one_line_errors(run_dir, tmp_path, capsys, command):
+  out = tmp_path / "out"
+  args = command.replace("RUN", str(run_dir)).replace("TAKE", str(TAKE)).replace("OUT", str(out)).split()
+  before = sorted(p.name for p in run_dir.rglob("*"))
+  assert cli.main(args) == 2
+  err = capsys.readouterr().err
+  assert err.count("\n") == 1 and err.startswith("chorjax: error: --"), err
+  assert not list(tmp_path.iterdir()) and sorted(p.name for p in run_dir.rglob("*")) == before

@@ -25,7 +25,8 @@ def as_weights(motion, num_motions: int):
 
 
 def parse_mix(text: str, num_motions: int) -> np.ndarray:
-  """``'4:0.5,5:0.5'`` -> a weight vector over the motions (normalized to sum 1)."""
+  """``'4:0.5,5:0.5'`` -> a weight vector over the motions; weights >= 0, normalized to sum 1 (so
+  ``4:1,5:1`` is an even blend)."""
   w = np.zeros(num_motions, np.float32)
   for part in text.split(","):
     try:
@@ -35,6 +36,8 @@ def parse_mix(text: str, num_motions: int) -> np.ndarray:
       raise UserError(f"--mix {text!r}: expected ID:WEIGHT,ID:WEIGHT (e.g. 4:0.5,5:0.5)") from None
     if not 0 <= i < num_motions:
       raise UserError(f"--mix {text!r}: motion id {i} out of range (0..{num_motions - 1})")
+    if not (np.isfinite(v) and v >= 0):
+      raise UserError(f"--mix {text!r}: weight {v_text} must be a finite number >= 0")
     w[i] += v
   if w.sum() <= 0:
     raise UserError(f"--mix {text!r}: weights must sum to a positive number")
