@@ -395,6 +395,7 @@ def _controls(args) -> dict:
     "sigma_temperature": (0.0, math.inf, "a multiplier >= 0"),
     "noise_smoothing": (0.0, 1.0, "0 <= RHO < 1"),
     "persistence": (0.0, math.inf, "a log-weight bonus >= 0"),
+    "crossfade": (0.0, 1.0, "0 <= F < 1"),
   }
   for name, (low, high, what) in checks.items():
     v = getattr(args, name)
@@ -430,6 +431,13 @@ def _add_sampling_args(p) -> None:
     "--persistence",
     type=float,
     help="bonus to the previous frame's mixture component, >= 0 (default: the run's sample.persistence)",
+  )
+  p.add_argument(
+    "--crossfade",
+    type=float,
+    metavar="F",
+    help="MDN component switches glide, the jump decaying by F per frame, 0 <= F < 1 "
+    "(default: the run's sample.crossfade)",
   )
   p.add_argument(
     "--rigid-bones",

@@ -163,6 +163,14 @@ class SampleConfig:
     minimum=0.0,
     resumable=True,
   )
+  crossfade: float = _field(
+    0.0,
+    "MDN component switches glide: the jump between the old and the new component's means is carried "
+    "into the frame and decays by this factor per frame (0 = off; 0.8: mostly gone after 10 frames)",
+    minimum=0.0,
+    below=1.0,
+    resumable=True,
+  )
   rigid_bones: bool = _field(
     False,
     "decode every generated frame with the training takes' mean bone lengths (each bone keeps its "
@@ -190,6 +198,7 @@ class SampleConfig:
     "greedy",
     "noise_smoothing",
     "persistence",
+    "crossfade",
     "rigid_bones",
     "foot_lock",
   )

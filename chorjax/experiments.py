@@ -59,6 +59,7 @@ EVAL_KEYS = {
   "greedy",
   "noise_smoothing",
   "persistence",
+  "crossfade",
   "rigid_bones",
   "foot_lock",
   "seeds",

@@ -20,7 +20,9 @@ from chorjax.data.dataset import conform, read_takes
 from chorjax.errors import UserError
 
 
-@functools.partial(jax.jit, static_argnames=("graphdef", "num_frames", "greedy", "noise_smoothing", "persistence"))
+@functools.partial(
+  jax.jit, static_argnames=("graphdef", "num_frames", "greedy", "noise_smoothing", "persistence", "crossfade")
+)
 def generate(
   graphdef,
   params,
@@ -34,6 +36,7 @@ def generate(
   greedy: bool = False,
   noise_smoothing: float = 0.0,
   persistence: float = 0.0,
+  crossfade: float = 0.0,
 ):
   """Generates ``num_frames`` normalized frames per dancer.
 
@@ -48,6 +51,7 @@ def generate(
     pi_temperature, sigma_temperature, greedy: MDN sampling controls (see ``heads.mdn_sample``).
     noise_smoothing: the MDN noise's AR(1) coefficient (:func:`smooth_noise`; 0 = independent per frame).
     persistence: added to the log-weight of the previous frame's mixture component.
+    crossfade: a change of component glides: the jump between the means decays by this factor per frame.
 
   Returns:
     ``[B, num_frames, D]`` normalized frames.
@@ -60,7 +64,7 @@ def generate(
   else:
     x0 = jnp.zeros((jnp.shape(motion)[0], model.dim), jnp.float32)
 
-  if greedy or (noise_smoothing == 0 and persistence == 0):
+  if greedy or noise_smoothing == persistence == crossfade == 0:
 
     def body(c, k):
       carry, x = c
@@ -71,18 +75,23 @@ def generate(
     _, xs_NxBxD = jax.lax.scan(body, (carry, x0), jax.random.split(key, num_frames))
     return jnp.swapaxes(xs_NxBxD, 0, 1)
 
-  controls = {"pi_temperature": pi_temperature, "sigma_temperature": sigma_temperature, "persistence": persistence}
+  controls = {
+    "pi_temperature": pi_temperature,
+    "sigma_temperature": sigma_temperature,
+    "persistence": persistence,
+    "crossfade": crossfade,
+  }
 
   def smooth_body(c, k):
-    carry, x, noise, comp = c
+    carry, x, noise, drawn = c
     carry, out = model.step(carry, x)
     k_comp, k_noise = jax.random.split(k)
     noise, eps_BxD = smooth_noise(noise, k_noise, noise_smoothing)
-    x, comp = model.draw(out, k_comp, eps_BxD, comp, **controls)
-    return (carry, x, noise, comp), x
+    x, drawn = model.draw(out, k_comp, eps_BxD, drawn, **controls)
+    return (carry, x, noise, drawn), x
 
-  batch = x0.shape[0]
-  init = (carry, x0, (jnp.zeros_like(x0), jnp.zeros_like(x0)), jnp.full((batch,), -1))  # -1: no component yet
+  none = (jnp.full((x0.shape[0],), -1), jnp.zeros_like(x0))  # no component yet, no offset
+  init = (carry, x0, (jnp.zeros_like(x0), jnp.zeros_like(x0)), none)
   _, xs_NxBxD = jax.lax.scan(smooth_body, init, jax.random.split(key, num_frames))
   return jnp.swapaxes(xs_NxBxD, 0, 1)
 

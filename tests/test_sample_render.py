@@ -339,6 +339,11 @@ def test_persistence_and_smoothing_keep_the_default_path_and_make_a_smoother_dan
   )
   rough = lambda z: np.mean(np.abs(z[:, 2:] - 2 * z[:, 1:-1] + z[:, :-2]))
   assert rough(smooth) < 0.5 * rough(plain)
+  # a change of component glides instead of cutting: the largest frame-to-frame jump shrinks
+  hop = {"pi_temperature": 1.0, "sigma_temperature": 0.0, "noise_smoothing": 0.5}  # no noise: jumps are switches
+  cut, glide = gen(**hop), gen(**hop, crossfade=0.8)
+  jump = lambda z: np.abs(np.diff(z, axis=1)).max(axis=(1, 2))
+  assert np.mean(jump(glide)) < 0.7 * np.mean(jump(cut))
 
 
 def test_sample_cli_smoothing_persistence_and_rigid_bones(run_dir, tmp_path, capsys):

@@ -34,9 +34,9 @@ class MSEHead(nnx.Module):
     del key, pi_temperature, sigma_temperature, greedy  # a point estimate has nothing to draw
     return out_BxD
 
-  def draw(self, out_BxD, key, noise_BxD, previous_B, **_):
+  def draw(self, out_BxD, key, noise_BxD, state, **_):
     del key, noise_BxD  # nothing to draw
-    return out_BxD, previous_B
+    return out_BxD, state
 
   def mean(self, out_xD):
     return out_xD
@@ -136,12 +136,32 @@ class MDNHead(nnx.Module):
     logpi, mu, scale = self.params(out_BxP)
     return mdn_sample(key, logpi, mu, scale, pi_temperature, sigma_temperature, greedy)
 
-  def draw(self, out_BxP, key, noise_BxD, previous_B, *, pi_temperature=1.0, sigma_temperature=1.0, persistence=0.0):
-    """A frame drawn with the given noise, the previous frame's component favoured by ``persistence``
-    (added to its log-weight): ``(frame [B, D], component [B])``."""
+  def draw(
+    self,
+    out_BxP,
+    key,
+    noise_BxD,
+    state,
+    *,
+    pi_temperature=1.0,
+    sigma_temperature=1.0,
+    persistence=0.0,
+    crossfade=0.0,
+  ):
+    """A frame drawn with the given noise; ``state = (previous component [B] (-1: none), offset [B, D])``.
+
+    ``persistence`` is added to the previous component's log-weight. ``crossfade``: when the component
+    changes, the jump between the two components' means is carried into the frame and decays by this
+    factor per frame (0 = off), so a switch is a short glide, not a cut. Returns ``(frame, state)``.
+    """
+    previous_B, offset_BxD = state
     logpi, mu, scale = self.params(out_BxP)
     bias = persistence * jax.nn.one_hot(previous_B, self.num_mixtures)
-    return mdn_draw(key, logpi, mu, scale, noise_BxD, pi_temperature, sigma_temperature, bias)
+    x, comp = mdn_draw(key, logpi, mu, scale, noise_BxD, pi_temperature, sigma_temperature, bias)
+    mean_of = lambda c: jnp.take_along_axis(mu, jnp.maximum(c, 0)[:, None, None], axis=1)[:, 0]
+    switched = ((comp != previous_B) & (previous_B >= 0))[:, None]
+    offset_BxD = crossfade * (offset_BxD + jnp.where(switched, mean_of(previous_B) - mean_of(comp), 0.0))
+    return x + offset_BxD, (comp, offset_BxD)
 
   def mean(self, out_xP):
     """The mixture's mean frame."""

@@ -69,9 +69,9 @@ class ChorModel(nnx.Module):
   def sample(self, out_BxP, key, pi_temperature=1.0, sigma_temperature=1.0, greedy=False):
     return self.head.sample(out_BxP, key, pi_temperature, sigma_temperature, greedy)
 
-  def draw(self, out_BxP, key, noise_BxD, previous_B, **controls):
-    """A frame drawn with given noise and the previous component: ``(frame, component)`` (``heads``)."""
-    return self.head.draw(out_BxP, key, noise_BxD, previous_B, **controls)
+  def draw(self, out_BxP, key, noise_BxD, state, **controls):
+    """A frame drawn with given noise and the sampler's state: ``(frame, state)`` (``heads``)."""
+    return self.head.draw(out_BxP, key, noise_BxD, state, **controls)
 
   def mean(self, out_xP):
     """The expected next frame (the MDN's mixture mean; the MSE head's output)."""
