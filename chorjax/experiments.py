@@ -44,28 +44,12 @@ from pathlib import Path
 
 import numpy as np
 
-from chorjax.config import load_config, valid_keys
+from chorjax.config import SampleConfig, load_config, valid_keys
 from chorjax.errors import UserError, atomic_write
 from chorjax.scoring import mean_of, upgrade
 
 SWEEP_KEYS = {"name", "base", "root", "grid", "set", "eval", "candidates"}
-EVAL_KEYS = {
-  "data",
-  "frames",
-  "num",
-  "seed",
-  "pi_temperature",
-  "sigma_temperature",
-  "greedy",
-  "noise_smoothing",
-  "persistence",
-  "crossfade",
-  "rigid_bones",
-  "foot_lock",
-  "seeds",
-  "splits",
-  "window",
-}
+EVAL_KEYS = {"data", "frames", "num", "seed", "seeds", "splits", "window", *SampleConfig.CONTROLS}
 
 
 def _fmt(v) -> str:
