@@ -560,6 +560,32 @@ def _add_run_commands(sub) -> None:
   _add_sampling_args(sample)
   sample.set_defaults(func=_sample)
 
+  _add_render_command(sub)
+
+
+SWEEP_FORMAT = """Train and evaluate every point of a grid over config keys. Points already finished are
+skipped, so an interrupted sweep continues where it stopped.
+
+The sweep file (TOML):
+  name = "lr_sweep"                      # run directories are named NAME-KEY=VALUE-...
+  base = "../configs/quickstart.toml"    # the config every point starts from (relative to this file)
+  root = "runs/lr_sweep"                 # where the run directories go (relative to the working directory)
+  [set]                                  # keys set for every point (optional)
+  "train.num_steps" = 1000
+  [grid]                                 # every combination of these values is one point
+  "optim.lr" = [1e-3, 3e-3]
+  "train.seed" = [0, 1, 2]
+  [candidates.canonical]                 # named variants, each crossed with the grid (optional)
+  "data.representation" = "canonical"
+  [eval]                                 # chorjax eval after training (optional): data, frames,
+  data = ["cmu94"]                       # num, seed, seeds, splits, window and the sampling
+  seeds = [0, 1, 2, 3]                   # controls (pi_temperature, noise_smoothing, ...)
+
+Then: chorjax compare ROOT/* -o report.md"""
+
+
+def _add_render_command(sub) -> None:
+  """`chorjax render`."""
   render = sub.add_parser("render", help="draw motion files or samples as PNG, GIF, MP4 or an HTML player")
   render.add_argument(
     "inputs", nargs="+", metavar="INPUT", help="motion files (.csv, .npz, .bvh, .amc, .c3d), folders or cmu94"
@@ -588,27 +614,6 @@ def _add_run_commands(sub) -> None:
   render.add_argument("--poses", type=int, default=12, help="--strip: poses per row (default 12)")
   render.add_argument("--force", action="store_true", help="overwrite OUT if it exists")
   render.set_defaults(func=_render)
-
-
-SWEEP_FORMAT = """Train and evaluate every point of a grid over config keys. Points already finished are
-skipped, so an interrupted sweep continues where it stopped.
-
-The sweep file (TOML):
-  name = "lr_sweep"                      # run directories are named NAME-KEY=VALUE-...
-  base = "../configs/quickstart.toml"    # the config every point starts from (relative to this file)
-  root = "runs/lr_sweep"                 # where the run directories go (relative to the working directory)
-  [set]                                  # keys set for every point (optional)
-  "train.num_steps" = 1000
-  [grid]                                 # every combination of these values is one point
-  "optim.lr" = [1e-3, 3e-3]
-  "train.seed" = [0, 1, 2]
-  [candidates.canonical]                 # named variants, each crossed with the grid (optional)
-  "data.representation" = "canonical"
-  [eval]                                 # chorjax eval after training (optional): data, frames,
-  data = ["cmu94"]                       # num, seed, seeds, splits, window and the sampling
-  seeds = [0, 1, 2, 3]                   # controls (pi_temperature, noise_smoothing, ...)
-
-Then: chorjax compare ROOT/* -o report.md"""
 
 
 def _add_report_commands(sub) -> None:

@@ -228,12 +228,17 @@ def _stats(values) -> tuple[float, float]:
 
 
 def group_runs(runs) -> list[dict]:
-  """Runs whose configs differ only in ``train.seed`` form one group (their name without ``seed=N``)."""
+  """Runs whose configs differ only in ``train.seed`` form one group (their name without ``seed=N``).
+
+  What a run was sampled with is what its evaluation records (``eval.sampling``), not its config's
+  ``[sample]`` (``chorjax eval`` may override it): groups compare that, and ignore ``[sample]`` and ``[log]``.
+  """
   groups: dict[str, dict] = {}
   for r in runs:
-    cfg = {k: v for k, v in r["config"].items() if k != "name"}
+    cfg = {k: v for k, v in r["config"].items() if k not in ("name", "sample", "log")}
     cfg["train"] = {k: v for k, v in cfg["train"].items() if k != "seed"}
-    ident = json.dumps(cfg, sort_keys=True) + json.dumps(r["eval"].get("data"))
+    drawn = {k: v for k, v in r["eval"].get("sampling", {}).items() if k not in ("seed", "seeds")}
+    ident = json.dumps([cfg, r["eval"].get("data"), drawn], sort_keys=True)
     name = re.sub(r"-?\bseed=-?\d+", "", r["name"]).strip("-") or r["name"]
     groups.setdefault(ident, {"name": name, "runs": []})["runs"].append(r)
   out = list(groups.values())

@@ -81,8 +81,13 @@ def generate(
     "persistence": persistence,
     "crossfade": crossfade,
   }
+  return _generate_smoothly(model, carry, x0, key, num_frames, noise_smoothing, controls)
 
-  def smooth_body(c, k):
+
+def _generate_smoothly(model, carry, x0_BxD, key, num_frames: int, noise_smoothing: float, controls: dict):
+  """The scan of :func:`generate` with smoothed noise and the draw's state (component, offset) carried."""
+
+  def body(c, k):
     carry, x, noise, drawn = c
     carry, out = model.step(carry, x)
     k_comp, k_noise = jax.random.split(k)
@@ -90,9 +95,9 @@ def generate(
     x, drawn = model.draw(out, k_comp, eps_BxD, drawn, **controls)
     return (carry, x, noise, drawn), x
 
-  none = (jnp.full((x0.shape[0],), -1), jnp.zeros_like(x0))  # no component yet, no offset
-  init = (carry, x0, (jnp.zeros_like(x0), jnp.zeros_like(x0)), none)
-  _, xs_NxBxD = jax.lax.scan(smooth_body, init, jax.random.split(key, num_frames))
+  none = (jnp.full((x0_BxD.shape[0],), -1), jnp.zeros_like(x0_BxD))  # no component yet, no offset
+  init = (carry, x0_BxD, (jnp.zeros_like(x0_BxD), jnp.zeros_like(x0_BxD)), none)
+  _, xs_NxBxD = jax.lax.scan(body, init, jax.random.split(key, num_frames))
   return jnp.swapaxes(xs_NxBxD, 0, 1)
 
 
