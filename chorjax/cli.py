@@ -449,7 +449,7 @@ def _add_sampling_args(p) -> None:
     action=argparse.BooleanOptionalAction,
     help="canonical runs: feet in contact do not slide (default: the run's sample.foot_lock)",
   )
-  p.add_argument("--seed", type=int, default=0, help="sampling seed: the same seed draws the same dance")
+  p.add_argument("--seed", type=int, default=0, help="sampling seed: the same seed draws the same dance (default 0)")
   p.add_argument(
     "--checkpoint",
     default="latest",
@@ -486,7 +486,8 @@ def _add_data_commands(sub) -> None:
     "--joints",
     choices=("mpii16", "native"),
     default="native",
-    help="map onto the 16-joint training layout (known CMU and Bandai skeletons), or keep all joints",
+    help="map onto the 16-joint training layout (known CMU and Bandai skeletons), or keep all joints "
+    "(default native; training reads mpii16 CSVs only)",
   )
   conv.add_argument(
     "--like",
@@ -495,7 +496,7 @@ def _add_data_commands(sub) -> None:
     "so the takes can join it",
   )
   conv.add_argument("--up-axis", choices=("y", "-y", "z", "-z", "x", "-x"), help="rotate to this up axis")
-  conv.add_argument("--scale", type=float, default=1.0, help="multiply lengths (after --like)")
+  conv.add_argument("--scale", type=float, default=1.0, help="multiply lengths (after --like; default 1)")
   conv.add_argument("--asf", metavar="PATH", help="the skeleton of AMC inputs (default: found in the AMC's folder)")
   conv.add_argument("--amc-fps", type=float, default=120.0, help="frame rate of AMC inputs (default 120)")
   conv.add_argument("--fps", type=float, default=30.0, help="frame rate of CSV inputs (default 30)")
@@ -657,7 +658,7 @@ def _add_report_commands(sub) -> None:
   me.add_argument("-o", "--output", metavar="metrics.json", help="write every key as JSON")
   me.add_argument("--window", type=int, default=60, help="frames per window for FID and novelty (default 60)")
   me.add_argument("--splits", type=int, default=10, help="random halves of the reference for the spreads (default 10)")
-  me.add_argument("--seed", type=int, default=0, help="seed of the resampling")
+  me.add_argument("--seed", type=int, default=0, help="seed of the resampling (default 0)")
   me.add_argument("--force", action="store_true", help="overwrite the output if it exists")
   me.set_defaults(func=_metrics)
 

@@ -35,12 +35,15 @@ def test_data_plot_writes_a_png(tmp_path):
   assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 10_000
 
 
-def test_every_flag_of_every_subcommand_has_help():
+def test_every_flag_of_every_subcommand_has_help_and_states_its_default():
   import argparse
 
   from chorjax.cli import build_parser
 
   missing = []
+  has_default = lambda a: (
+    bool(a.option_strings) and a.default is not None and a.default is not False and a.default != argparse.SUPPRESS
+  )
 
   def walk(parser, name):
     for action in parser._actions:
@@ -49,6 +52,8 @@ def test_every_flag_of_every_subcommand_has_help():
           walk(p, f"{name} {sub}")
       elif not isinstance(action, argparse._HelpAction) and not action.help:
         missing.append(f"{name} {'/'.join(action.option_strings) or action.dest}")
+      elif has_default(action) and "default" not in action.help:  # a flag with a default says it
+        missing.append(f"{name} {'/'.join(action.option_strings)} (default {action.default!r} not stated)")
 
   walk(build_parser(), "chorjax")
   assert not missing

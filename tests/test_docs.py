@@ -57,3 +57,18 @@ def test_every_readme_command_runs(tmp_path, monkeypatch):
     except SystemExit as e:  # argparse
       code = e.code
     assert code == 0, f"README command failed: {line}"
+
+
+def test_the_readme_sweep_file_is_a_valid_sweep(tmp_path):
+  from chorjax.config import load_config
+  from chorjax.experiments import load_sweep, sweep_points
+
+  (example,) = re.findall(r"```toml\n(.*?)```", (ROOT / "README.md").read_text(), flags=re.S)
+  (tmp_path / "configs").symlink_to(ROOT / "configs")
+  (tmp_path / "sweeps").mkdir()
+  (tmp_path / "sweeps" / "s.toml").write_text(example)  # `base` is relative to the sweep file
+  sweep = load_sweep(tmp_path / "sweeps" / "s.toml")
+  points = sweep_points(sweep)
+  assert len(points) == 2 * 3 * 1
+  for _, overrides in points:
+    load_config(tmp_path / "configs" / "quickstart.toml", overrides)
