@@ -6,7 +6,8 @@ framing its whole take, at the first motion's frame rate.
 
 from __future__ import annotations
 
-import warnings
+import contextlib
+import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -17,6 +18,21 @@ from chorjax.data import transforms
 from chorjax.data.motion import Motion
 from chorjax.errors import UserError, atomic_write
 from chorjax.render.plot import require_matplotlib
+
+
+@contextlib.contextmanager
+def _env(**values):
+  """Environment variables set for the duration of the block, then restored."""
+  old = {k: os.environ.get(k) for k in values}
+  os.environ.update(values)
+  try:
+    yield
+  finally:
+    for k, v in old.items():
+      if v is None:
+        os.environ.pop(k, None)
+      else:
+        os.environ[k] = v
 
 
 def _frames_rgb(motions: Sequence[Motion], size: tuple[int, int] = (1280, 720), max_frames: int | None = None):
@@ -81,10 +97,10 @@ def write_animation(
     def write(tmp):
       first = next(frames)
       h, w = first.shape[:2]
-      with warnings.catch_warnings():
-        # ffmpeg runs as a subprocess: CPython forks and at once execs ffmpeg in C, no Python code runs
-        # in the child, so JAX's warning about os.fork() in a multithreaded process does not apply.
-        warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called", category=RuntimeWarning)
+      # imageio-ffmpeg would start ffmpeg with a Python preexec_fn (os.setpgrp, to keep Ctrl-C from
+      # it), which makes CPython run fork handlers, and JAX's handler warns of a deadlock. Without it
+      # the child is spawned in C (vfork + exec): no fork of this multithreaded process at all.
+      with _env(IMAGEIO_FFMPEG_NO_PREVENT_SIGINT="1"):
         writer = imageio_ffmpeg.write_frames(
           str(tmp),
           (w, h),
