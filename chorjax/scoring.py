@@ -13,6 +13,9 @@ Keys (a value, or ``{"mean", "sd"}`` over several motions or reference splits):
   ``movement_first_1000`` and ``movement_last_1000``; :func:`upgrade` renames them.)
 * ``jitter``, ``jitter_max``: mean magnitude of the second difference of joint positions / the
   reference's, over the whole motion and in its roughest segment.
+* ``per_motion``: per motion (in order), the values that bars are set on one sample at a time:
+  ``movement_min``, ``movement_max``, ``jitter_max`` and ``root_step_max`` (the keys above hold their mean
+  and sd).
 * ``bone_cv_mean``, ``bone_cv_max`` (and ``bone_cv_median``): per-bone length CV, mean and max over bones.
 * ``root_step_max``: the largest per-frame root displacement / the reference's largest (> 1.5: teleports).
 * ``fid_k`` / ``fid_g``: Frechet distances on kinetic / geometric window features, normalized by the
@@ -70,6 +73,11 @@ def _movement_and_jitter(motions, reference, skeleton: Skeleton, fps: float, seg
   jitters = [metrics.jitter_curve(m, ref_rough, segment) for m in motions]
   return {
     "segment_frames": segment,
+    "per_motion": {
+      "movement_min": [float(c.min()) for c in moves],
+      "movement_max": [float(c.max()) for c in moves],
+      "jitter_max": [float(c.max()) for c in jitters],
+    },
     "movement_first": spread([c[0] for c in moves]),
     "movement_last": spread([c[-1] for c in moves]),
     "movement_min": spread([c.min() for c in moves]),
@@ -85,7 +93,8 @@ def _root_steps(motions, reference, skeleton: Skeleton) -> dict:
   """The largest per-frame root displacement of each motion / the largest in the reference (teleports)."""
   largest = lambda p: float(np.linalg.norm(np.diff(p[:, skeleton.root], axis=0), axis=-1).max())
   ref = max(largest(t) for t in reference)
-  return {"root_step_max": spread([largest(m) / ref for m in motions])}
+  each = [largest(m) / ref for m in motions]
+  return {"root_step_max": spread(each), "per_motion": {"root_step_max": each}}
 
 
 def _bones(motions, skeleton: Skeleton) -> dict:
@@ -208,10 +217,15 @@ def score(
   # geometric features are fractions of a window's frames: a std below 5% of the frames is noise
   fid_g, fid_g_real, div_g, div_g_real = _distribution(motions, reference, geo, window, splits, seed, 0.05)
   speed = float(np.mean(np.concatenate([metrics.joint_speed(t) for t in reference])))
+  moving, steps = (
+    _movement_and_jitter(motions, reference, skeleton, fps, segment),
+    _root_steps(motions, reference, skeleton),
+  )
   return {
-    **_movement_and_jitter(motions, reference, skeleton, fps, segment),
+    **moving,
     **_bones(motions, skeleton),
-    **_root_steps(motions, reference, skeleton),
+    **steps,
+    "per_motion": {**moving["per_motion"], **steps["per_motion"]},
     "fid_k": spread(fid_k),
     "fid_k_real": spread(fid_k_real),
     "div_k": div_k,

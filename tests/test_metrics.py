@@ -121,6 +121,10 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
   for key in ("heldout_loss", *METRIC_KEYS, "fid_k_real", "fid_g_real", "novelty_real"):
     assert np.isfinite(mean_of(m[key])), key
   assert set(m["fid_k"]) == {"mean", "sd"} and set(m["movement_first"]) == {"mean", "sd"}  # 2 seeds
+  each = m["per_motion"]  # every sample's own value of the per-sample bars, the keys' mean and sd over them
+  assert len(each["movement_min"]) == len(each["root_step_max"]) == 2
+  assert np.mean(each["movement_min"]) == pytest.approx(m["movement_min"]["mean"])
+  assert np.mean(each["root_step_max"]) == pytest.approx(m["root_step_max"]["mean"])
   assert m["sampling"]["seeds"] == [0, 1] and (runs[0] / "eval" / "sample.npz").exists()
   assert m["loss_kind"] == "nll" and json.loads((runs[2] / "eval" / "metrics.json").read_text())["loss_kind"] == "mse"
   capsys.readouterr()
