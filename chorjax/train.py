@@ -19,7 +19,6 @@ import fcntl
 import functools
 import json
 import math
-import os
 import signal
 import sys
 import threading
@@ -297,25 +296,33 @@ def workdir_lock(workdir: Path):
     f.close()
 
 
-def _check_saved_config(workdir: Path, cfg: Config, force: bool, may_write: bool = True) -> None:
-  """Refuses a workdir whose saved config differs (unless ``force``; then process 0 keeps the old one)."""
+def _check_saved_config(workdir: Path, cfg: Config, force: bool) -> bool:
+  """Refuses a workdir whose saved config differs, unless ``force``; returns whether the saved config
+  differs (or is unreadable) and must be kept aside once the new run has started (:func:`_keep_aside`)."""
   path = workdir / "config.json"
   if not path.exists():
-    return
+    return False
   try:
     saved = config_from_dict(json.loads(path.read_text()))
   except (json.JSONDecodeError, UserError) as e:
     if not force:
       raise UserError(f"{path}: unreadable saved config ({e}); use --force to replace it") from None
-    return
+    return True
   diff = config_diff(saved, cfg, ignore=resumable_keys())
   if diff and not force:
     raise UserError(
       f"{workdir}: holds a run with a different config ({'; '.join(diff[:3])}"
       f"{' ...' if len(diff) > 3 else ''}); use another --workdir, or --force to continue it"
     )
-  if diff and may_write:  # keep the old config beside the new one: nothing is overwritten silently
-    os.replace(path, workdir / f"config.{int(time.time())}.json")
+  return bool(diff)
+
+
+def _keep_aside(workdir: Path) -> None:
+  """The old config.json copied to config.<time>.json before the new one replaces it: nothing is
+  overwritten silently, and nothing is moved before the new run has restored (a failed --force leaves
+  the workdir as it was)."""
+  old = workdir / "config.json"
+  atomic_write(workdir / f"config.{int(time.time())}.json", lambda p: p.write_bytes(old.read_bytes()))
 
 
 def _write_config(workdir: Path, cfg: Config) -> None:
@@ -492,7 +499,7 @@ def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=No
   workdir = Path(workdir).absolute()
   is_main = parallel is None or parallel.is_main
   with workdir_lock(workdir) if is_main else contextlib.nullcontext():
-    _check_saved_config(workdir, cfg, force, may_write=is_main)
+    keep_old_config = _check_saved_config(workdir, cfg, force) and is_main
     ds = load_dataset(cfg.data)
     if cfg.sample.frames > 0:  # fail now, not after hours of training, if the end sample cannot be drawn
       motion_weight_vector(ds.num_motions, cfg.sample.motion, source="sample.motion =")
@@ -502,7 +509,7 @@ def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=No
     with contextlib.ExitStack() as cleanup:
       cleanup.callback(manager.close)
       cleanup.callback(manager.wait_until_finished)
-      return _train(cfg, workdir, ds, manager, parallel, cleanup)
+      return _train(cfg, workdir, ds, manager, parallel, cleanup, keep_old_config)
 
 
 def _restore_or_init(cfg: Config, workdir: Path, ds: Dataset, manager, parallel) -> tuple[dict, StepSpec, int]:
@@ -517,10 +524,14 @@ def _restore_or_init(cfg: Config, workdir: Path, ds: Dataset, manager, parallel)
   return ckpt.restore(manager, start, state, None if parallel is None else parallel.replicated), spec, start
 
 
-def _train(cfg: Config, workdir: Path, ds: Dataset, manager, parallel, cleanup: contextlib.ExitStack) -> dict:
+def _train(
+  cfg: Config, workdir: Path, ds: Dataset, manager, parallel, cleanup: contextlib.ExitStack, keep_old_config=False
+) -> dict:
   t_start = time.time()
   is_main = parallel is None or parallel.is_main
   state, spec, start = _restore_or_init(cfg, workdir, ds, manager, parallel)
+  if keep_old_config:
+    _keep_aside(workdir)
   if is_main:
     _write_config(workdir, cfg)
     _truncate_metrics(workdir / "metrics.jsonl", start)

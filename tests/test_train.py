@@ -217,6 +217,13 @@ def test_a_workdir_in_use_or_with_another_config_is_refused(tmp_path, capsys):
   # --force continues; the old config is kept beside the new one, and a changed shape is a clean error
   assert cli.main(["train", str(cfg), "--workdir", str(w), "optim.lr=5e-4", "--force"]) == 0
   assert len(list(w.glob("config.*.json"))) == 1
+  # a --force that fails (the checkpoint cannot hold the changed model) leaves the workdir as it was
+  before = {p.name: p.read_bytes() for p in w.glob("config*.json")}
+  capsys.readouterr()
+  assert cli.main(["train", str(cfg), "--workdir", str(w), "model.hidden_size=8", "--force"]) == 2
+  assert capsys.readouterr().err.count("\n") == 1
+  assert {p.name: p.read_bytes() for p in w.glob("config*.json")} == before
+  assert cli.main(["train", str(cfg), "--workdir", str(w), "model.hidden_size=8"]) == 2  # still refused
 
 
 def test_missing_checkpoint_is_a_clean_error(tmp_path, capsys):
