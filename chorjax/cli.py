@@ -6,7 +6,6 @@ User errors print one line (``chorjax: error: ...``) and exit with code 2, witho
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 
@@ -389,19 +388,15 @@ def _counts(args, **minimum) -> None:
 
 
 def _controls(args) -> dict:
-  """The sampling flags given on the command line, checked (unset ones are None: the run's config)."""
-  checks = {
-    "pi_temperature": (0.0, math.inf, "a temperature >= 0"),
-    "sigma_temperature": (0.0, math.inf, "a multiplier >= 0"),
-    "noise_smoothing": (0.0, 1.0, "0 <= RHO < 1"),
-    "persistence": (0.0, math.inf, "a log-weight bonus >= 0"),
-    "crossfade": (0.0, 1.0, "0 <= F < 1"),
-  }
-  for name, (low, high, what) in checks.items():
-    v = getattr(args, name)
-    if v is not None and not (low <= v < high):
-      raise UserError(f"--{name.replace('_', '-')} {v}: must be {what} (finite)")
-  given = {k: getattr(args, k) for k in checks}
+  """The sampling flags given on the command line, checked as the same keys are in a config file
+  (unset ones are None: the run's config)."""
+  from chorjax.config import check_sample_control
+
+  numbers = ("pi_temperature", "sigma_temperature", "noise_smoothing", "persistence", "crossfade")
+  given = {k: getattr(args, k) for k in numbers}
+  for name, value in given.items():
+    if value is not None:
+      check_sample_control(name, value, f"--{name.replace('_', '-')}")
   return {
     **given,
     "greedy": True if args.greedy else None,

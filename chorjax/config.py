@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import json
+import math
 import re
 import tomllib
 import typing
@@ -265,6 +266,13 @@ def _suggest(key: str, options: Sequence[str]) -> str:
   return f"; did you mean {close[0]!r}?" if close else ""
 
 
+def check_sample_control(name: str, value, where: str):
+  """``value`` checked as ``[sample] name`` is in a config file (type, range, finite); ``where`` names
+  its source in the error (e.g. the command-line flag)."""
+  field = {f.name: f for f in dataclasses.fields(SampleConfig)}[name]
+  return _check_value(where, f"sample.{name}", field, value)
+
+
 def _check_value(where: str, key: str, field: dataclasses.Field, value: Any):
   """Returns ``value`` converted to the field's type, or raises a UserError naming ``key``."""
   hint = typing.get_type_hints(_SECTION_CLASSES[key.split(".")[0]])[field.name]
@@ -286,6 +294,8 @@ def _check_value(where: str, key: str, field: dataclasses.Field, value: Any):
   if not ok:
     tname = "list" if hint is tuple else hint.__name__
     raise UserError(f"{where}: key {key!r}: expected {tname}, got {type(value).__name__} {value!r}")
+  if hint is float and not math.isfinite(value):
+    raise UserError(f"{where}: key {key!r}: {value!r} is not a finite number")
   items = value if isinstance(value, tuple) else (value,)  # a list (a tuple by now): each element
   for item in items:
     if meta.get("choices") and item not in meta["choices"]:
