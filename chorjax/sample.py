@@ -116,10 +116,10 @@ def dance(graphdef, params, features, motion, key, num_frames: int, controls: di
   """Dancers in data space ``[B, T, J, 3]``: :func:`generate` with ``controls`` (``SampleConfig.controls``),
   decoded (with rigid bones and locked feet if asked). A prime phrase comes first, decoded as one with its continuation
   (root-motion features integrate across the seam)."""
-  if controls["rigid_bones"] and features.lengths is None:
-    raise UserError("rigid_bones: this run records no bone lengths (trained before the option existed)")
-  if controls["foot_lock"] and features.representation != "canonical":
-    raise UserError(f"foot_lock: needs data.representation = canonical (this run: {features.representation})")
+  try:  # before generating, not after
+    features.check_decode(controls["rigid_bones"], controls["foot_lock"])
+  except ValueError as e:
+    raise UserError(str(e)) from None
   drawn = {k: v for k, v in controls.items() if k not in ("rigid_bones", "foot_lock")}
   z = generate(graphdef, params, motion, key, num_frames=num_frames, prime_BxPxD=prime_BxPxD, **drawn)
   if prime_BxPxD is not None:

@@ -71,19 +71,18 @@ def _movement_and_jitter(motions, reference, skeleton: Skeleton, fps: float, seg
   segment = min(segment, min(len(m) for m in motions))
   moves = [metrics.movement_curve(m, skeleton.root, lag, ref_disp, segment) for m in motions]
   jitters = [metrics.jitter_curve(m, ref_rough, segment) for m in motions]
+  each = {
+    "movement_min": [float(c.min()) for c in moves],
+    "movement_max": [float(c.max()) for c in moves],
+    "jitter_max": [float(c.max()) for c in jitters],
+  }
   return {
     "segment_frames": segment,
-    "per_motion": {
-      "movement_min": [float(c.min()) for c in moves],
-      "movement_max": [float(c.max()) for c in moves],
-      "jitter_max": [float(c.max()) for c in jitters],
-    },
+    "per_motion": each,
     "movement_first": spread([c[0] for c in moves]),
     "movement_last": spread([c[-1] for c in moves]),
-    "movement_min": spread([c.min() for c in moves]),
-    "movement_max": spread([c.max() for c in moves]),
+    **{k: spread(v) for k, v in each.items()},
     "jitter": spread([metrics.roughness(m) / ref_rough for m in motions]),
-    "jitter_max": spread([c.max() for c in jitters]),
     "movement_curve": np.mean([c for c in moves if len(c) == len(moves[0])], axis=0).tolist(),
     "movement_lag_frames": lag,
   }

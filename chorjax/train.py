@@ -553,11 +553,11 @@ def _train(
     loop.listeners.append(log)
   meta_of = lambda step: run_meta(cfg, ds.features, ds.id_map, ds.train_names, ds.val_names, step)
   loop.add_hook(evaluation_hook(val, spec.graphdef), cfg.train.eval_every)
-  loop.add_hook(checkpoint_hook(manager, meta_of), cfg.train.checkpoint_every)
+  save = checkpoint_hook(manager, meta_of)
+  loop.add_hook(save, cfg.train.checkpoint_every)
   if log is not None and log.writer is not None and cfg.train.figure_every:
     loop.add_hook(figure_hook(log.writer, spec.graphdef, host_params, ds, cfg), cfg.train.figure_every, at_last=False)
   loop.end_hooks.append(lambda loop: manager.wait_until_finished())
-  save = checkpoint_hook(manager, meta_of)
 
   def save_now(loop: Loop) -> None:  # on SIGINT/SIGTERM: this step's checkpoint, unless just written
     if manager.latest_step() != loop.step:

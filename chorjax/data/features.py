@@ -74,19 +74,23 @@ class Features:
     first frame's ``(heading, x, z)`` for the representations that integrate the root's motion;
     ``rigid``: every bone at the training takes' mean length, see ``transforms.rigid_bones``;
     ``lock_feet``: feet the features call in contact do not slide, see ``transforms.lock_feet``)."""
+    self.check_decode(rigid, lock_feet)
     rep = transforms.denormalize(z_TxD, self.mean, self.std)
     pos = _unrepresent(rep, self, place)
     if rigid:
-      if self.lengths is None:
-        raise ValueError("no bone lengths recorded (a run trained before sample.rigid_bones existed)")
       pos = transforms.rigid_bones(pos, self.skeleton.parents, self.lengths)
     if lock_feet:
-      if self.representation != "canonical":
-        raise ValueError("foot locking needs the canonical representation (the one that predicts foot contacts)")
       leg = leg_length(np.asarray(pos).reshape(-1, *pos.shape[-2:]), self.skeleton)
       contacts = rep[..., -len(self.skeleton.feet) :]
       pos = transforms.lock_feet(pos, contacts, self.skeleton.feet, max_step=0.05 * leg)  # foot_contacts' speed
     return self.uncanonical(pos)
+
+  def check_decode(self, rigid: bool = False, lock_feet: bool = False) -> None:
+    """Raises ValueError if :meth:`decode` cannot do what is asked (callers check before long work)."""
+    if rigid and self.lengths is None:
+      raise ValueError("rigid_bones: this run records no bone lengths (trained before the option existed)")
+    if lock_feet and self.representation != "canonical":
+      raise ValueError(f"foot_lock: needs data.representation = canonical (this run: {self.representation})")
 
   def to_dict(self) -> dict:
     return {
