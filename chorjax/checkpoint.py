@@ -13,7 +13,9 @@ The manager keeps the latest ``keep`` steps plus the best one by validation loss
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import shutil
 from pathlib import Path
 
 import jax
@@ -80,29 +82,79 @@ def _abstract(template, sharding=None):
   return jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=sharding), template)
 
 
+def _first_line(e: Exception) -> str:
+  return (str(e).strip().splitlines() or [type(e).__name__])[0][:160]
+
+
 def _mismatch(manager, step, e: Exception) -> UserError:
-  return UserError(
-    f"{manager.directory}/{step}: checkpoint does not match this model config ({str(e).splitlines()[0][:160]})"
-  )
+  return UserError(f"{manager.directory}/{step}: checkpoint does not match this model config ({_first_line(e)})")
+
+
+class Damaged(UserError):
+  """A checkpoint step whose files cannot be read back (truncated, emptied or missing); ``step`` says which."""
+
+  def __init__(self, message: str, step: int):
+    super().__init__(message)
+    self.step = step
+
+
+def _damaged(manager, step: int, item: str, e: Exception) -> Damaged:
+  """Names the file when the storage layer's message does (it usually does), else the item's folder."""
+  where = Path(manager.directory) / str(step) / item
+  named = [w.strip("'\",:;()[]") for w in str(e).split() if str(where) in w]
+  return Damaged(f"{named[0] if named else where}: damaged checkpoint ({type(e).__name__}: {_first_line(e)})", step)
 
 
 def step_meta(manager, step) -> dict:
-  """The JSON meta of one checkpoint step (config, features, id map, ...)."""
-  return dict(manager.restore(step, args=ocp.args.Composite(meta=ocp.args.JsonRestore()))["meta"])
+  """The JSON meta of one checkpoint step (config, features, id map, ...).
+
+  Raises:
+    Damaged: its meta file is missing, empty or not JSON.
+  """
+  try:
+    meta = manager.restore(step, args=ocp.args.Composite(meta=ocp.args.JsonRestore()))["meta"]
+  except Exception as e:  # orbax and tensorstore raise many types for one cause: bad files
+    raise _damaged(manager, step, "meta/metadata", e) from None
+  if not isinstance(meta, dict):
+    raise Damaged(f"{manager.directory}/{step}/meta/metadata: damaged checkpoint (not a JSON object)", step)
+  return dict(meta)
 
 
 def best_step(manager) -> int | None:
-  """The kept step with the lowest validation loss (None if no checkpoint has one)."""
-  losses = {s: step_meta(manager, s).get("val_loss") for s in manager.all_steps()}
+  """The kept step with the lowest validation loss (None if no intact checkpoint has one)."""
+  losses = {}
+  for s in manager.all_steps():
+    with contextlib.suppress(Damaged):
+      losses[s] = step_meta(manager, s).get("val_loss")
   losses = {s: v for s, v in losses.items() if v is not None}
   return min(losses, key=losses.get) if losses else None
 
 
-def restore(manager: ocp.CheckpointManager, step: int, template, sharding=None):
+def move_aside(manager: ocp.CheckpointManager, steps) -> Path:
+  """Moves damaged steps into ``checkpoints-damaged/`` beside the checkpoints (nothing is deleted) and
+  lets the manager forget them; returns that folder."""
+  d = Path(manager.directory)
+  aside = d.parent / "checkpoints-damaged"
+  aside.mkdir(exist_ok=True)
+  for step in steps:
+    target = aside / str(step)
+    k = 1
+    while target.exists():
+      target, k = aside / f"{step}.{k}", k + 1
+    shutil.move(str(d / str(step)), str(target))
+  manager.reload()
+  return aside
+
+
+def restore(manager: ocp.CheckpointManager, step: int, template, sharding=None, mismatch: bool = False):
   """Restores ``{params, opt_state, step}`` of ``step`` into the structure of ``template`` (to resume).
 
   With ``sharding`` every array is restored with it (e.g. replicated over the current mesh), so a
   checkpoint written by one process count resumes on another.
+
+  Raises:
+    UserError: the checkpoint cannot be restored: with ``mismatch`` (the caller knows the model config
+      changed) as a config mismatch, otherwise as ``Damaged``.
   """
   abstract = _abstract(template, sharding)
   try:
@@ -117,14 +169,15 @@ def restore(manager: ocp.CheckpointManager, step: int, template, sharding=None):
         ),
       )
       state = {"params": r["params"], **r["train"]}
-  except (ValueError, KeyError, TypeError) as e:
-    raise _mismatch(manager, step, e) from None
+  except Exception as e:  # bad files and a changed model both surface here, in many types
+    raise (_mismatch(manager, step, e) if mismatch else _damaged(manager, step, "", e)) from None
   # Re-impose the template's tree (optax states are namedtuples; keep their types exactly).
   return jax.tree.unflatten(jax.tree.structure(template), jax.tree.leaves(state))
 
 
 def restore_params(manager: ocp.CheckpointManager, step: int, template):
-  """Restores only the params of ``step`` into the structure of ``template`` (no optimizer needed)."""
+  """Restores only the params of ``step`` into the structure of ``template`` (no optimizer needed; the
+  template is built from the step's own config, so a failure means damaged files: ``Damaged``)."""
   abstract = _abstract(template, jax.sharding.SingleDeviceSharding(jax.devices()[0]))
   try:
     if _is_legacy(manager, step):  # a partial restore of the old single ``state`` item
@@ -135,8 +188,8 @@ def restore_params(manager: ocp.CheckpointManager, step: int, template):
       params = manager.restore(step, args=ocp.args.Composite(state=args))["state"]["params"]
     else:
       params = manager.restore(step, args=ocp.args.Composite(params=ocp.args.StandardRestore(abstract)))["params"]
-  except (ValueError, KeyError, TypeError) as e:
-    raise _mismatch(manager, step, e) from None
+  except Exception as e:  # the template comes from the step's own config: a failure is bad files
+    raise _damaged(manager, step, "params", e) from None
   return jax.tree.unflatten(jax.tree.structure(template), jax.tree.leaves(params))
 
 

@@ -6,6 +6,7 @@ User errors print one line (``chorjax: error: ...``) and exit with code 2, witho
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -187,13 +188,14 @@ def _sample(args) -> int:
   paths = _sample_paths(out, args.num)
   _refuse_existing(paths, args.force)  # the files really written (OUT_k.csv for several dancers)
   run = load_run(args.workdir, args.checkpoint)
+  sampling = run.sampling(**_controls(args))
+  run = run.ranged(sampling)
   features = run.features
   motion_BxM = np.tile(motion_weight_vector(run.num_motions, args.motion, args.mix)[None], (args.num, 1))
   prime = phrase = None
   if args.prime:
     phrase = read_prime(args.prime, features, run.config.data)
     prime = np.tile(phrase[None], (args.num, 1, 1))
-  sampling = run.sampling(**_controls(args))
   pos = dance(run.graphdef, run.params, features, motion_BxM, jax.random.key(args.seed), args.frames, sampling, prime)
   settings = {
     "workdir": str(args.workdir),
@@ -392,7 +394,7 @@ def _controls(args) -> dict:
   (unset ones are None: the run's config)."""
   from chorjax.config import check_sample_control
 
-  numbers = ("pi_temperature", "sigma_temperature", "noise_smoothing", "persistence", "crossfade")
+  numbers = ("pi_temperature", "sigma_temperature", "noise_smoothing", "persistence", "crossfade", "pace")
   given = {k: getattr(args, k) for k in numbers}
   for name, value in given.items():
     if value is not None:
@@ -402,6 +404,7 @@ def _controls(args) -> dict:
     "greedy": True if args.greedy else None,
     "rigid_bones": args.rigid_bones,
     "foot_lock": args.foot_lock,
+    "clamp": args.clamp,
   }
 
 
@@ -435,6 +438,13 @@ def _add_sampling_args(p) -> None:
     "(default: the run's sample.crossfade)",
   )
   p.add_argument(
+    "--pace",
+    type=float,
+    metavar="GAIN",
+    help="hold the dancer to the training pace: scale temperature x (training / own pace)^GAIN, >= 0 "
+    "(default: the run's sample.pace)",
+  )
+  p.add_argument(
     "--rigid-bones",
     action=argparse.BooleanOptionalAction,
     help="decode with the training takes' bone lengths (default: the run's sample.rigid_bones)",
@@ -443,6 +453,11 @@ def _add_sampling_args(p) -> None:
     "--foot-lock",
     action=argparse.BooleanOptionalAction,
     help="canonical runs: feet in contact do not slide (default: the run's sample.foot_lock)",
+  )
+  p.add_argument(
+    "--clamp",
+    action=argparse.BooleanOptionalAction,
+    help="clip every generated frame to the training features' range (default: the run's sample.clamp)",
   )
   p.add_argument("--seed", type=int, default=0, help="sampling seed: the same seed draws the same dance (default 0)")
   p.add_argument(
@@ -491,10 +506,10 @@ def _add_data_commands(sub) -> None:
     "so the takes can join it",
   )
   conv.add_argument("--up-axis", choices=("y", "-y", "z", "-z", "x", "-x"), help="rotate to this up axis")
-  conv.add_argument("--scale", type=float, default=1.0, help="multiply lengths (after --like; default 1)")
+  conv.add_argument("--scale", type=_positive, default=1.0, help="multiply lengths (after --like; default 1)")
   conv.add_argument("--asf", metavar="PATH", help="the skeleton of AMC inputs (default: found in the AMC's folder)")
-  conv.add_argument("--amc-fps", type=float, default=120.0, help="frame rate of AMC inputs (default 120)")
-  conv.add_argument("--fps", type=float, default=30.0, help="frame rate of CSV inputs (default 30)")
+  conv.add_argument("--amc-fps", type=_positive, default=120.0, help="frame rate of AMC inputs (default 120)")
+  conv.add_argument("--fps", type=_positive, default=30.0, help="frame rate of CSV inputs (default 30)")
   conv.add_argument("--drop-first-frame", action="store_true", help="drop frame 0 (a converter's T-pose frame)")
   conv.add_argument(
     "--rigid",
@@ -594,7 +609,7 @@ def _add_render_command(sub) -> None:
     help="the file to write; its suffix picks the format",
   )
   render.add_argument("--frames", type=int, help="render only the first N frames")
-  render.add_argument("--fps", type=float, default=30.0, help="frame rate of CSV inputs (default 30)")
+  render.add_argument("--fps", type=_positive, default=30.0, help="frame rate of CSV inputs (default 30)")
   render.add_argument(
     "--size", default="1280x720", metavar="WxH", help="GIF/MP4: frame size in pixels (default 1280x720)"
   )
@@ -673,8 +688,26 @@ def _add_report_commands(sub) -> None:
   cmp_.set_defaults(func=_compare)
 
 
+class _Parser(argparse.ArgumentParser):
+  """Usage errors as one line (``--help`` shows the usage), like every other chorjax error."""
+
+  def error(self, message: str):
+    self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _positive(text: str) -> float:
+  """An argparse type: a finite number above 0 (a frame rate, a scale)."""
+  try:
+    value = float(text)
+  except ValueError:
+    raise argparse.ArgumentTypeError(f"invalid number: {text!r}") from None
+  if not (math.isfinite(value) and value > 0):
+    raise argparse.ArgumentTypeError(f"{text}: must be a finite number above 0")
+  return value
+
+
 def build_parser() -> argparse.ArgumentParser:
-  parser = argparse.ArgumentParser(
+  parser = _Parser(
     prog="chorjax",
     description=("Learn a dancer's movement language from motion capture and write new dance in it."),
     epilog=(
@@ -707,6 +740,10 @@ def main(argv=None) -> int:
   except Interrupted as e:
     print(f"chorjax: {e}", file=sys.stderr)
     return e.code
+  except OSError as e:  # the machine said no (read-only, disk full, a file where a folder should be): one line
+    where = f"{e.filename}: " if e.filename else ""
+    print(f"chorjax: error: {where}{e.strerror or e}", file=sys.stderr)
+    return 2
   except KeyboardInterrupt:
     print("chorjax: interrupted", file=sys.stderr)
     return 130

@@ -184,13 +184,28 @@ class SampleConfig:
     "travels by what its legs do",
     resumable=True,
   )
+  clamp: bool = _field(
+    False,
+    "every generated frame is clipped, feature by feature, to the range the training takes span before it "
+    "is fed back: no root speed, pose offset or joint velocity beyond what the data ever shows (the model "
+    "is never fed a frame unlike its training inputs)",
+    resumable=True,
+  )
+  pace: float = _field(
+    0.0,
+    "MDN pace governor: the scale temperature is multiplied by (training pace / the dancer's own pace) to "
+    "this power (within 0.5-2x), the pace being how far the features move in half a second, averaged over "
+    "about 5 s: a dancer who slows down gets more energy, one who trembles or races gets less (0 = off)",
+    minimum=0.0,
+    resumable=True,
+  )
   seed: int = _field(0, "sampling seed", resumable=True)
 
   def controls(self, **given) -> dict:
     """How to draw and decode a dance (``sample.dance``): each of ``CONTROLS`` as given, where given and
     not None, else this config's."""
     out = {k: getattr(self, k) if given.get(k) is None else given[k] for k in self.CONTROLS}
-    flags = ("greedy", "rigid_bones", "foot_lock")
+    flags = ("greedy", "rigid_bones", "foot_lock", "clamp")
     return {**out, **{k: bool(out[k]) for k in flags}}
 
   CONTROLS = (
@@ -200,8 +215,10 @@ class SampleConfig:
     "noise_smoothing",
     "persistence",
     "crossfade",
+    "pace",
     "rigid_bones",
     "foot_lock",
+    "clamp",
   )
 
 

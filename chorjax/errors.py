@@ -6,6 +6,8 @@ checkpoint). The CLI prints its message as one line and exits with code 2, witho
 
 from __future__ import annotations
 
+import glob
+import math
 import os
 import tempfile
 from collections.abc import Callable
@@ -41,7 +43,8 @@ def atomic_write(path: str | os.PathLike, write: Callable[[Path], object], *, ov
   if not overwrite and path.exists():
     raise UserError(f"{path}: already exists (refusing to overwrite; remove it or choose another name)")
   path.parent.mkdir(parents=True, exist_ok=True)
-  fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix or ".tmp", dir=path.parent)
+  _clean_stale(path)
+  fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.tmp{os.getpid()}.", suffix=path.suffix or ".tmp", dir=path.parent)
   os.close(fd)
   tmp_path = Path(tmp)
   try:
@@ -56,6 +59,24 @@ def atomic_write(path: str | os.PathLike, write: Callable[[Path], object], *, ov
   return path
 
 
+def _clean_stale(path: Path) -> None:
+  """Removes temporaries of ``path`` left by a killed write (their process is gone)."""
+  for tmp in path.parent.glob(f".{glob.escape(path.stem)}.tmp*"):
+    pid = tmp.name[len(path.stem) + 5 :].split(".")[0]
+    if pid.isdigit() and not _alive(int(pid)):
+      tmp.unlink(missing_ok=True)
+
+
+def _alive(pid: int) -> bool:
+  try:
+    os.kill(pid, 0)
+  except ProcessLookupError:
+    return False
+  except (PermissionError, OverflowError):
+    return pid < 2**22  # someone else's process (or an impossible number: not a process)
+  return True
+
+
 def read_text(path, kind: str, errors: str = "strict") -> str:
   """A text file's contents, or a one-line ``UserError`` naming the file (``kind``: e.g. "BVH")."""
   path = Path(path)
@@ -67,11 +88,35 @@ def read_text(path, kind: str, errors: str = "strict") -> str:
     raise UserError(f"{path}: cannot read as a {kind} text file ({type(e).__name__})") from None
 
 
-def first_non_number(cells) -> int:
-  """Index of the first cell that does not parse as a float, for line errors (called after one failed)."""
+# no motion capture value (a coordinate in any unit, an angle in degrees) comes near this: larger is garbage
+LARGEST_VALUE = 1e7
+
+
+def parse_numbers(cells, where: str, columns: bool = False) -> list[float]:
+  """The floats in ``cells`` (one line of a text file), or a one-line ``UserError`` starting with
+  ``where`` (``path:line``; with ``columns``, the 1-based column too) for the first cell that is not a
+  number, not finite (nan, inf) or beyond +-``LARGEST_VALUE``."""
   for i, c in enumerate(cells):
+    at = f"{where}: column {i + 1}" if columns else where
     try:
-      float(c)
+      v = float(c)
     except ValueError:
-      return i
-  raise ValueError("every cell parses as a number")
+      raise UserError(f"{at}: not a number: {c.strip()[:40]!r}") from None
+    if not math.isfinite(v):
+      raise UserError(f"{at}: non-finite value {c.strip()!r}")
+    if abs(v) > LARGEST_VALUE:
+      raise UserError(f"{at}: value {c.strip()[:40]} is out of range (beyond +-{LARGEST_VALUE:g})")
+  return [float(c) for c in cells]
+
+
+def check_array(values, where: str) -> None:
+  """One-line ``UserError`` naming ``where`` if ``values`` hold a non-finite entry or one beyond
+  +-``LARGEST_VALUE`` (binary formats: the text readers check each line with :func:`parse_numbers`)."""
+  import numpy as np
+
+  a = np.asarray(values)
+  bad = ~np.isfinite(a) | (np.abs(np.nan_to_num(a)) > LARGEST_VALUE)
+  if bad.any():
+    idx = tuple(int(k) for k in np.argwhere(bad)[0])
+    kind = "non-finite" if not np.isfinite(a[idx]) else "out-of-range"
+    raise UserError(f"{where}: {kind} value {a[idx]!r} at index {list(idx)} ({int(bad.sum())} such values)")

@@ -50,9 +50,10 @@ def evaluate(
     motion measured against the takes in ``data``, novelty against the run's training takes.
   """
   run = load_run(workdir, checkpoint)
+  sampling = run.sampling(**controls)
+  run = run.ranged(sampling)
   feats = run.features
   sk, fps = feats.skeleton, run.fps
-  sampling = run.sampling(**controls)
   real, train = read_reference(run, data)
   if frames < 2 * window:
     raise UserError(f"--frames {frames}: need at least {2 * window} frames")

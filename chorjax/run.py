@@ -12,11 +12,13 @@ train, sample -> cli.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 from pathlib import Path
 from typing import Any
 
 import jax.numpy as jnp
+import numpy as np
 import optax
 from flax import nnx
 
@@ -168,6 +170,27 @@ class Run:
     """Sampling controls: the ones given (not None), else the run's ``[sample]`` config."""
     return self.config.sample.controls(**given)
 
+  def ranged(self, sampling: dict) -> Run:
+    """This run with the training range and pace that ``sampling`` (``clamp``, ``pace``) holds to. Runs
+    trained before they were recorded get them from their training data, which must still give the very
+    normalization they were trained with."""
+    f = self.features
+    needs = (sampling.get("clamp") and f.low is None) or (sampling.get("pace") and f.pace is None)
+    if not needs:
+      return self
+    from chorjax.data.dataset import load_dataset
+
+    try:
+      fresh = load_dataset(self.config.data).features
+    except UserError as e:
+      raise UserError(f"{self.workdir}: records no training range or pace and its data cannot be read ({e})") from None
+    close = lambda a, b: np.allclose(a, b, atol=1e-5)
+    same = fresh.dim == f.dim and close(fresh.mean, f.mean) and close(fresh.std, f.std)
+    if not same:
+      raise UserError(f"{self.workdir}: records no training range or pace and its training data changed")
+    stats = {k: getattr(fresh, k) for k in ("low", "high", "pace_lag", "pace")}
+    return dataclasses.replace(self, features=dataclasses.replace(f, **stats))
+
 
 def load_run(workdir, which: str | int = "latest") -> Run:
   """The run in ``workdir`` at checkpoint ``which`` (``latest``, ``best`` or a step number).
@@ -182,11 +205,12 @@ def load_run(workdir, which: str | int = "latest") -> Run:
   manager = ckpt.open_run(workdir)
   try:
     step = ckpt.resolve_step(manager, which, workdir)
-    meta = ckpt.step_meta(manager, step)
-    cfg = config_from_dict(meta["config"])
-    features = Features.from_dict(meta["features"])
-    graphdef, template = model_template(cfg, features.dim, len(meta["id_map"]))
-    params = ckpt.restore_params(manager, step, template)
+    try:
+      meta, cfg, features, graphdef, params = _read_step(manager, step)
+    except ckpt.Damaged as e:
+      good = _intact_step(manager, [s for s in manager.all_steps() if s != step])
+      hint = f"use --checkpoint {good} (intact)" if good is not None else "no other checkpoint is intact"
+      raise UserError(f"{e}; {hint}") from None
   finally:
     manager.close()
   return Run(
@@ -201,3 +225,24 @@ def load_run(workdir, which: str | int = "latest") -> Run:
     step=int(meta["step"]),
     val_loss=meta.get("val_loss"),
   )
+
+
+def _read_step(manager, step: int):
+  """``(meta, config, features, graphdef, params)`` of one checkpoint step (``ckpt.Damaged`` if unreadable)."""
+  meta = ckpt.step_meta(manager, step)
+  try:
+    cfg = config_from_dict(meta["config"])
+    features = Features.from_dict(meta["features"])
+    graphdef, template = model_template(cfg, features.dim, len(meta["id_map"]))
+  except (KeyError, TypeError, ValueError) as e:  # (a UserError, e.g. a newer version's key, stays as it is)
+    raise ckpt.Damaged(f"{manager.directory}/{step}/meta/metadata: damaged checkpoint ({e})", step) from None
+  return meta, cfg, features, graphdef, ckpt.restore_params(manager, step, template)
+
+
+def _intact_step(manager, steps) -> int | None:
+  """The newest of ``steps`` that reads back whole (for the hint after a damaged one), or None."""
+  for step in sorted(steps, reverse=True):
+    with contextlib.suppress(ckpt.Damaged):
+      _read_step(manager, step)
+      return step
+  return None

@@ -19,10 +19,10 @@ from flax import nnx
 from chorjax.data.dataset import conform, read_takes
 from chorjax.errors import UserError
 
+_STATIC = ("graphdef", "num_frames", "greedy", "noise_smoothing", "persistence", "crossfade", "pace", "pace_lag")
 
-@functools.partial(
-  jax.jit, static_argnames=("graphdef", "num_frames", "greedy", "noise_smoothing", "persistence", "crossfade")
-)
+
+@functools.partial(jax.jit, static_argnames=_STATIC)
 def generate(
   graphdef,
   params,
@@ -37,6 +37,10 @@ def generate(
   noise_smoothing: float = 0.0,
   persistence: float = 0.0,
   crossfade: float = 0.0,
+  bounds=None,
+  pace: float = 0.0,
+  pace_lag: int = 15,
+  pace_target=None,
 ):
   """Generates ``num_frames`` normalized frames per dancer.
 
@@ -52,6 +56,10 @@ def generate(
     noise_smoothing: the MDN noise's AR(1) coefficient (:func:`smooth_noise`; 0 = independent per frame).
     persistence: added to the log-weight of the previous frame's mixture component.
     crossfade: a change of component glides: the jump between the means decays by this factor per frame.
+    bounds: optional ``(low [D], high [D])``: every drawn frame is clipped to them before it is fed back
+      and returned (``Features.low``/``high``: the training range; ``sample.clamp``).
+    pace, pace_lag, pace_target: the pace governor (0 = off; :func:`_generate_smoothly`); ``pace_target``
+      is ``(the training pace over pace_lag frames, [D] weights that average the pose features)``.
 
   Returns:
     ``[B, num_frames, D]`` normalized frames.
@@ -64,12 +72,12 @@ def generate(
   else:
     x0 = jnp.zeros((jnp.shape(motion)[0], model.dim), jnp.float32)
 
-  if greedy or noise_smoothing == persistence == crossfade == 0:
+  if greedy or noise_smoothing == persistence == crossfade == pace == 0:
 
     def body(c, k):
       carry, x = c
       carry, out = model.step(carry, x)
-      x = model.sample(out, k, pi_temperature, sigma_temperature, greedy)
+      x = _clip(model.sample(out, k, pi_temperature, sigma_temperature, greedy), bounds)
       return (carry, x), x
 
     _, xs_NxBxD = jax.lax.scan(body, (carry, x0), jax.random.split(key, num_frames))
@@ -81,22 +89,45 @@ def generate(
     "persistence": persistence,
     "crossfade": crossfade,
   }
-  return _generate_smoothly(model, carry, x0, key, num_frames, noise_smoothing, controls)
+  pacing = (pace, pace_lag, *pace_target) if pace else None
+  return _generate_smoothly(model, carry, x0, key, num_frames, noise_smoothing, controls, bounds, pacing)
 
 
-def _generate_smoothly(model, carry, x0_BxD, key, num_frames: int, noise_smoothing: float, controls: dict):
-  """The scan of :func:`generate` with smoothed noise and the draw's state (component, offset) carried."""
+def _clip(x_BxD, bounds):
+  return x_BxD if bounds is None else jnp.clip(x_BxD, *bounds)
+
+
+def _generate_smoothly(
+  model, carry, x0_BxD, key, num_frames: int, noise_smoothing: float, controls: dict, bounds, pacing
+):
+  """The scan of :func:`generate` with smoothed noise and the draw's state (component, offset) carried.
+
+  With ``pacing = (gain, lag, ref, weights)`` a governor holds the dancer to the training pace ``ref``
+  (the weighted mean absolute change of the features over ``lag`` frames): the scale temperature is
+  multiplied by ``(ref / own pace) ** gain`` within 0.5-2x, the own pace a running mean over about ten
+  lags; a dancer who slows down gets more energy, one who races or trembles less."""
+  b = x0_BxD.shape[0]
+  gain, lag, ref, weights = pacing or (0.0, 1, 1.0, None)
+  keep = 1.0 - 1.0 / (10 * lag)  # the running pace forgets over about ten lags (5 s)
 
   def body(c, k):
-    carry, x, noise, drawn = c
+    carry, x, noise, drawn, (recent, at, own) = c
     carry, out = model.step(carry, x)
     k_comp, k_noise = jax.random.split(k)
     noise, eps_BxD = smooth_noise(noise, k_noise, noise_smoothing)
-    x, drawn = model.draw(out, k_comp, eps_BxD, drawn, **controls)
-    return (carry, x, noise, drawn), x
+    sigma = controls["sigma_temperature"]
+    if pacing:
+      sigma = sigma * jnp.clip((ref / jnp.maximum(own, 1e-6)) ** gain, 0.5, 2.0)[:, None]
+    x, drawn = model.draw(out, k_comp, eps_BxD, drawn, **{**controls, "sigma_temperature": sigma})
+    x = _clip(x, bounds)
+    if pacing:
+      own = keep * own + (1 - keep) * (jnp.abs(x - recent[at]) @ weights)
+      recent, at = recent.at[at].set(x), (at + 1) % lag
+    return (carry, x, noise, drawn, (recent, at, own)), x
 
-  none = (jnp.full((x0_BxD.shape[0],), -1), jnp.zeros_like(x0_BxD))  # no component yet, no offset
-  init = (carry, x0_BxD, (jnp.zeros_like(x0_BxD), jnp.zeros_like(x0_BxD)), none)
+  none = (jnp.full((b,), -1), jnp.zeros_like(x0_BxD))  # no component yet, no offset
+  governor = (jnp.broadcast_to(x0_BxD, (lag, *x0_BxD.shape)), 0, jnp.full((b,), ref, jnp.float32))
+  init = (carry, x0_BxD, (jnp.zeros_like(x0_BxD), jnp.zeros_like(x0_BxD)), none, governor)
   _, xs_NxBxD = jax.lax.scan(body, init, jax.random.split(key, num_frames))
   return jnp.swapaxes(xs_NxBxD, 0, 1)
 
@@ -113,14 +144,21 @@ def smooth_noise(state, key, rho: float):
 
 
 def dance(graphdef, params, features, motion, key, num_frames: int, controls: dict, prime_BxPxD=None) -> np.ndarray:
-  """Dancers in data space ``[B, T, J, 3]``: :func:`generate` with ``controls`` (``SampleConfig.controls``),
-  decoded (with rigid bones and locked feet if asked). A prime phrase comes first, decoded as one with its continuation
-  (root-motion features integrate across the seam)."""
+  """Dancers in data space ``[B, T, J, 3]``: :func:`generate` with ``controls`` (``SampleConfig.controls``;
+  clipped to the training range if asked), decoded (with rigid bones and locked feet if asked). A prime
+  phrase comes first, decoded as one with its continuation (root-motion features integrate across the
+  seam)."""
   try:  # before generating, not after
-    features.check_decode(controls["rigid_bones"], controls["foot_lock"])
+    features.check_decode(controls["rigid_bones"], controls["foot_lock"], controls["clamp"], controls["pace"])
   except ValueError as e:
     raise UserError(str(e)) from None
-  drawn = {k: v for k, v in controls.items() if k not in ("rigid_bones", "foot_lock")}
+  drawn = {k: v for k, v in controls.items() if k not in ("rigid_bones", "foot_lock", "clamp")}
+  if controls["clamp"]:
+    drawn["bounds"] = (features.low, features.high)
+  if controls["pace"]:
+    weights = np.zeros(features.dim, np.float32)
+    weights[features.pose_channels] = 1.0 / len(features.pose_channels)
+    drawn.update(pace_lag=features.pace_lag, pace_target=(features.pace, weights))
   z = generate(graphdef, params, motion, key, num_frames=num_frames, prime_BxPxD=prime_BxPxD, **drawn)
   if prime_BxPxD is not None:
     z = np.concatenate([prime_BxPxD, np.asarray(z)], axis=1)

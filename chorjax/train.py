@@ -497,6 +497,8 @@ def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=No
   every process trains its share and only process 0 writes anything but checkpoints.
   """
   workdir = Path(workdir).absolute()
+  if workdir.exists() and not workdir.is_dir():
+    raise UserError(f"{workdir}: is a file, not a run directory (--workdir names a folder)")
   is_main = parallel is None or parallel.is_main
   with workdir_lock(workdir) if is_main else contextlib.nullcontext():
     keep_old_config = _check_saved_config(workdir, cfg, force) and is_main
@@ -513,15 +515,34 @@ def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=No
 
 
 def _restore_or_init(cfg: Config, workdir: Path, ds: Dataset, manager, parallel) -> tuple[dict, StepSpec, int]:
-  """The latest checkpoint's state (checked to be of these takes), or a fresh one."""
+  """The newest intact checkpoint's state (checked to be of these takes), or a fresh one if there is none.
+
+  A damaged checkpoint (a killed write, a truncated file) is moved aside into ``checkpoints-damaged/``
+  with a warning line and the next older one is tried; if every one is damaged, a UserError (never a
+  silent restart from step 0)."""
   state, spec = create_train_state(cfg, ds.features.dim, ds.num_motions)
-  start = manager.latest_step()
-  if start is None:
-    return state, spec, 0
-  meta = ckpt.step_meta(manager, start)
-  if meta["id_map"] != ds.id_map:
-    raise UserError(f"{workdir}: its checkpoints were trained on other takes ({list(meta['id_map'])[:3]}...)")
-  return ckpt.restore(manager, start, state, None if parallel is None else parallel.replicated), spec, start
+  steps = sorted(manager.all_steps(), reverse=True)
+  damaged = []
+  for start in steps:
+    try:
+      meta = ckpt.step_meta(manager, start)
+      if meta["id_map"] != ds.id_map:
+        raise UserError(f"{workdir}: its checkpoints were trained on other takes ({list(meta['id_map'])[:3]}...)")
+      changed = config_from_dict(meta["config"]).model != cfg.model
+      sharding = None if parallel is None else parallel.replicated
+      restored = ckpt.restore(manager, start, state, sharding, mismatch=changed)
+    except ckpt.Damaged as e:
+      damaged.append(e)
+      continue
+    if damaged and (parallel is None or parallel.is_main):
+      aside = ckpt.move_aside(manager, [e.step for e in damaged])
+      print(f"warning: {damaged[0]}; moved to {aside}, resuming from step {start}", file=sys.stderr)
+    return restored, spec, start
+  if damaged:
+    raise UserError(
+      f"{damaged[0]}; no intact checkpoint in {ckpt.checkpoint_dir(workdir)} (move it aside to start over)"
+    )
+  return state, spec, 0
 
 
 def _train(

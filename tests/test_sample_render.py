@@ -364,6 +364,64 @@ def test_sample_cli_smoothing_persistence_and_rigid_bones(run_dir, tmp_path, cap
   assert not (tmp_path / "bad.csv").exists()
 
 
+def test_clamp_keeps_every_frame_in_the_training_range(loaded, run_dir, tmp_path, capsys):
+  import dataclasses
+
+  from chorjax.errors import UserError
+  from chorjax.sample import dance
+
+  f = loaded.features
+  every = np.concatenate([x for _, x in load_dataset(loaded.config.data).train])  # what training windows show
+  np.testing.assert_array_equal(f.low, every.min(0))
+  np.testing.assert_array_equal(f.high, every.max(0))
+  w = jnp.tile(as_weights(jnp.array([3]), 10), (4, 1))
+  wide = {"pi_temperature": 1.0, "sigma_temperature": 3.0, "noise_smoothing": 0.5}
+  gen = lambda **kw: np.asarray(generate(loaded.graphdef, loaded.params, w, jax.random.key(0), num_frames=200, **kw))
+  free, held = gen(**wide), gen(**wide, bounds=(f.low, f.high))
+  assert ((free < f.low) | (free > f.high)).any()  # a wide draw leaves the range ...
+  assert ((held >= f.low) & (held <= f.high)).all()  # ... the clamped one never does
+  assert np.isfinite(held).all() and not np.allclose(held[0], held[1])
+  # a run trained before the range was recorded gets it from its own training data ...
+  old = dataclasses.replace(loaded, features=dataclasses.replace(f, low=None, high=None))
+  assert old.ranged({"clamp": False}) is old
+  np.testing.assert_array_equal(old.ranged({"clamp": True}).features.low, f.low)
+  with pytest.raises(UserError, match=r"no training range or pace .*changed"):  # ... unless that data no longer matches
+    dataclasses.replace(old, features=dataclasses.replace(old.features, mean=old.features.mean + 1)).ranged(
+      {"clamp": True}
+    )
+  controls = loaded.sampling(clamp=True)
+  with pytest.raises(UserError, match="no training range"):
+    dance(old.graphdef, old.params, old.features, np.array([0]), jax.random.key(0), 10, controls)
+  out = tmp_path / "c.npz"
+  assert cli.main(["sample", str(run_dir), "-o", str(out), "--frames", "100", "--clamp"]) == 0
+  assert json.loads(str(np.load(out)["meta"]))["settings"]["clamp"] is True
+
+
+def test_pace_governor_drives_the_dancer_towards_the_training_pace(loaded, run_dir, tmp_path):
+  f = loaded.features
+  lag = f.pace_lag
+  train = [x for _, x in load_dataset(loaded.config.data).train]
+  assert lag == round(0.5 * loaded.fps)
+  pose = f.pose_channels
+  assert f.pace == pytest.approx(
+    np.concatenate([np.abs(x[lag:, pose] - x[:-lag, pose]).mean(-1) for x in train]).mean()
+  )
+  w = jnp.tile(as_weights(jnp.array([3]), 10), (4, 1))
+  base = {"pi_temperature": 1.0, "sigma_temperature": 1.0, "noise_smoothing": 0.5, "pace_lag": lag}
+  weights = np.zeros(f.dim, np.float32)
+  weights[pose] = 1 / len(pose)
+  gen = lambda **kw: np.asarray(generate(loaded.graphdef, loaded.params, w, jax.random.key(0), num_frames=400, **kw))
+  pace_of = lambda z: np.abs(z[:, 200 + lag :, pose] - z[:, 200:-lag, pose]).mean()  # once the running mean settled
+  free = gen(**base)
+  held = lambda ref: gen(**base, pace=2.0, pace_target=(ref, weights))
+  slow, fast = held(0.5 * pace_of(free)), held(2 * pace_of(free))
+  assert pace_of(slow) < 0.9 * pace_of(free) < 0.9 * pace_of(fast)  # held back, left alone, pushed on
+  assert np.isfinite(fast).all()
+  out = tmp_path / "p.npz"
+  assert cli.main(["sample", str(run_dir), "-o", str(out), "--frames", "100", "--pace", "1"]) == 0
+  assert json.loads(str(np.load(out)["meta"]))["settings"]["pace"] == 1.0
+
+
 def test_foot_lock_needs_the_canonical_representation(run_dir, tmp_path, capsys):
   assert cli.main(["sample", str(run_dir), "-o", str(tmp_path / "s.csv"), "--foot-lock"]) == 2
   err = capsys.readouterr().err

@@ -22,7 +22,7 @@ import numpy as np
 from chorjax.data.bvh import _guess_feet, _guess_twins
 from chorjax.data.motion import Motion, Skeleton
 from chorjax.data.rotations import euler_to_matrix
-from chorjax.errors import UserError, first_non_number, read_text
+from chorjax.errors import UserError, parse_numbers, read_text
 
 
 class Asf:
@@ -60,7 +60,7 @@ def read_asf(path) -> Asf:
           continue
       if section == "units":
         if words[0] == "length":
-          asf.length_unit = float(words[1])
+          asf.length_unit = parse_numbers(words[1:2], f"{path}:{lineno}")[0]
         elif words[0] == "angle":
           asf.degrees = words[1].lower().startswith("deg")
       elif section == "root":
@@ -69,9 +69,9 @@ def read_asf(path) -> Asf:
         elif words[0] == "axis":
           asf.root_axis = words[1].lower()
         elif words[0] == "position":
-          asf.root_position = np.array([float(w) for w in words[1:4]])
+          asf.root_position = np.array(parse_numbers(words[1:4], f"{path}:{lineno}"))
         elif words[0] == "orientation":
-          asf.root_orientation = np.array([float(w) for w in words[1:4]])
+          asf.root_orientation = np.array(parse_numbers(words[1:4], f"{path}:{lineno}"))
       elif section == "bonedata":
         if words[0] == "begin":
           bone = {"dof": [], "axis": np.zeros(3), "axis_order": "xyz", "line": lineno}
@@ -83,11 +83,11 @@ def read_asf(path) -> Asf:
         elif bone is not None and words[0] == "name":
           bone["name"] = words[1]
         elif bone is not None and words[0] == "direction":
-          bone["direction"] = np.array([float(w) for w in words[1:4]])
+          bone["direction"] = np.array(parse_numbers(words[1:4], f"{path}:{lineno}"))
         elif bone is not None and words[0] == "length":
-          bone["length"] = float(words[1])
+          bone["length"] = parse_numbers(words[1:2], f"{path}:{lineno}")[0]
         elif bone is not None and words[0] == "axis":
-          bone["axis"] = np.array([float(w) for w in words[1:4]])
+          bone["axis"] = np.array(parse_numbers(words[1:4], f"{path}:{lineno}"))
           bone["axis_order"] = words[4].lower() if len(words) > 4 else "xyz"
         elif bone is not None and words[0] == "dof":
           bone["dof"] = [w.lower() for w in words[1:]]
@@ -129,7 +129,7 @@ def read_amc(path, asf_path=None, *, fps: float = 120.0, scale: float = 1.0, uni
   path = Path(path)
   asf = read_asf(asf_path or find_asf(path))
   lines = read_text(path, "AMC", errors="replace").splitlines()
-  frames, current = [], None
+  frames, starts, current = [], [], None
   for lineno, raw in enumerate(lines, start=1):
     line = raw.strip()
     if not line or line.startswith("#") or line.startswith(":"):
@@ -138,6 +138,7 @@ def read_amc(path, asf_path=None, *, fps: float = 120.0, scale: float = 1.0, uni
     if len(words) == 1 and words[0].isdigit():
       current = {}
       frames.append(current)
+      starts.append(lineno)
       continue
     if current is None:
       raise UserError(f"{path}:{lineno}: bone values before the first frame number")
@@ -145,16 +146,19 @@ def read_amc(path, asf_path=None, *, fps: float = 120.0, scale: float = 1.0, uni
     if name != "root" and name not in asf.bones:
       raise UserError(f"{path}:{lineno}: bone {name!r} is not in the skeleton {asf.path.name}")
     want = len(asf.root_order) if name == "root" else len(asf.bones[name]["dof"])
-    try:
-      values = [float(w) for w in words[1:]]
-    except ValueError:
-      bad = words[1:][first_non_number(words[1:])]
-      raise UserError(f"{path}:{lineno}: not a number: {bad[:30]!r}") from None
+    values = parse_numbers(words[1:], f"{path}:{lineno}")
     if len(values) != want:
       raise UserError(f"{path}:{lineno}: {name} has {len(values)} values, its dof list has {want}")
     current[name] = values
   if not frames:
     raise UserError(f"{path}: no frames")
+  for frame, line in zip(frames, starts):  # a cut-off file ends in a frame that lacks bones: never filled with 0
+    if frame.keys() != frames[0].keys():
+      missing = sorted(set(frames[0]) - set(frame)) or sorted(set(frame) - set(frames[0]))
+      raise UserError(
+        f"{path}:{line}: this frame lists {len(frame)} bones, the first frame {len(frames[0])} "
+        f"(differs in {missing[0]!r}; a truncated file?)"
+      )
   pos, names, parents = _fk(asf, frames, path)
   skeleton = Skeleton(
     name=asf.path.stem,

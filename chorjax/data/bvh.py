@@ -22,7 +22,7 @@ import numpy as np
 
 from chorjax.data.motion import Motion, Skeleton
 from chorjax.data.rotations import best_fit_rotation, euler_to_matrix, matrix_to_euler, swing
-from chorjax.errors import UserError, atomic_write, first_non_number, read_text
+from chorjax.errors import UserError, atomic_write, parse_numbers, read_text
 
 _ROT = {"xrotation": "x", "yrotation": "y", "zrotation": "z"}
 _POS = {"xposition": 0, "yposition": 1, "zposition": 2}
@@ -80,10 +80,7 @@ def _parse_hierarchy(path: Path, text: str):
       i += 1
     elif up == "OFFSET":
       need(4)
-      try:
-        joints[stack[-1]].offset = np.array([float(t) for _, t in toks[i + 1 : i + 4]])
-      except ValueError:
-        raise UserError(f"{path}:{line}: OFFSET needs 3 numbers") from None
+      joints[stack[-1]].offset = np.array(parse_numbers([t for _, t in toks[i + 1 : i + 4]], f"{path}:{line}: OFFSET"))
       i += 4
     elif up == "CHANNELS":
       need(2)
@@ -122,7 +119,7 @@ def _parse_motion(path: Path, text: str, num_channels: int):
   try:
     frames = int(lines[start + 1].split(":")[1])
     frame_time = float(lines[start + 2].split(":")[1])
-    assert lines[start + 1].strip().lower().startswith("frames") and frame_time > 0
+    assert lines[start + 1].strip().lower().startswith("frames") and 0 < frame_time < 1e3
   except (IndexError, ValueError, AssertionError):
     raise UserError(f"{path}:{start + 2}: expected 'Frames: N' and 'Frame Time: T' after MOTION") from None
   rows = []
@@ -132,11 +129,7 @@ def _parse_motion(path: Path, text: str, num_channels: int):
     cells = lines[k].split()
     if len(cells) != num_channels:
       raise UserError(f"{path}:{k + 1}: {len(cells)} values, the hierarchy declares {num_channels} channels")
-    try:
-      rows.append([float(c) for c in cells])
-    except ValueError:
-      bad = cells[first_non_number(cells)]
-      raise UserError(f"{path}:{k + 1}: not a number: {bad[:30]!r}") from None
+    rows.append(parse_numbers(cells, f"{path}:{k + 1}"))
   if len(rows) != frames:
     raise UserError(f"{path}: header says {frames} frames, the file holds {len(rows)}")
   return np.asarray(rows, np.float64).reshape(frames, num_channels), frame_time

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from chorjax.data.motion import Motion, Skeleton
-from chorjax.errors import UserError
+from chorjax.errors import UserError, check_array
 
 
 def read_c3d(path, *, up_axis: str = "z") -> Motion:
@@ -44,8 +44,14 @@ def read_c3d(path, *, up_axis: str = "z") -> Motion:
   units = point["UNITS"]["value"][0] if point.get("UNITS", {}).get("value") else "mm"
   labels = [str(l).strip() or f"marker{i}" for i, l in enumerate(point["LABELS"]["value"])][: pts.shape[1]]
   labels = [l if labels.count(l) == 1 else f"{l}_{i}" for i, l in enumerate(labels)]
+  if not pts.shape[1] or not held:
+    raise UserError(f"{path}: {pts.shape[1]} markers x {held} frames: nothing to read")
   pos = np.transpose(pts[:3], (2, 1, 0)).astype(np.float32)  # [T, M, 3]
   missing = ~np.isfinite(pos).all(axis=-1)
+  never = [labels[j] for j in np.flatnonzero(missing.all(axis=0))]
+  if never:
+    raise UserError(f"{path}: marker {never[0]!r} is never seen ({len(never)} such markers): no position to fill with")
+  check_array(np.where(missing[..., None], 0.0, pos), f"{path}: markers")
   if missing.any():  # occluded markers: hold the last seen position (and report it)
     pos = _fill_gaps(pos, missing)
   m = len(labels)
@@ -56,10 +62,7 @@ def read_c3d(path, *, up_axis: str = "z") -> Motion:
 def _fill_gaps(pos, missing):
   out = pos.copy()
   for j in range(pos.shape[1]):
-    seen = np.flatnonzero(~missing[:, j])
-    if not len(seen):
-      out[:, j] = 0.0
-      continue
+    seen = np.flatnonzero(~missing[:, j])  # never empty: read_c3d refuses a marker that is never seen
     idx = np.maximum.accumulate(np.where(~missing[:, j], np.arange(len(pos)), 0))
     idx[: seen[0]] = seen[0]
     out[:, j] = pos[idx, j]

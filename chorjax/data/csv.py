@@ -5,14 +5,13 @@ This is the layout of the bundled CMU subject 94 takes (16 joints, 48 columns, y
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
 
 from chorjax.data.motion import Motion, Skeleton
 from chorjax.data.skeletons import MPII16
-from chorjax.errors import UserError, atomic_write, first_non_number, read_text
+from chorjax.errors import UserError, atomic_write, parse_numbers, read_text
 
 
 def read_csv(
@@ -48,15 +47,7 @@ def read_csv(
         f"{path}:{lineno}: expected {want} columns ({skeleton.num_joints} joints x 3 "
         f"for skeleton {skeleton.name}), found {len(cells)}"
       )
-    try:
-      values = [float(c) for c in cells]
-    except ValueError:
-      col = first_non_number(cells)
-      raise UserError(f"{path}:{lineno}: column {col + 1}: not a number: {cells[col].strip()[:40]!r}") from None
-    bad = [i for i, v in enumerate(values) if not math.isfinite(v)]
-    if bad:
-      raise UserError(f"{path}:{lineno}: column {bad[0] + 1}: non-finite value {cells[bad[0]].strip()!r}")
-    rows.append(values)
+    rows.append(parse_numbers(cells, f"{path}:{lineno}", columns=True))
   if not rows:
     raise UserError(f"{path}: empty file (no frames)")
   positions = np.asarray(rows, dtype=np.float32).reshape(len(rows), skeleton.num_joints, 3)

@@ -31,6 +31,11 @@ class Features:
     lengths: ``[J]`` bone length of each joint from its parent, the training takes' mean (the
       ``directions`` representation builds every frame with these, and ``decode(z, rigid=True)`` sets
       any representation's bones to them: bones cannot stretch).
+    low, high: ``[D]`` the smallest and largest normalized value of each feature over the training
+      split (mirrored copies included); generation can clip to them (``sample.clamp``).
+    pace_lag, pace: how far the training frames' pose moves in ``pace_lag`` frames (half a second): the
+      mean absolute change of the normalized ``pose_channels`` over that lag; generation can hold its
+      own pace to it (``sample.pace``).
 
   Representations: ``absolute``, ``bone_relative`` and ``root_relative`` are per-frame ``[J, 3]``;
   ``canonical`` (HumanML3D-style: heading change, root step in the facing frame, root height, joints
@@ -46,10 +51,25 @@ class Features:
   mean: np.ndarray
   std: np.ndarray
   lengths: np.ndarray | None = None
+  low: np.ndarray | None = None
+  high: np.ndarray | None = None
+  pace_lag: int | None = None
+  pace: float | None = None
 
   @property
   def dim(self) -> int:
     return feature_dim(self.skeleton, self.representation)
+
+  @property
+  def pose_channels(self) -> np.ndarray:
+    """Indices of the features that hold the pose (joint positions or bone directions, not root motion,
+    velocities or contacts): what the pace governor measures, as the movement metric measures joints."""
+    j = self.skeleton.num_joints
+    if self.representation == "canonical":
+      return np.arange(4, 4 + 3 * (j - 1))
+    if self.representation == "directions":
+      return np.arange(3, 3 + 3 * j)
+    return np.arange(3 * j)
 
   def canonical(self, pos_TxJx3):
     """Data space -> y-up, scaled positions (before the representation)."""
@@ -85,8 +105,13 @@ class Features:
       pos = transforms.lock_feet(pos, contacts, self.skeleton.feet, max_step=0.05 * leg)  # foot_contacts' speed
     return self.uncanonical(pos)
 
-  def check_decode(self, rigid: bool = False, lock_feet: bool = False) -> None:
-    """Raises ValueError if :meth:`decode` cannot do what is asked (callers check before long work)."""
+  def check_decode(self, rigid: bool = False, lock_feet: bool = False, clamp: bool = False, pace: float = 0) -> None:
+    """Raises ValueError if :meth:`decode` (or generation clipped to the training range: ``clamp``)
+    cannot do what is asked (callers check before long work)."""
+    if clamp and (self.low is None or self.high is None):
+      raise ValueError("clamp: this run records no training range (trained before the option existed)")
+    if pace and self.pace is None:
+      raise ValueError("pace: this run records no training pace (trained before the option existed)")
     if rigid and self.lengths is None:
       raise ValueError("rigid_bones: this run records no bone lengths (trained before the option existed)")
     if lock_feet and self.representation != "canonical":
@@ -100,8 +125,11 @@ class Features:
       "scale": self.scale,
       "mean": np.asarray(self.mean).tolist(),
       "std": np.asarray(self.std).tolist(),
-      **({} if self.lengths is None else {"lengths": np.asarray(self.lengths).tolist()}),
+      **{k: np.asarray(v).tolist() for k, v in self._optional().items() if v is not None},
     }
+
+  def _optional(self) -> dict:
+    return {"lengths": self.lengths, "low": self.low, "high": self.high, "pace_lag": self.pace_lag, "pace": self.pace}
 
   @classmethod
   def from_dict(cls, d: dict) -> Features:
@@ -112,7 +140,9 @@ class Features:
       float(d["scale"]),
       np.asarray(d["mean"], np.float32),
       np.asarray(d["std"], np.float32),
-      None if d.get("lengths") is None else np.asarray(d["lengths"], np.float32),
+      *(None if d.get(k) is None else np.asarray(d[k], np.float32) for k in ("lengths", "low", "high")),
+      None if d.get("pace_lag") is None else int(d["pace_lag"]),
+      None if d.get("pace") is None else float(d["pace"]),
     )
 
 

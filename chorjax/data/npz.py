@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from chorjax.data.motion import Motion, Skeleton
-from chorjax.errors import UserError, atomic_write
+from chorjax.errors import UserError, atomic_write, check_array
 
 
 def write_npz(
@@ -40,18 +40,27 @@ def read_npz(path) -> list[Motion]:
       pos, meta = z["positions"], json.loads(str(z["meta"]))
   except FileNotFoundError:
     raise UserError(f"{path}: no such file") from None
-  except (KeyError, ValueError, OSError, zipfile.BadZipFile, json.JSONDecodeError) as e:
+  except (KeyError, ValueError, OSError, EOFError, zipfile.BadZipFile, json.JSONDecodeError) as e:
     raise UserError(f"{path}: not a chorjax sample .npz ({type(e).__name__})") from None
+  try:
+    sk = Skeleton.from_dict(meta["skeleton"])
+    fps, up_axis, units = float(meta["fps"]), str(meta["up_axis"]), str(meta["units"])
+  except (KeyError, TypeError, ValueError) as e:
+    raise UserError(f"{path}: not a chorjax sample .npz (meta: {type(e).__name__} {str(e)[:60]})") from None
   if pos.ndim == 3:
     pos = pos[None]
-  sk = Skeleton.from_dict(meta["skeleton"])
+  if pos.ndim != 4 or pos.shape[-2:] != (sk.num_joints, 3) or pos.shape[1] < 1:
+    raise UserError(f"{path}: positions {pos.shape}, expected [K, T >= 1, {sk.num_joints}, 3] for skeleton {sk.name}")
+  if not (np.isfinite(fps) and fps > 0):
+    raise UserError(f"{path}: fps {fps} is not a positive number")
+  check_array(pos, f"{path}: positions")
   return [
     Motion(
       p,
-      meta["fps"],
+      fps,
       sk,
-      meta["up_axis"],
-      meta["units"],
+      up_axis,
+      units,
       name=f"{path.stem}#{k}" if len(pos) > 1 else path.stem,
       source=str(path),
     )
