@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import shutil
+import time
 from pathlib import Path
 
 import jax
@@ -26,10 +27,13 @@ from chorjax.errors import UserError
 
 
 class _ReadOnlyNotice(logging.Filter):
-  """Drops orbax's warning that a directory opened read-only is read-only (we asked for that)."""
+  """Drops orbax's warning that a directory opened read-only is read-only (we asked for that) and its
+  background threads' tracebacks of a failed write (``wait`` reports that failure as one line)."""
 
   def filter(self, record: logging.LogRecord) -> bool:
-    return not str(record.msg).startswith("Given directory is read only")
+    msg = str(record.msg)
+    failed_write = "orbax" in record.pathname and record.levelno >= logging.ERROR  # re-raised by `wait`/`save`
+    return not (msg.startswith("Given directory is read only") or failed_write)
 
 
 logging.getLogger("absl").addFilter(_ReadOnlyNotice())
@@ -52,23 +56,75 @@ def create_manager(workdir, keep: int = 3, read_only: bool = False) -> ocp.Check
     create=not read_only,
     read_only=read_only,
     save_interval_steps=0 if read_only else 1,  # (orbax warns when it has to set this itself)
+    # Synchronous: a failed write (disk full, read-only) is then one error at its step. Written in the
+    # background it surfaced later, after orbax's threads had printed hundreds of lines of tracebacks
+    # from a closed event loop. A save of the quickstart takes well under a second.
+    enable_async_checkpointing=False,
   )
   return ocp.CheckpointManager(checkpoint_dir(workdir), options=options)
 
 
 def save(manager: ocp.CheckpointManager, step: int, state, meta: dict, val_loss: float | None) -> None:
-  """Saves ``state = {params, opt_state, step}`` and ``meta`` asynchronously;
-  ``manager.wait_until_finished()`` must run before the process exits."""
+  """Saves ``state = {params, opt_state, step}`` and ``meta`` (synchronously; a failed write is a
+  one-line UserError and leaves no partial step behind)."""
   metrics = {"val_loss": float(val_loss)} if val_loss is not None else None
   meta = {**meta, "val_loss": metrics and metrics["val_loss"]}
   train = {"opt_state": state["opt_state"], "step": state["step"]}
-  manager.save(
-    step,
-    args=ocp.args.Composite(
-      params=ocp.args.StandardSave(state["params"]), train=ocp.args.StandardSave(train), meta=ocp.args.JsonSave(meta)
-    ),
-    metrics=metrics,
-  )
+  with _writing(manager, step):
+    manager.save(
+      step,
+      args=ocp.args.Composite(
+        params=ocp.args.StandardSave(state["params"]), train=ocp.args.StandardSave(train), meta=ocp.args.JsonSave(meta)
+      ),
+      metrics=metrics,
+    )
+
+
+def wait(manager: ocp.CheckpointManager) -> None:
+  """Waits for the asynchronous saves; a write that failed (disk full, read-only) is a one-line UserError
+  and its partial files are removed."""
+  with _writing(manager, None):
+    manager.wait_until_finished()
+
+
+def close_quietly(manager: ocp.CheckpointManager) -> None:
+  """Waits and closes on the way out of an error (the error that is already on its way is the one to
+  report); on success paths :func:`wait` has run before."""
+  with contextlib.suppress(Exception):
+    manager.wait_until_finished()
+  with contextlib.suppress(Exception):
+    manager.close()
+  _remove_partial(manager)
+
+
+@contextlib.contextmanager
+def _writing(manager, step: int | None):
+  try:
+    yield
+  except Exception as e:  # orbax surfaces a failed background write here, in several types
+    _remove_partial(manager)
+    text = str(e)
+    known = (
+      "No space left on device",
+      "Read-only file system",
+      "Permission denied",
+      "Disk quota exceeded",
+      "File too large",
+    )
+    reason = next((k for k in known if k in text), _first_line(e))
+    at = f" at step {step}" if step is not None else ""
+    raise UserError(f"{manager.directory}: the checkpoint{at} could not be written ({reason})") from None
+
+
+def _remove_partial(manager) -> None:
+  """Removes a failed write's temporary step (its writer threads may still be finishing: retried)."""
+  for _ in range(20):
+    left = list(Path(manager.directory).glob("*.orbax-checkpoint-tmp*"))
+    if not left:
+      return
+    for tmp in left:
+      shutil.rmtree(tmp, ignore_errors=True)
+    time.sleep(0.1)
 
 
 def _is_legacy(manager: ocp.CheckpointManager, step: int) -> bool:

@@ -6,6 +6,7 @@ User errors print one line (``chorjax: error: ...``) and exit with code 2, witho
 from __future__ import annotations
 
 import argparse
+import logging
 import math
 import sys
 from pathlib import Path
@@ -722,8 +723,26 @@ def build_parser() -> argparse.ArgumentParser:
   return parser
 
 
+def _quiet_closed_loop(hook):
+  """After a failed checkpoint write or restore, the storage layer's threads still report to orbax's
+  event loop, closed by then; Python prints each such RuntimeError as an unraisable exception. The
+  failure itself is reported as one line, so only those are dropped."""
+
+  def unraisable(info):
+    if not (isinstance(info.exc_value, RuntimeError) and str(info.exc_value) == "Event loop is closed"):
+      hook(info)
+
+  return unraisable
+
+
 def main(argv=None) -> int:
   keep_freed_memory()  # before the first JAX computation; see chorjax/runtime.py
+  if not getattr(sys.unraisablehook, "chorjax", False):
+    sys.unraisablehook = _quiet_closed_loop(sys.unraisablehook)
+    sys.unraisablehook.chorjax = True  # type: ignore[attr-defined]
+    # (orbax's futures of such a write also end as "Future exception was never retrieved": only orbax
+    # runs asyncio in this process, and every failure of its reaches the user as a UserError)
+    logging.getLogger("asyncio").setLevel(logging.CRITICAL)
   parser = build_parser()
   args, extra = parser.parse_known_args(argv)
   # KEY=VALUE overrides may also follow options (`train c.toml --workdir w model.cell=gru`).

@@ -186,9 +186,9 @@ class SampleConfig:
   )
   clamp: bool = _field(
     False,
-    "every generated frame is clipped, feature by feature, to the range the training takes span before it "
-    "is fed back: no root speed, pose offset or joint velocity beyond what the data ever shows (the model "
-    "is never fed a frame unlike its training inputs)",
+    "every generated frame is clipped, feature by feature, to the range the training frames span before "
+    "it is fed back: no root speed, pose or joint velocity beyond what the data shows (the model is never "
+    "fed a frame unlike its training inputs)",
     resumable=True,
   )
   pace: float = _field(

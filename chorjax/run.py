@@ -188,7 +188,7 @@ class Run:
     same = fresh.dim == f.dim and close(fresh.mean, f.mean) and close(fresh.std, f.std)
     if not same:
       raise UserError(f"{self.workdir}: records no training range or pace and its training data changed")
-    stats = {k: getattr(fresh, k) for k in ("low", "high", "pace_lag", "pace")}
+    stats = {k: getattr(fresh, k) for k in (*Features.RANGES, "pace_lag", "pace")}
     return dataclasses.replace(self, features=dataclasses.replace(f, **stats))
 
 

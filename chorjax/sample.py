@@ -154,7 +154,7 @@ def dance(graphdef, params, features, motion, key, num_frames: int, controls: di
     raise UserError(str(e)) from None
   drawn = {k: v for k, v in controls.items() if k not in ("rigid_bones", "foot_lock", "clamp")}
   if controls["clamp"]:
-    drawn["bounds"] = (features.low, features.high)
+    drawn["bounds"] = tuple(getattr(features, k) for k in features.RANGES)
   if controls["pace"]:
     weights = np.zeros(features.dim, np.float32)
     weights[features.pose_channels] = 1.0 / len(features.pose_channels)

@@ -509,8 +509,7 @@ def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=No
       raise UserError("train.feedback runs the cells frame by frame, without dropout: set model.dropout = 0")
     manager = ckpt.create_manager(workdir, keep=cfg.train.keep_checkpoints)
     with contextlib.ExitStack() as cleanup:
-      cleanup.callback(manager.close)
-      cleanup.callback(manager.wait_until_finished)
+      cleanup.callback(ckpt.close_quietly, manager)
       return _train(cfg, workdir, ds, manager, parallel, cleanup, keep_old_config)
 
 
@@ -578,12 +577,12 @@ def _train(
   loop.add_hook(save, cfg.train.checkpoint_every)
   if log is not None and log.writer is not None and cfg.train.figure_every:
     loop.add_hook(figure_hook(log.writer, spec.graphdef, host_params, ds, cfg), cfg.train.figure_every, at_last=False)
-  loop.end_hooks.append(lambda loop: manager.wait_until_finished())
+  loop.end_hooks.append(lambda loop: ckpt.wait(manager))
 
   def save_now(loop: Loop) -> None:  # on SIGINT/SIGTERM: this step's checkpoint, unless just written
     if manager.latest_step() != loop.step:
       save(loop)
-    manager.wait_until_finished()
+    ckpt.wait(manager)
 
   loop.on_stop = save_now
   samples: dict = {}

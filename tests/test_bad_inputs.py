@@ -20,6 +20,18 @@ from chorjax.data.dataset import bundled_path, read_motions
 from chorjax.errors import UserError
 from chorjax.train import train_and_evaluate
 
+TINY_TRAIN = [
+  "model.hidden_size=16",
+  "model.num_layers=1",
+  "train.batch_size=4",
+  "data.seq_length=16",
+  "train.num_steps=4",
+  "train.checkpoint_every=2",
+  "train.eval_every=0",
+  "log.tensorboard=false",
+  "log.progress=none",
+  "sample.frames=20",
+]
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 CSV = bundled_path("cmu94") / "94_07_skeleton_3d.csv"
 BVH = SHARED / "bvh" / "bandai" / "dataset-1_dash_normal_001.bvh"
@@ -381,6 +393,26 @@ def test_training_never_silently_restarts_when_every_checkpoint_is_damaged(run_d
   cfg = tiny_config("train.num_steps=6", "train.checkpoint_every=2", "log.tensorboard=false")
   with pytest.raises(UserError, match="no intact checkpoint"):
     train_and_evaluate(cfg, work)
+
+
+def test_a_checkpoint_that_cannot_be_written_is_one_line_and_leaves_no_partial_step(tmp_path):
+  """A real failing write, without root: files beyond 10 kB fail (RLIMIT_FSIZE, as a full disk would)."""
+  import subprocess
+  import sys
+
+  work = tmp_path / "w"
+  code = (
+    "import resource, signal, sys; signal.signal(signal.SIGXFSZ, signal.SIG_IGN); "
+    "resource.setrlimit(resource.RLIMIT_FSIZE, (10_000, 10_000)); from chorjax.cli import main; "
+    f"sys.exit(main(['train', 'configs/quickstart.toml', *{TINY_TRAIN!r}, '--workdir', {str(work)!r}]))"
+  )
+  root = Path(__file__).resolve().parents[1]
+  done = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=300)
+  assert done.returncode == 2, done.stderr[-2000:]
+  assert done.stderr.splitlines() == [
+    f"chorjax: error: {work}/checkpoints: the checkpoint at step 2 could not be written (File too large)"
+  ]
+  assert not list((work / "checkpoints").iterdir())  # nothing half written
 
 
 def test_a_temporary_file_left_by_a_killed_write_is_cleaned_at_the_next_write(tmp_path):

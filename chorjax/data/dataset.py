@@ -207,7 +207,11 @@ def load_dataset(data_cfg) -> Dataset:
   pose = features.pose_channels
   moved = [np.abs(x[lag:, pose] - x[:-lag, pose]).mean(-1) for _, x in train if len(x) > lag]
   features = dataclasses.replace(
-    features, low=every.min(0), high=every.max(0), pace_lag=lag, pace=float(np.concatenate(moved).mean())
+    features,
+    low=every.min(0),
+    high=every.max(0),
+    pace_lag=lag,
+    pace=float(np.concatenate(moved).mean()),
   )
   return Dataset(
     id_map,

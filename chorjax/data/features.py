@@ -108,7 +108,7 @@ class Features:
   def check_decode(self, rigid: bool = False, lock_feet: bool = False, clamp: bool = False, pace: float = 0) -> None:
     """Raises ValueError if :meth:`decode` (or generation clipped to the training range: ``clamp``)
     cannot do what is asked (callers check before long work)."""
-    if clamp and (self.low is None or self.high is None):
+    if clamp and any(getattr(self, k) is None for k in self.RANGES):
       raise ValueError("clamp: this run records no training range (trained before the option existed)")
     if pace and self.pace is None:
       raise ValueError("pace: this run records no training pace (trained before the option existed)")
@@ -129,7 +129,10 @@ class Features:
     }
 
   def _optional(self) -> dict:
-    return {"lengths": self.lengths, "low": self.low, "high": self.high, "pace_lag": self.pace_lag, "pace": self.pace}
+    ranges = {k: getattr(self, k) for k in self.RANGES}
+    return {"lengths": self.lengths, **ranges, "pace_lag": self.pace_lag, "pace": self.pace}
+
+  RANGES = ("low", "high")
 
   @classmethod
   def from_dict(cls, d: dict) -> Features:
@@ -140,7 +143,7 @@ class Features:
       float(d["scale"]),
       np.asarray(d["mean"], np.float32),
       np.asarray(d["std"], np.float32),
-      *(None if d.get(k) is None else np.asarray(d[k], np.float32) for k in ("lengths", "low", "high")),
+      *(None if d.get(k) is None else np.asarray(d[k], np.float32) for k in ("lengths", *cls.RANGES)),
       None if d.get("pace_lag") is None else int(d["pace_lag"]),
       None if d.get("pace") is None else float(d["pace"]),
     )
