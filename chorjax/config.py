@@ -278,7 +278,8 @@ def resumable_keys() -> list[str]:
   ]
 
 
-def _suggest(key: str, options: Sequence[str]) -> str:
+def suggest(key: str, options: Sequence[str]) -> str:
+  """ "; did you mean 'x'?" for the closest of ``options``, or ""."""
   close = difflib.get_close_matches(key, options, n=1, cutoff=0.5)
   return f"; did you mean {close[0]!r}?" if close else ""
 
@@ -318,7 +319,7 @@ def _check_value(where: str, key: str, field: dataclasses.Field, value: Any):
     if meta.get("choices") and item not in meta["choices"]:
       raise UserError(
         f"{where}: key {key!r}: {item!r} is not one of {', '.join(map(repr, meta['choices']))}"
-        + _suggest(str(item), [str(c) for c in meta["choices"]])
+        + suggest(str(item), [str(c) for c in meta["choices"]])
       )
   if meta.get("minimum") is not None and value < meta["minimum"]:
     raise UserError(f"{where}: key {key!r}: {value!r} is below the minimum {meta['minimum']}")
@@ -349,7 +350,7 @@ def _apply(sections: dict[str, dict], tree: dict, where_of) -> None:
       continue
     if section not in _SECTION_CLASSES:
       raise UserError(
-        f"{where_of(section, None)}: unknown section {section!r}" + _suggest(section, list(_SECTION_CLASSES))
+        f"{where_of(section, None)}: unknown section {section!r}" + suggest(section, list(_SECTION_CLASSES))
       )
     if not isinstance(body, dict):
       raise UserError(f"{where_of(section, None)}: {section!r} must be a table ([{section}])")
@@ -357,7 +358,7 @@ def _apply(sections: dict[str, dict], tree: dict, where_of) -> None:
     for key, value in body.items():
       dotted = f"{section}.{key}"
       if key not in fields:
-        raise UserError(f"{where_of(section, key)}: unknown key {dotted!r}" + _suggest(dotted, valid_keys()))
+        raise UserError(f"{where_of(section, key)}: unknown key {dotted!r}" + suggest(dotted, valid_keys()))
       sections[section][key] = _check_value(where_of(section, key), dotted, fields[key], value)
 
 
@@ -409,7 +410,7 @@ def load_config(path: str | Path | None = None, overrides: Sequence[str] = ()) -
       name = str(value)
       continue
     if "." not in key:
-      raise UserError(f"override {item!r}: expected SECTION.KEY=VALUE" + _suggest(key, valid_keys()))
+      raise UserError(f"override {item!r}: expected SECTION.KEY=VALUE" + suggest(key, valid_keys()))
     section, sub = key.split(".", 1)
     _apply(sections, {section: {sub: value}}, lambda s, k, item=item: f"override {item!r}")
   return Config(**{s: cls(**sections[s]) for s, cls in _SECTION_CLASSES.items()}, name=name)

@@ -44,7 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
-from chorjax.config import SampleConfig, load_config, valid_keys
+from chorjax.config import SampleConfig, load_config, suggest, valid_keys
 from chorjax.errors import UserError, atomic_write
 from chorjax.scoring import mean_of, upgrade
 
@@ -66,12 +66,14 @@ def load_sweep(path) -> dict:
     raise UserError(f"{path}: invalid TOML: {e}") from None
   unknown = set(sweep) - SWEEP_KEYS
   if unknown:
-    raise UserError(f"{path}: unknown key {sorted(unknown)[0]!r}; a sweep has {', '.join(sorted(SWEEP_KEYS))}")
+    first = sorted(unknown)[0]
+    hint = suggest(first, sorted(SWEEP_KEYS)) or f"; a sweep has {', '.join(sorted(SWEEP_KEYS))}"
+    raise UserError(f"{path}: unknown key {first!r}{hint}")
   if not sweep.get("grid"):
     raise UserError(f"{path}: needs a [grid] table of KEY = [values]")
   for key, values in sweep["grid"].items():
     if key not in valid_keys():
-      raise UserError(f"{path}: [grid] key {key!r} is not a config key")
+      raise UserError(f"{path}: [grid] key {key!r} is not a config key{suggest(key, valid_keys())}")
     if not isinstance(values, list) or not values:
       raise UserError(f"{path}: [grid] {key!r} must be a non-empty list")
   for name, body in sweep.get("candidates", {}).items():
@@ -79,7 +81,7 @@ def load_sweep(path) -> dict:
       raise UserError(f"{path}: [candidates.{name}] must be a table of KEY = value")
     for key in body:
       if key not in valid_keys():
-        raise UserError(f"{path}: [candidates.{name}] key {key!r} is not a config key")
+        raise UserError(f"{path}: [candidates.{name}] key {key!r} is not a config key{suggest(key, valid_keys())}")
   bad = set(sweep.get("eval", {})) - EVAL_KEYS
   if bad:
     raise UserError(f"{path}: unknown [eval] key {sorted(bad)[0]!r}; one of {', '.join(sorted(EVAL_KEYS))}")

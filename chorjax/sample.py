@@ -171,6 +171,8 @@ def read_prime(spec: str, features, data_cfg) -> np.ndarray:
   parts = spec.rsplit(":", 2)
   if len(parts) == 3 and parts[1].isdigit() and parts[2].isdigit():
     path, start, length = Path(parts[0]), int(parts[1]), int(parts[2])
+  elif len(parts) == 3 and not Path(spec).exists() and Path(parts[0]).exists():
+    raise UserError(f"--prime {spec}: START and LEN must be whole numbers (FILE:START:LEN, e.g. {parts[0]}:0:60)")
   else:
     path, start, length = Path(spec), 0, None
   motion = conform(read_takes([str(path)], data_cfg)[:1], data_cfg)[0]

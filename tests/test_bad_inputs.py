@@ -282,7 +282,9 @@ def test_sample_refuses_impossible_flags(case, run_dir, tmp_path, capsys):
   out = [] if "-o" in flags else ["-o", tmp_path / "s.csv"]
   if case == "size-odd":
     out = ["-o", tmp_path / "s.mp4"]
-  refused(["sample", run_dir, *out, *flags], capsys, tmp_path, run_dir)
+  err = refused(["sample", run_dir, *out, *flags], capsys, tmp_path, run_dir)
+  if case == "prime-range":
+    assert "START and LEN must be whole numbers" in err
 
 
 EVAL_FLAGS = {
@@ -320,6 +322,10 @@ COMMANDS = {
   "compare-missing": lambda t, r: ["compare", t / "nowhere", "-o", t / "r.md"],
   "sweep-missing": lambda t, r: ["sweep", t / "nowhere.toml"],
   "sweep-unknown-key": lambda t, r: ["sweep", _toml(t, 'name = "s"\nbase = "x"\nroot = "r"\ngird = {}\n')],
+  "sweep-unknown-grid-key": lambda t, r: [
+    "sweep",
+    _toml(t, 'name="s"\nbase="x"\nroot="r"\n[grid]\n"train.sed"=[1]\n'),
+  ],
   "config-unknown-key": lambda t, r: ["config", "show", "configs/quickstart.toml", "model.hidden_sise=3"],
   "config-bad-type": lambda t, r: ["config", "show", "configs/quickstart.toml", "model.hidden_size=big"],
   "config-lr-nan": lambda t, r: ["config", "show", "configs/quickstart.toml", "optim.lr=nan"],
@@ -342,8 +348,10 @@ def test_commands_refuse_bad_paths_configs_and_values(case, run_dir, tmp_path, c
   monkeypatch.chdir(Path(__file__).resolve().parents[1])
   argv = COMMANDS[case](tmp_path, run_dir)
   watch = [tmp_path, run_dir] if not case.startswith("config") else [tmp_path]
-  refused(argv, capsys, *watch)
+  err = refused(argv, capsys, *watch)
   assert not (tmp_path / "w").exists() and not (tmp_path / "o").exists()
+  if "unknown-key" in case:
+    assert "did you mean" in err
 
 
 # ---------------------------------------------------------------- damaged checkpoints
