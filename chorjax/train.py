@@ -272,6 +272,19 @@ def stop_on_signals():
       signal.signal(s, h)
 
 
+def agreed_stop(local: Callable[[], int | None]) -> Callable[[], int | None]:
+  """For several processes: after every step they exchange whether a signal arrived (one tiny
+  all-gather), so that all stop, and save the collective checkpoint, at the same step when any one is
+  signalled (a preempted host gets SIGTERM alone)."""
+  from jax.experimental import multihost_utils
+
+  def stop() -> int | None:
+    every = np.asarray(multihost_utils.process_allgather(np.int32(local() or 0)))
+    return int(every.max()) or None
+
+  return stop
+
+
 # ---------------------------------------------------------------- run directory
 
 
@@ -591,7 +604,7 @@ def _train(
       lambda loop: samples.update(write_end_sample(workdir, spec.graphdef, host_params(loop.state["params"]), ds, cfg))
     )
   with stop_on_signals() as stop:
-    loop.stop = stop if parallel is None else (lambda: None)  # several processes: see docs/parallel.md
+    loop.stop = stop if parallel is None else agreed_stop(stop)
     loop.run()
   summary = {
     "start_step": start,

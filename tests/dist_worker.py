@@ -1,7 +1,7 @@
 """One process of the two-process data-parallel test (started by test_parallel.py).
 
 Usage: python dist_worker.py PORT PROCESS_ID NUM_PROCESSES WORKDIR NUM_STEPS
-Prints the per-step training losses of this process as one JSON line.
+Prints the per-step training losses of this process as one JSON line (or, stopped by a signal, where).
 """
 
 import json
@@ -14,6 +14,7 @@ sys.path.insert(0, os.path.dirname(__file__))
 
 from helpers import tiny_config
 
+from chorjax.errors import Interrupted
 from chorjax.parallel import setup_parallel
 from chorjax.train import train_and_evaluate
 
@@ -27,5 +28,9 @@ cfg = tiny_config(
   f"parallel.num_processes={n}",
   f"parallel.process_id={pid}",
 )
-summary = train_and_evaluate(cfg, workdir, parallel=setup_parallel(cfg))
+try:
+  summary = train_and_evaluate(cfg, workdir, parallel=setup_parallel(cfg))
+except Interrupted as e:  # a signal: every process stops after the same step (chorjax.train.agreed_stop)
+  print(json.dumps({"process": pid, "stopped": str(e)}), flush=True)
+  sys.exit(e.code)
 print(json.dumps({"process": pid, "losses": summary["train_losses"]}), flush=True)

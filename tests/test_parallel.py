@@ -93,6 +93,39 @@ def test_two_processes_match_a_single_process_and_resume_on_one(tmp_path):
   np.testing.assert_allclose(losses(more), losses(ref), rtol=1e-5, atol=1e-5)
 
 
+def test_a_signal_to_one_process_stops_both_after_the_same_step_with_a_checkpoint(tmp_path):
+  import signal
+  import time
+
+  port, work = free_port(), tmp_path / "dist"
+  env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+  procs = [
+    subprocess.Popen(
+      [sys.executable, str(HERE / "dist_worker.py"), str(port), str(i), "2", str(work), "100000"],
+      stdout=subprocess.PIPE,
+      stderr=subprocess.PIPE,
+      text=True,
+      env=env,
+    )
+    for i in range(2)
+  ]
+  log, deadline = work / "metrics.jsonl", time.time() + 240
+  while not (log.exists() and len(log.read_text().splitlines()) >= 3):  # both are training
+    assert all(p.poll() is None for p in procs) and time.time() < deadline, procs[0].stderr.read()[-2000:]
+    time.sleep(0.2)
+  procs[1].send_signal(signal.SIGTERM)  # a preempted host: the other one is not told by anyone else
+  outs = [p.communicate(timeout=120) for p in procs]
+  assert [p.returncode for p in procs] == [143, 143], [err[-1500:] for _, err in outs]
+  stopped = [json.loads(out.strip().splitlines()[-1])["stopped"] for out, _ in outs]
+  assert stopped[0] == stopped[1] and stopped[0].startswith("SIGTERM at step ")
+  step = int(stopped[0].split()[3].split("/")[0])
+  assert (work / "checkpoints" / str(step)).is_dir()  # written by both, together
+  more = train_and_evaluate(
+    tiny_config(f"train.num_steps={step + 2}", "train.checkpoint_every=3", "log.tensorboard=false"), work
+  )
+  assert more["start_step"] == step and more["final_step"] == step + 2
+
+
 @pytest.mark.slow
 def test_cli_distributed_flags_launch_two_processes(tmp_path):
   from chorjax.config import to_toml
