@@ -89,7 +89,9 @@ def generate(
     "persistence": persistence,
     "crossfade": crossfade,
   }
-  pacing = (pace, pace_lag, *pace_target) if pace else None
+  if pace and pace_target is None:
+    raise ValueError("pace needs pace_target = (the training pace, the pose weights): Features.pace")
+  pacing = (pace, pace_lag, *pace_target) if pace and pace_target is not None else None
   return _generate_smoothly(model, carry, x0, key, num_frames, noise_smoothing, controls, bounds, pacing)
 
 
@@ -107,7 +109,7 @@ def _generate_smoothly(
   multiplied by ``(ref / own pace) ** gain`` within 0.5-2x, the own pace a running mean over about ten
   lags; a dancer who slows down gets more energy, one who races or trembles less."""
   b = x0_BxD.shape[0]
-  gain, lag, ref, weights = pacing or (0.0, 1, 1.0, None)
+  gain, lag, ref, weights = pacing or (0.0, 1, 1.0, jnp.zeros(x0_BxD.shape[-1]))
   keep = 1.0 - 1.0 / (10 * lag)  # the running pace forgets over about ten lags (5 s)
 
   def body(c, k):

@@ -47,8 +47,8 @@ def read_c3d(path, *, up_axis: str = "z") -> Motion:
   if not pts.shape[1] or not held:
     raise UserError(f"{path}: {pts.shape[1]} markers x {held} frames: nothing to read")
   pos = np.transpose(pts[:3], (2, 1, 0)).astype(np.float32)  # [T, M, 3]
-  missing = ~np.isfinite(pos).all(axis=-1)
-  never = [labels[j] for j in np.flatnonzero(missing.all(axis=0))]
+  missing = np.asarray(~np.isfinite(pos).all(axis=-1))
+  never = [labels[j] for j in np.flatnonzero(np.all(missing, axis=0))]
   if never:
     raise UserError(f"{path}: marker {never[0]!r} is never seen ({len(never)} such markers): no position to fill with")
   check_array(np.where(missing[..., None], 0.0, pos), f"{path}: markers")

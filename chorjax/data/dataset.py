@@ -201,18 +201,7 @@ def load_dataset(data_cfg) -> Dataset:
   features = dataclasses.replace(proto, mean=stats.mean.astype(np.float32), std=std)
   enc = lambda x: ((x - features.mean) / features.std).astype(np.float32)
   train = tuple((i, enc(x)) for i, x in train_raw)
-  # what generation may hold to: the range the training frames span (sample.clamp), their pace (sample.pace)
-  every = np.concatenate([x for _, x in train])
-  lag = max(round(0.5 * data_cfg.fps), 1)
-  pose = features.pose_channels
-  moved = [np.abs(x[lag:, pose] - x[:-lag, pose]).mean(-1) for _, x in train if len(x) > lag]
-  features = dataclasses.replace(
-    features,
-    low=every.min(0),
-    high=every.max(0),
-    pace_lag=lag,
-    pace=float(np.concatenate(moved).mean()),
-  )
+  features = _generation_stats(features, train, data_cfg.fps)
   return Dataset(
     id_map,
     tuple(motions),
@@ -222,6 +211,17 @@ def load_dataset(data_cfg) -> Dataset:
     train,
     tuple((i, enc(x)) for i, x in val_raw),
   )
+
+
+def _generation_stats(features: Features, train, fps: float) -> Features:
+  """What generation may hold to: the range the encoded training frames span (``sample.clamp``) and
+  their pace, how far the pose features move in half a second (``sample.pace``)."""
+  every = np.concatenate([x for _, x in train])
+  lag = max(round(0.5 * fps), 1)
+  pose = features.pose_channels
+  moved = [np.abs(x[lag:, pose] - x[:-lag, pose]).mean(-1) for _, x in train if len(x) > lag]
+  pace = float(np.concatenate(moved).mean())
+  return dataclasses.replace(features, low=every.min(0), high=every.max(0), pace_lag=lag, pace=pace)
 
 
 class WindowSampler:

@@ -143,9 +143,9 @@ class Features:
       float(d["scale"]),
       np.asarray(d["mean"], np.float32),
       np.asarray(d["std"], np.float32),
-      *(None if d.get(k) is None else np.asarray(d[k], np.float32) for k in ("lengths", *cls.RANGES)),
-      None if d.get("pace_lag") is None else int(d["pace_lag"]),
-      None if d.get("pace") is None else float(d["pace"]),
+      **{k: None if d.get(k) is None else np.asarray(d[k], np.float32) for k in ("lengths", *cls.RANGES)},
+      pace_lag=None if d.get("pace_lag") is None else int(d["pace_lag"]),
+      pace=None if d.get("pace") is None else float(d["pace"]),
     )
 
 
