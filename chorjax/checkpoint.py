@@ -81,8 +81,8 @@ def save(manager: ocp.CheckpointManager, step: int, state, meta: dict, val_loss:
 
 
 def wait(manager: ocp.CheckpointManager) -> None:
-  """Waits for the asynchronous saves; a write that failed (disk full, read-only) is a one-line UserError
-  and its partial files are removed."""
+  """Waits for any pending save (saves are synchronous, see ``create_manager``; this also finalizes
+  orbax's bookkeeping); a write that failed is a one-line UserError and its partial files are removed."""
   with _writing(manager, None):
     manager.wait_until_finished()
 
@@ -101,7 +101,7 @@ def close_quietly(manager: ocp.CheckpointManager) -> None:
 def _writing(manager, step: int | None):
   try:
     yield
-  except Exception as e:  # orbax surfaces a failed background write here, in several types
+  except Exception as e:  # orbax and tensorstore surface a failed write in several types
     _remove_partial(manager)
     text = str(e)
     known = (
