@@ -423,6 +423,23 @@ def test_a_checkpoint_that_cannot_be_written_is_one_line_and_leaves_no_partial_s
   assert not list((work / "checkpoints").iterdir())  # nothing half written
 
 
+def test_a_sample_that_cannot_be_written_is_one_line_and_leaves_nothing(run_dir, tmp_path):
+  """As above, for `sample` (a CSV of 3,000 frames is far beyond 10 kB)."""
+  import subprocess
+  import sys
+
+  out = tmp_path / "out" / "s.csv"
+  code = (
+    "import resource, signal, sys; signal.signal(signal.SIGXFSZ, signal.SIG_IGN); "
+    "resource.setrlimit(resource.RLIMIT_FSIZE, (10_000, 10_000)); from chorjax.cli import main; "
+    f"sys.exit(main(['sample', {str(run_dir)!r}, '-o', {str(out)!r}, '--frames', '3000']))"
+  )
+  done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+  assert done.returncode == 2, done.stderr[-2000:]
+  assert len(done.stderr.splitlines()) == 1 and "File too large" in done.stderr, done.stderr[-2000:]
+  assert not list(out.parent.iterdir())  # no half-written sample, no temporary
+
+
 def test_a_temporary_file_left_by_a_killed_write_is_cleaned_at_the_next_write(tmp_path):
   from chorjax.errors import atomic_write
 
