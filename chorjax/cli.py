@@ -725,11 +725,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _quiet_closed_loop(hook):
   """After a failed checkpoint write or restore, the storage layer's threads still report to orbax's
-  event loop, closed by then; Python prints each such RuntimeError as an unraisable exception. The
-  failure itself is reported as one line, so only those are dropped."""
+  event loop, closed by then, and orbax's unfinished read coroutines are closed; Python prints each as
+  an unraisable exception. The failure itself is reported as one line, so only those are dropped."""
 
   def unraisable(info):
-    if not (isinstance(info.exc_value, RuntimeError) and str(info.exc_value) == "Event loop is closed"):
+    closed_loop = isinstance(info.exc_value, RuntimeError) and str(info.exc_value) == "Event loop is closed"
+    code = getattr(info.object, "cr_code", None)  # an orbax coroutine closed unfinished when its read ended
+    abandoned = isinstance(info.exc_value, GeneratorExit) and "orbax" in getattr(code, "co_filename", "")
+    if not (closed_loop or abandoned):
       hook(info)
 
   return unraisable

@@ -514,3 +514,18 @@ def test_a_zip_that_is_not_a_sample_is_refused(tmp_path):
   with zipfile.ZipFile(path, "w") as z:
     z.writestr("positions.npy", b"garbage")
   assert _read(path) is None
+
+
+def test_the_cli_drops_only_orbax_leftovers_among_unraisable_exceptions():
+  from types import SimpleNamespace
+
+  seen = []
+  hook = cli._quiet_closed_loop(seen.append)
+  closed = SimpleNamespace(exc_value=RuntimeError("Event loop is closed"), object=None)
+  orbax_code = SimpleNamespace(co_filename="/x/orbax/checkpoint/_src/serialization/serialization.py")
+  abandoned = SimpleNamespace(exc_value=GeneratorExit(), object=SimpleNamespace(cr_code=orbax_code))
+  ours = SimpleNamespace(exc_value=RuntimeError("something else"), object=None)
+  other_coroutine = SimpleNamespace(exc_value=GeneratorExit(), object=SimpleNamespace(cr_code=None))
+  for info in (closed, abandoned, ours, other_coroutine):
+    hook(info)
+  assert seen == [ours, other_coroutine]
