@@ -56,12 +56,17 @@ def mean_of(value) -> float:
 
 
 def upgrade(result: dict) -> dict:
-  """A metrics dict in today's key names (older files named the first and last segment after 1,000 frames)."""
+  """A metrics dict in today's key names (older files named the first and last segment after 1,000 frames)
+  and with every sampling control stated (older files lack the ones added since: they were off)."""
+  from chorjax.config import SampleConfig
+
   out = dict(result)
   for old, new in (("movement_first_1000", "movement_first"), ("movement_last_1000", "movement_last")):
     if old in out and new not in out:
       out[new] = out.pop(old)
   out.setdefault("segment_frames", 1000)
+  if "sampling" in out:
+    out["sampling"] = {**SampleConfig().controls(), **out["sampling"]}
   return out
 
 

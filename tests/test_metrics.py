@@ -277,3 +277,23 @@ def test_sweep_candidates_cross_the_grid_and_bad_keys_are_named(tmp_path):
 
   with pytest.raises(UserError, match=r"\[candidates.x\] key 'train.feedbak' is not a config key"):
     load_sweep(path)
+
+
+def test_older_metrics_files_state_the_controls_added_since_as_off():
+  """Runs evaluated before a sampling control existed group with runs that state it off (compare)."""
+  from chorjax.experiments import group_runs
+  from chorjax.scoring import upgrade
+
+  old = {"movement_first_1000": 0.5, "sampling": {"pi_temperature": 0.2, "seed": 0}}
+  new = {"movement_first": 0.5, "sampling": {"pi_temperature": 0.2, "clamp": False, "pace": 0.0, "seed": 0}}
+  up = upgrade(old)
+  assert up["movement_first"] == 0.5 and up["sampling"]["clamp"] is False and up["sampling"]["pace"] == 0.0
+  assert up["sampling"]["pi_temperature"] == 0.2  # what the file says wins
+  cfg = {"train": {"seed": 0}, "model": {}}
+  runs = [
+    {"name": f"x-seed={s}", "config": {**cfg, "train": {"seed": s}}, "eval": upgrade(e)}
+    for s, e in enumerate([old, new])
+  ]
+  assert len(group_runs(runs)) == 1
+  runs[1]["eval"]["sampling"]["pace"] = 0.5  # a control really on is another group
+  assert len(group_runs(runs)) == 2
