@@ -194,7 +194,7 @@ class SampleConfig:
   pace: float = _field(
     0.0,
     "MDN pace governor: the scale temperature is multiplied by (training pace / the dancer's own pace) to "
-    "this power (within 0.5-2x), the pace being how far the features move in half a second, averaged over "
+    "this power (within 0.5-2x), the pace being how far the pose features move in half a second, averaged over "
     "about 5 s: a dancer who slows down gets more energy, one who trembles or races gets less (0 = off)",
     minimum=0.0,
     resumable=True,

@@ -96,6 +96,7 @@ def parse_numbers(cells, where: str, columns: bool = False) -> list[float]:
   """The floats in ``cells`` (one line of a text file), or a one-line ``UserError`` starting with
   ``where`` (``path:line``; with ``columns``, the 1-based column too) for the first cell that is not a
   number, not finite (nan, inf) or beyond +-``LARGEST_VALUE``."""
+  values = []
   for i, c in enumerate(cells):
     at = f"{where}: column {i + 1}" if columns else where
     try:
@@ -106,7 +107,8 @@ def parse_numbers(cells, where: str, columns: bool = False) -> list[float]:
       raise UserError(f"{at}: non-finite value {c.strip()!r}")
     if abs(v) > LARGEST_VALUE:
       raise UserError(f"{at}: value {c.strip()[:40]} is out of range (beyond +-{LARGEST_VALUE:g})")
-  return [float(c) for c in cells]
+    values.append(v)
+  return values
 
 
 def check_array(values, where: str) -> None:

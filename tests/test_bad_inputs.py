@@ -403,19 +403,25 @@ def test_training_never_silently_restarts_when_every_checkpoint_is_damaged(run_d
     train_and_evaluate(cfg, work)
 
 
-def test_a_checkpoint_that_cannot_be_written_is_one_line_and_leaves_no_partial_step(tmp_path):
-  """A real failing write, without root: files beyond 10 kB fail (RLIMIT_FSIZE, as a full disk would)."""
+def _cli_with_small_files(argv):
+  """The CLI in a subprocess (from the repository root) where no file may grow beyond 10 kB."""
   import subprocess
   import sys
 
-  work = tmp_path / "w"
   code = (
     "import resource, signal, sys; signal.signal(signal.SIGXFSZ, signal.SIG_IGN); "
     "resource.setrlimit(resource.RLIMIT_FSIZE, (10_000, 10_000)); from chorjax.cli import main; "
-    f"sys.exit(main(['train', 'configs/quickstart.toml', *{TINY_TRAIN!r}, '--workdir', {str(work)!r}]))"
+    f"sys.exit(main({argv!r}))"
   )
   root = Path(__file__).resolve().parents[1]
-  done = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=300)
+  return subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=300)
+
+
+def test_a_checkpoint_that_cannot_be_written_is_one_line_and_leaves_no_partial_step(tmp_path):
+  """A real failing write, without root: files beyond 10 kB fail (RLIMIT_FSIZE, as a full disk would)."""
+
+  work = tmp_path / "w"
+  done = _cli_with_small_files(["train", "configs/quickstart.toml", *TINY_TRAIN, "--workdir", str(work)])
   assert done.returncode == 2, done.stderr[-2000:]
   assert done.stderr.splitlines() == [
     f"chorjax: error: {work}/checkpoints: the checkpoint at step 2 could not be written (File too large)"
@@ -425,16 +431,9 @@ def test_a_checkpoint_that_cannot_be_written_is_one_line_and_leaves_no_partial_s
 
 def test_a_sample_that_cannot_be_written_is_one_line_and_leaves_nothing(run_dir, tmp_path):
   """As above, for `sample` (a CSV of 3,000 frames is far beyond 10 kB)."""
-  import subprocess
-  import sys
 
   out = tmp_path / "out" / "s.csv"
-  code = (
-    "import resource, signal, sys; signal.signal(signal.SIGXFSZ, signal.SIG_IGN); "
-    "resource.setrlimit(resource.RLIMIT_FSIZE, (10_000, 10_000)); from chorjax.cli import main; "
-    f"sys.exit(main(['sample', {str(run_dir)!r}, '-o', {str(out)!r}, '--frames', '3000']))"
-  )
-  done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+  done = _cli_with_small_files(["sample", str(run_dir), "-o", str(out), "--frames", "3000"])
   assert done.returncode == 2, done.stderr[-2000:]
   assert len(done.stderr.splitlines()) == 1 and "File too large" in done.stderr, done.stderr[-2000:]
   assert not list(out.parent.iterdir())  # no half-written sample, no temporary
