@@ -213,6 +213,41 @@ def _sample(args) -> int:
   return 0
 
 
+def _live(args) -> int:
+  from chorjax.live import run_live
+
+  _counts(args, port=0)
+  if args.record:
+    _output(args.record, (".npz",))
+    _refuse_existing([args.record], args.force)
+  weights = None
+  if args.motion is not None or args.mix:
+    from chorjax.models import motion_weight_vector
+    from chorjax.run import load_run
+
+    weights = motion_weight_vector(load_run(args.workdir, args.checkpoint).num_motions, args.motion, args.mix)
+
+  def ready(line: str) -> None:
+    print(line, flush=True)
+
+  return run_live(
+    args.workdir,
+    host=args.host,
+    port=args.port,
+    fps=args.fps,
+    seed=args.seed,
+    controls=_controls(args),
+    weights=weights,
+    osc=args.osc,
+    osc_in=args.osc_in,
+    alternate=args.alternate,
+    input_spec=args.input,
+    record=args.record,
+    checkpoint=args.checkpoint,
+    on_ready=ready,
+  )
+
+
 # The keys `chorjax metrics` and `chorjax eval` print (every one is in the JSON; see chorjax/scoring.py).
 METRIC_KEYS = (
   "movement_first",
@@ -573,6 +608,50 @@ def _add_run_commands(sub) -> None:
   sample.set_defaults(func=_sample)
 
   _add_render_command(sub)
+  _add_live_command(sub)
+
+
+def _add_live_command(sub) -> None:
+  """`chorjax live`."""
+  live = sub.add_parser(
+    "live",
+    help="dance in real time: a live page and a WebSocket stream (and OSC) that clients steer",
+    description="Generates without end and streams one frame per 1/fps seconds: GET / is a live player "
+    "page, /ws a WebSocket (one JSON message per frame; clients send prime/set/pause), --osc sends every "
+    "frame as OSC. Prints 'serving http://HOST:PORT' when ready; Ctrl-C stops it (exit 0). The protocol is "
+    "described in chorjax/live.py and the README.",
+  )
+  live.add_argument("workdir", metavar="WORKDIR", help="a run directory with checkpoints")
+  live.add_argument("--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1)")
+  live.add_argument("--port", type=int, default=8765, help="port to serve on, 0 = any free one (default 8765)")
+  live.add_argument("--osc", metavar="HOST:PORT", help="also send every frame as OSC /chorjax/frame (default: off)")
+  live.add_argument(
+    "--osc-in",
+    metavar="HOST:PORT",
+    help="listen for OSC /chorjax/input, /chorjax/prime, /chorjax/set, /chorjax/pause (default: off)",
+  )
+  live.add_argument("--fps", type=_positive, help="frames sent per second (default: the run's frame rate)")
+  ids = live.add_mutually_exclusive_group()
+  ids.add_argument("--motion", type=int, help="motion id that conditions the dance (default 0)")
+  ids.add_argument(
+    "--mix", metavar="ID:W,ID:W", help="blend motion ids, e.g. 4:0.5,5:0.5 (weights >= 0, normalized to sum 1)"
+  )
+  live.add_argument(
+    "--alternate",
+    type=float,
+    default=0.0,
+    metavar="SECONDS",
+    help="take turns: the input (--input or OSC /chorjax/input) dances SECONDS, then the model continues "
+    "from it for SECONDS (default 0: the model alone)",
+  )
+  live.add_argument(
+    "--input", metavar="FILE[:START:LEN]", help="a take played as if live for --alternate (default: none)"
+  )
+  live.add_argument(
+    "--record", metavar="OUT.npz", help="write every frame sent to OUT.npz when stopped (default: not recorded)"
+  )
+  _add_sampling_args(live)
+  live.set_defaults(func=_live)
 
 
 SWEEP_FORMAT = """Train and evaluate every point of a grid over config keys. Points already finished are

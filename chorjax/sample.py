@@ -108,8 +108,24 @@ def _generate_smoothly(
   (the weighted mean absolute change of the features over ``lag`` frames): the scale temperature is
   multiplied by ``(ref / own pace) ** gain`` within 0.5-2x, the own pace a running mean over about ten
   lags; a dancer who slows down gets more energy, one who races or trembles less."""
+  state = _smooth_start(carry, x0_BxD, pacing)
+  return _smooth_scan(model, state, key, num_frames, noise_smoothing, controls, bounds, pacing)[1]
+
+
+def _smooth_start(carry, x0_BxD, pacing):
+  """The state of :func:`_smooth_scan` before the first frame: ``(carry, previous frame, noise filters,
+  (component, offset), (the governor's recent frames, where the next goes, own pace))``."""
   b = x0_BxD.shape[0]
-  gain, lag, ref, weights = pacing or (0.0, 1, 1.0, jnp.zeros(x0_BxD.shape[-1]))
+  lag, ref = (pacing[1], pacing[2]) if pacing else (1, 1.0)
+  none = (jnp.full((b,), -1, jnp.int32), jnp.zeros_like(x0_BxD))  # no component yet, no offset
+  at = jnp.zeros((), jnp.int32)  # an array from the start: a resumed state keeps its type (no retrace)
+  governor = (jnp.broadcast_to(x0_BxD, (lag, *x0_BxD.shape)), at, jnp.full((b,), ref, jnp.float32))
+  return (carry, x0_BxD, (jnp.zeros_like(x0_BxD), jnp.zeros_like(x0_BxD)), none, governor)
+
+
+def _smooth_scan(model, state, key, num_frames: int, noise_smoothing: float, controls: dict, bounds, pacing):
+  """``num_frames`` smoothed draws from ``state``: ``(the state after them, frames [B, N, D])``."""
+  gain, lag, ref, weights = pacing or (0.0, 1, 1.0, jnp.zeros(state[1].shape[-1]))
   keep = 1.0 - 1.0 / (10 * lag)  # the running pace forgets over about ten lags (5 s)
 
   def body(c, k):
@@ -127,11 +143,8 @@ def _generate_smoothly(
       recent, at = recent.at[at].set(x), (at + 1) % lag
     return (carry, x, noise, drawn, (recent, at, own)), x
 
-  none = (jnp.full((b,), -1), jnp.zeros_like(x0_BxD))  # no component yet, no offset
-  governor = (jnp.broadcast_to(x0_BxD, (lag, *x0_BxD.shape)), 0, jnp.full((b,), ref, jnp.float32))
-  init = (carry, x0_BxD, (jnp.zeros_like(x0_BxD), jnp.zeros_like(x0_BxD)), none, governor)
-  _, xs_NxBxD = jax.lax.scan(body, init, jax.random.split(key, num_frames))
-  return jnp.swapaxes(xs_NxBxD, 0, 1)
+  state, xs_NxBxD = jax.lax.scan(body, state, jax.random.split(key, num_frames))
+  return state, jnp.swapaxes(xs_NxBxD, 0, 1)
 
 
 def smooth_noise(state, key, rho: float):
@@ -150,7 +163,18 @@ def dance(graphdef, params, features, motion, key, num_frames: int, controls: di
   clipped to the training range if asked), decoded (with rigid bones and locked feet if asked). A prime
   phrase comes first, decoded as one with its continuation (root-motion features integrate across the
   seam)."""
-  try:  # before generating, not after
+  drawn = draw_controls(features, controls)
+  z = generate(graphdef, params, motion, key, num_frames=num_frames, prime_BxPxD=prime_BxPxD, **drawn)
+  if prime_BxPxD is not None:
+    z = np.concatenate([prime_BxPxD, np.asarray(z)], axis=1)
+  return np.asarray(features.decode(z, rigid=controls["rigid_bones"], lock_feet=controls["foot_lock"]))
+
+
+def draw_controls(features, controls: dict) -> dict:
+  """:func:`generate`'s keyword arguments for ``controls`` (``SampleConfig.controls``): the decode-time
+  ones left out, the training range (``clamp``) and pace target (``pace``) filled in from ``features``.
+  Raises UserError if the run cannot do what is asked (checked before generating, not after)."""
+  try:
     features.check_decode(controls["rigid_bones"], controls["foot_lock"], controls["clamp"], controls["pace"])
   except ValueError as e:
     raise UserError(str(e)) from None
@@ -161,20 +185,74 @@ def dance(graphdef, params, features, motion, key, num_frames: int, controls: di
     weights = np.zeros(features.dim, np.float32)
     weights[features.pose_channels] = 1.0 / len(features.pose_channels)
     drawn.update(pace_lag=features.pace_lag, pace_target=(features.pace, weights))
-  z = generate(graphdef, params, motion, key, num_frames=num_frames, prime_BxPxD=prime_BxPxD, **drawn)
+  return drawn
+
+
+@functools.partial(jax.jit, static_argnames=("graphdef", "pace_lag"))
+def start_stream(graphdef, params, motion, prime_BxPxD=None, *, pace_lag: int | None = None, pace_ref=1.0):
+  """The state of an endless dance (:func:`continue_stream`) before its first frame: conditioned on
+  ``motion`` and, with a prime, after its last frame (teacher forced over the phrase as
+  :func:`generate` primes). ``pace_lag``/``pace_ref``: the governor's lag and the training pace, where
+  the stream will be paced (None: it will not)."""
+  model = nnx.merge(graphdef, params)
+  carry = model.initial_carry(motion)
   if prime_BxPxD is not None:
-    z = np.concatenate([prime_BxPxD, np.asarray(z)], axis=1)
-  return np.asarray(features.decode(z, rigid=controls["rigid_bones"], lock_feet=controls["foot_lock"]))
+    _, carry = model.teacher_force(prime_BxPxD[:, :-1], carry)
+    x0 = prime_BxPxD[:, -1]
+  else:
+    x0 = jnp.zeros((jnp.shape(motion)[0], model.dim), jnp.float32)
+  return _smooth_start(carry, x0, None if pace_lag is None else (None, pace_lag, pace_ref, None))
+
+
+@functools.partial(jax.jit, static_argnames=_STATIC)
+def continue_stream(
+  graphdef,
+  params,
+  state,
+  key,
+  *,
+  num_frames: int,
+  pi_temperature=1.0,
+  sigma_temperature=1.0,
+  greedy: bool = False,
+  noise_smoothing: float = 0.0,
+  persistence: float = 0.0,
+  crossfade: float = 0.0,
+  bounds=None,
+  pace: float = 0.0,
+  pace_lag: int = 15,
+  pace_target=None,
+):
+  """The next ``num_frames`` of an endless dance: ``(state, normalized frames [B, N, D])``. The same draw
+  as :func:`generate`'s smoothed path (``greedy``: the most likely component's mean), resumable chunk
+  by chunk from :func:`start_stream`'s state; the temperatures may change between chunks."""
+  model = nnx.merge(graphdef, params)
+  if greedy:
+    pi_temperature = sigma_temperature = 0.0
+  controls = {
+    "pi_temperature": pi_temperature,
+    "sigma_temperature": sigma_temperature,
+    "persistence": persistence,
+    "crossfade": crossfade,
+  }
+  pacing = (pace, pace_lag, *pace_target) if pace and pace_target is not None else None
+  return _smooth_scan(model, state, key, num_frames, noise_smoothing, controls, bounds, pacing)
 
 
 def read_prime(spec: str, features, data_cfg) -> np.ndarray:
   """``FILE[:START:LEN]`` -> normalized frames ``[P, D]`` of a real phrase, read as training read its
   takes (``data_cfg`` is the run's DataConfig: joints mapped, rotated to its up axis)."""
+  return np.asarray(features.encode(read_phrase(spec, features, data_cfg)), np.float32)
+
+
+def read_phrase(spec: str, features, data_cfg, flag: str = "--prime") -> np.ndarray:
+  """``FILE[:START:LEN]`` -> the phrase's positions ``[P, J, 3]`` in the run's data space (see
+  :func:`read_prime`; ``flag`` names the setting in errors)."""
   parts = spec.rsplit(":", 2)
   if len(parts) == 3 and parts[1].isdigit() and parts[2].isdigit():
     path, start, length = Path(parts[0]), int(parts[1]), int(parts[2])
   elif len(parts) == 3 and not Path(spec).exists() and Path(parts[0]).exists():
-    raise UserError(f"--prime {spec}: START and LEN must be whole numbers (FILE:START:LEN, e.g. {parts[0]}:0:60)")
+    raise UserError(f"{flag} {spec}: START and LEN must be whole numbers (FILE:START:LEN, e.g. {parts[0]}:0:60)")
   else:
     path, start, length = Path(spec), 0, None
   motion = conform(read_takes([str(path)], data_cfg)[:1], data_cfg)[0]
@@ -185,6 +263,6 @@ def read_prime(spec: str, features, data_cfg) -> np.ndarray:
   end = motion.num_frames if length is None else start + length
   if start >= motion.num_frames or end > motion.num_frames or end - start < 2:
     raise UserError(
-      f"--prime {spec}: frames {start}..{end} are not inside the take's {motion.num_frames} frames (need at least 2)"
+      f"{flag} {spec}: frames {start}..{end} are not inside the take's {motion.num_frames} frames (need at least 2)"
     )
-  return np.asarray(features.encode(motion.positions[start:end]), np.float32)
+  return np.asarray(motion.positions[start:end], np.float32)

@@ -105,6 +105,24 @@ class Features:
       pos = transforms.lock_feet(pos, contacts, self.skeleton.feet, max_step=0.05 * leg)  # foot_contacts' speed
     return self.uncanonical(pos)
 
+  def decode_after(self, z_TxD, last_z_D, last_pos_Jx3, rigid: bool = False, lock_feet: bool = False):
+    """Frames that follow one already decoded (normalized ``last_z_D``, at data-space ``last_pos_Jx3``)
+    -> data-space positions ``[T, J, 3]`` that continue from it: decoded with that frame as their frame
+    0, then turned about the up axis and moved over the floor (the representations that integrate the
+    root's motion) so that frame 0 lands where it was. A stream decodes chunk by chunk this way
+    (``chorjax live``); the other representations place every frame themselves."""
+    z = np.concatenate([np.asarray(last_z_D)[None], np.asarray(z_TxD)], 0)
+    pos = self.canonical(self.decode(z, rigid=rigid, lock_feet=lock_feet))
+    if self.representation in ("canonical", "directions"):
+      target = self.canonical(np.asarray(last_pos_Jx3))
+      turn = 0.0
+      if self.representation == "canonical":  # directions hold absolute bone directions: no heading to fix
+        left, right = hips(self.skeleton)
+        turn = transforms.heading(target, left, right) - transforms.heading(pos[0], left, right)
+      floor = lambda p: p[self.skeleton.root] * jnp.array([1.0, 0.0, 1.0])
+      pos = transforms.rotate_y(pos - floor(pos[0]), turn) + floor(target)
+    return np.asarray(self.uncanonical(pos[1:]), np.float32)
+
   def check_decode(self, rigid: bool = False, lock_feet: bool = False, clamp: bool = False, pace: float = 0) -> None:
     """Raises ValueError if :meth:`decode` (or generation clipped to the training range: ``clamp``)
     cannot do what is asked (callers check before long work)."""

@@ -45,7 +45,17 @@ def player_html(motions: Sequence[Motion], title: str = "chorjax", columns: int 
   as fit, each at least 300 CSS pixels wide)."""
   grid = f"repeat({columns}, minmax(0, 1fr))" if columns else "repeat(auto-fit, minmax(min(100%, 300px), 1fr))"
   data = json.dumps([_payload(m) for m in motions])
-  return _TEMPLATE.replace("__TITLE__", html_lib.escape(title)).replace("__GRID__", grid).replace("__DATA__", data)
+  page = _TEMPLATE.replace("__STYLE__", _STYLE).replace("__FIGURE__", _FIGURE)
+  return page.replace("__TITLE__", html_lib.escape(title)).replace("__GRID__", grid).replace("__DATA__", data)
+
+
+def live_html(title: str = "chorjax live") -> str:
+  """The live page (``chorjax live`` serves it at ``/``): connects to the WebSocket at ``/ws`` on its own
+  host and draws the dancer as frames arrive, with the player's look; controls for the temperatures, the
+  motion mix, pause/resume and "prime from file". ``window.__live`` holds what a test reads (frames
+  received, replies, errors)."""
+  page = _LIVE.replace("__STYLE__", _STYLE).replace("__FIGURE__", _FIGURE)
+  return page.replace("__TITLE__", html_lib.escape(title)).replace("__GRID__", "minmax(0, 1fr)")
 
 
 def write_player(motions: Sequence[Motion], path, title: str = "chorjax", columns: int | None = None) -> Path:
@@ -54,10 +64,7 @@ def write_player(motions: Sequence[Motion], path, title: str = "chorjax", column
   return atomic_write(path, lambda p: p.write_text(text, encoding="utf-8"))
 
 
-_TEMPLATE = r"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><title>__TITLE__</title>
-<script>window.__errors = []; window.addEventListener('error', function (e) { window.__errors.push(String(e.message)); });</script>
-<style>
+_STYLE = """<style>
 body { font-family: system-ui, sans-serif; margin: 12px; background: #fafafa; color: #222; }
 h3 { margin: 0 0 8px; }
 #controls { display: flex; gap: 10px; align-items: center; margin-bottom: 10px; }
@@ -66,7 +73,66 @@ h3 { margin: 0 0 8px; }
 figure { margin: 0; background: #fff; border: 1px solid #ddd; }
 figcaption { font-size: 13px; padding: 4px 8px; border-bottom: 1px solid #eee; }
 canvas { width: 100%; height: 360px; display: block; cursor: grab; }
-</style></head><body>
+</style>"""
+
+# The stick figure's drawing, shared by the player and the live page: view, projection, canvas fit, one
+# frame drawn, mouse orbit and zoom. A panel ``p`` holds ``m`` (joints, bones, scale), ``pos``, ``cx``/``cz``/``y0``.
+_FIGURE = r"""  var view = { yaw: 0.6, pitch: 0.25, zoom: 1.5 };
+  function project(p, x, y, z) {
+    var s = p.m.scale; x = (x - p.cx) * s; y = (y - p.y0) * s - 1.0; z = (z - p.cz) * s;
+    var cy = Math.cos(view.yaw), sy = Math.sin(view.yaw), cp = Math.cos(view.pitch), sp = Math.sin(view.pitch);
+    var x1 = cy * x + sy * z, z1 = -sy * x + cy * z;
+    var y2 = cp * y - sp * z1, z2 = sp * y + cp * z1;
+    var d = 6.0 / view.zoom, f = Math.min(p.cv.height, p.cv.width * 1.25) * 1.1 / (d - z2);
+    return [p.cv.width / 2 + x1 * f, p.cv.height / 2 - y2 * f];
+  }
+  function fit(players) {  // each canvas: its box's width, as tall as the window allows, at the device pixel ratio
+    var dpr = window.devicePixelRatio || 1;
+    players.forEach(function (p) {
+      var top = p.cv.getBoundingClientRect().top + window.scrollY;
+      var h = Math.max(160, Math.min(window.innerHeight - top - 14, p.cv.clientWidth * 1.25));
+      p.cv.style.height = Math.floor(h) + 'px';
+      p.cv.width = Math.round(p.cv.clientWidth * dpr); p.cv.height = Math.round(h * dpr); p.dpr = dpr;
+    });
+  }
+  function draw(p, t) {  // frame t of p.pos
+    var ctx = p.ctx, W = p.cv.width, H = p.cv.height, J = p.m.joints, px = p.dpr || 1;
+    ctx.fillStyle = '#ffffff'; ctx.fillRect(0, 0, W, H);
+    ctx.strokeStyle = '#e4e4e4'; ctx.lineWidth = px;  // floor grid
+    for (var g = -4; g <= 4; g++) {
+      var a = proj3(p, g, 0, -4), b = proj3(p, g, 0, 4), c = proj3(p, -4, 0, g), d = proj3(p, 4, 0, g);
+      line(ctx, a, b); line(ctx, c, d);
+    }
+    var base = t * J * 3, pts = [];
+    for (var j = 0; j < J; j++) pts.push(project(p, p.pos[base + 3 * j], p.pos[base + 3 * j + 1], p.pos[base + 3 * j + 2]));
+    ctx.strokeStyle = '#1f5fa8'; ctx.lineWidth = 3 * px;
+    p.m.bones.forEach(function (bn) { line(ctx, pts[bn[0]], pts[bn[1]]); });
+    ctx.fillStyle = '#c0392b';
+    pts.forEach(function (q) { ctx.beginPath(); ctx.arc(q[0], q[1], 3 * px, 0, 2 * Math.PI); ctx.fill(); });
+  }
+  function proj3(p, gx, gy, gz) {  // grid points are in viewer units around the take's centre
+    return project(p, p.cx + gx / (p.m.scale * 2), p.y0, p.cz + gz / (p.m.scale * 2));
+  }
+  function line(ctx, a, b) { ctx.beginPath(); ctx.moveTo(a[0], a[1]); ctx.lineTo(b[0], b[1]); ctx.stroke(); }
+  function orbit(players, render) {  // mouse drag orbits, the wheel zooms
+    players.forEach(function (p) {
+      var drag = null;
+      p.cv.addEventListener('mousedown', function (e) { drag = [e.clientX, e.clientY]; });
+      window.addEventListener('mouseup', function () { drag = null; });
+      window.addEventListener('mousemove', function (e) {
+        if (!drag) return;
+        view.yaw += (e.clientX - drag[0]) * 0.01; view.pitch = Math.max(-1.4, Math.min(1.4, view.pitch + (e.clientY - drag[1]) * 0.01));
+        drag = [e.clientX, e.clientY]; render();
+      });
+      p.cv.addEventListener('wheel', function (e) { e.preventDefault(); view.zoom = Math.max(0.3, Math.min(5, view.zoom * (e.deltaY > 0 ? 0.9 : 1.1))); render(); }, { passive: false });
+    });
+  }
+"""
+
+_TEMPLATE = r"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>__TITLE__</title>
+<script>window.__errors = []; window.addEventListener('error', function (e) { window.__errors.push(String(e.message)); });</script>
+__STYLE__</head><body>
 <h3>__TITLE__</h3>
 <div id="controls">
   <button id="play">Play</button>
@@ -85,7 +151,6 @@ canvas { width: 100%; height: 360px; display: block; cursor: grab; }
     for (var i = 0; i < s.length; i++) bytes[i] = s.charCodeAt(i);
     return new Float32Array(bytes.buffer);
   }
-  var view = { yaw: 0.6, pitch: 0.25, zoom: 1.5 };
   var players = MOTIONS.map(function (m) {
     var fig = document.createElement('figure');
     var cap = document.createElement('figcaption'); cap.textContent = m.title + ' (' + m.frames + ' frames, ' + m.fps + ' fps)';
@@ -103,43 +168,8 @@ canvas { width: 100%; height: 360px; display: block; cursor: grab; }
   var scrub = document.getElementById('scrub'); scrub.max = Math.max(0, maxFrames - 1);
   var state = { frame: 0, playing: false, last: 0 };
 
-  function project(p, x, y, z) {
-    var s = p.m.scale; x = (x - p.cx) * s; y = (y - p.y0) * s - 1.0; z = (z - p.cz) * s;
-    var cy = Math.cos(view.yaw), sy = Math.sin(view.yaw), cp = Math.cos(view.pitch), sp = Math.sin(view.pitch);
-    var x1 = cy * x + sy * z, z1 = -sy * x + cy * z;
-    var y2 = cp * y - sp * z1, z2 = sp * y + cp * z1;
-    var d = 6.0 / view.zoom, f = Math.min(p.cv.height, p.cv.width * 1.25) * 1.1 / (d - z2);
-    return [p.cv.width / 2 + x1 * f, p.cv.height / 2 - y2 * f];
-  }
-  function fit() {  // each canvas: its box's width, as tall as the window allows, at the device pixel ratio
-    var dpr = window.devicePixelRatio || 1;
-    players.forEach(function (p) {
-      var top = p.cv.getBoundingClientRect().top + window.scrollY;
-      var h = Math.max(160, Math.min(window.innerHeight - top - 14, p.cv.clientWidth * 1.25));
-      p.cv.style.height = Math.floor(h) + 'px';
-      p.cv.width = Math.round(p.cv.clientWidth * dpr); p.cv.height = Math.round(h * dpr); p.dpr = dpr;
-    });
-  }
-  function draw(p) {
-    var ctx = p.ctx, W = p.cv.width, H = p.cv.height, J = p.m.joints, px = p.dpr || 1;
-    ctx.fillStyle = '#ffffff'; ctx.fillRect(0, 0, W, H);
-    ctx.strokeStyle = '#e4e4e4'; ctx.lineWidth = px;  // floor grid
-    for (var g = -4; g <= 4; g++) {
-      var a = proj3(p, g, 0, -4), b = proj3(p, g, 0, 4), c = proj3(p, -4, 0, g), d = proj3(p, 4, 0, g);
-      line(ctx, a, b); line(ctx, c, d);
-    }
-    var t = Math.min(state.frame, p.m.frames - 1), base = t * J * 3, pts = [];
-    for (var j = 0; j < J; j++) pts.push(project(p, p.pos[base + 3 * j], p.pos[base + 3 * j + 1], p.pos[base + 3 * j + 2]));
-    ctx.strokeStyle = '#1f5fa8'; ctx.lineWidth = 3 * px;
-    p.m.bones.forEach(function (bn) { line(ctx, pts[bn[0]], pts[bn[1]]); });
-    ctx.fillStyle = '#c0392b';
-    pts.forEach(function (q) { ctx.beginPath(); ctx.arc(q[0], q[1], 3 * px, 0, 2 * Math.PI); ctx.fill(); });
-  }
-  function proj3(p, gx, gy, gz) {  // grid points are in viewer units around the take's centre
-    return project(p, p.cx + gx / (p.m.scale * 2), p.y0, p.cz + gz / (p.m.scale * 2));
-  }
-  function line(ctx, a, b) { ctx.beginPath(); ctx.moveTo(a[0], a[1]); ctx.lineTo(b[0], b[1]); ctx.stroke(); }
-  function render() { players.forEach(draw); scrub.value = state.frame; document.getElementById('frame').textContent = state.frame; }
+__FIGURE__
+  function render() { players.forEach(function (p) { draw(p, Math.min(state.frame, p.m.frames - 1)); }); scrub.value = state.frame; document.getElementById('frame').textContent = state.frame; }
   function setPlaying(on) { state.playing = on; state.last = performance.now(); document.getElementById('play').textContent = on ? 'Pause' : 'Play'; }
   document.getElementById('play').onclick = function () { setPlaying(!state.playing); };
   scrub.oninput = function () { state.frame = parseInt(scrub.value, 10); render(); };
@@ -151,19 +181,9 @@ canvas { width: 100%; height: 360px; display: block; cursor: grab; }
     var step = Math.floor(acc);
     if (step > 0) { acc -= step; state.frame = (state.frame + step) % maxFrames; render(); }
   }, 15);
-  players.forEach(function (p) {
-    var drag = null;
-    p.cv.addEventListener('mousedown', function (e) { drag = [e.clientX, e.clientY]; });
-    window.addEventListener('mouseup', function () { drag = null; });
-    window.addEventListener('mousemove', function (e) {
-      if (!drag) return;
-      view.yaw += (e.clientX - drag[0]) * 0.01; view.pitch = Math.max(-1.4, Math.min(1.4, view.pitch + (e.clientY - drag[1]) * 0.01));
-      drag = [e.clientX, e.clientY]; render();
-    });
-    p.cv.addEventListener('wheel', function (e) { e.preventDefault(); view.zoom = Math.max(0.3, Math.min(5, view.zoom * (e.deltaY > 0 ? 0.9 : 1.1))); render(); }, { passive: false });
-  });
-  fit(); render();
-  window.addEventListener('resize', function () { fit(); render(); });
+  orbit(players, render);
+  fit(players); render();
+  window.addEventListener('resize', function () { fit(players); render(); });
   setPlaying(true);  // autoplay, looped
 
   if (location.hash === '#selftest') {
@@ -189,6 +209,94 @@ canvas { width: 100%; height: 360px; display: block; cursor: grab; }
       });
     }, 700);
   }
+})();
+</script></body></html>
+"""
+
+
+_LIVE = r"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>__TITLE__</title>
+<script>window.__errors = []; window.addEventListener('error', function (e) { window.__errors.push(String(e.message)); });</script>
+__STYLE__
+<style>
+#controls { flex-wrap: wrap; font-size: 13px; }
+#controls input[type=range] { width: 110px; }
+#status { font-size: 12px; color: #777; }
+</style></head><body>
+<h3>__TITLE__</h3>
+<div id="controls">
+  <button id="pause">Pause</button>
+  <label>mixture temperature <input id="pi" type="range" min="0" max="2" step="0.05"> <span id="piv"></span></label>
+  <label>scale temperature <input id="sigma" type="range" min="0" max="2" step="0.05"> <span id="sigmav"></span></label>
+  <label>mix <input id="mix" size="12" placeholder="4:0.5,5:0.5"></label><button id="setmix">Set</button>
+  <label>prime from file <input id="prime" type="file" accept=".csv,.bvh,.npz,.amc,.c3d"></label>
+  <span id="status">connecting...</span>
+</div>
+<div id="grid"></div>
+<script>
+(function () {
+  window.__live = { frames: 0, replies: [], errors: window.__errors, connected: false };
+__FIGURE__
+  var p = null, toYUp = null, ws = null, paused = false, shown = 0, started = performance.now();
+  var status = document.getElementById('status');
+  function say(text) { status.textContent = text; }
+  function send(obj) { if (ws && ws.readyState === 1) ws.send(JSON.stringify(obj)); }
+  function render() { if (p) draw(p, 0); }
+
+  function setup(hello) {  // one panel, fed one frame at a time; the camera follows the dancer slowly
+    var fig = document.createElement('figure'), cap = document.createElement('figcaption'), cv = document.createElement('canvas');
+    cap.textContent = 'live (' + hello.joints + ' joints, ' + hello.fps + ' fps)';
+    fig.appendChild(cap); fig.appendChild(cv); document.getElementById('grid').appendChild(fig);
+    p = { m: { joints: hello.joints, bones: hello.bones, scale: 1, frames: 1 }, cv: cv, ctx: cv.getContext('2d'),
+          pos: new Float32Array(hello.joints * 3), cx: 0, cz: 0, y0: 0, fresh: true };
+    toYUp = hello.to_y_up;
+    ['pi', 'sigma'].forEach(function (id) {
+      var key = id === 'pi' ? 'pi_temperature' : 'sigma_temperature', el = document.getElementById(id);
+      el.value = hello.settings[key]; document.getElementById(id + 'v').textContent = el.value;
+      el.onchange = function () { document.getElementById(id + 'v').textContent = el.value; var s = {}; s[key] = parseFloat(el.value); send({ set: s }); };
+    });
+    fit([p]); orbit([p], render);
+  }
+  function frame(msg) {
+    var J = p.m.joints, ymin = Infinity, ymax = -Infinity, root = 0;
+    for (var j = 0; j < J; j++) {
+      var q = msg.positions[j], r = toYUp;
+      for (var a = 0; a < 3; a++) p.pos[3 * j + a] = r[a][0] * q[0] + r[a][1] * q[1] + r[a][2] * q[2];
+      ymin = Math.min(ymin, p.pos[3 * j + 1]); ymax = Math.max(ymax, p.pos[3 * j + 1]);
+    }
+    var mx = 0, mz = 0;
+    for (j = 0; j < J; j++) { mx += p.pos[3 * j] / J; mz += p.pos[3 * j + 2] / J; }
+    if (p.fresh) { p.m.scale = 2.0 / Math.max(ymax - ymin, 1e-6); p.cx = mx; p.cz = mz; p.y0 = ymin; p.fresh = false; }
+    var k = 0.02;  // the camera glides after the dancer (about 1.5 s at 30 fps)
+    p.cx += k * (mx - p.cx); p.cz += k * (mz - p.cz); p.y0 += k * (ymin - p.y0);
+    window.__live.frames++; shown = msg.frame;
+    render();
+    var secs = (performance.now() - started) / 1000;
+    say('frame ' + msg.frame + (msg.source === 'input' ? ' (input)' : '') + ', ' + (window.__live.frames / secs).toFixed(1) + ' frames/s');
+  }
+  function connect() {
+    ws = new WebSocket((location.protocol === 'https:' ? 'wss://' : 'ws://') + location.host + '/ws');
+    ws.onopen = function () { window.__live.connected = true; say('connected'); };
+    ws.onclose = function () { window.__live.connected = false; say('disconnected: reload to reconnect'); };
+    ws.onmessage = function (e) {
+      var msg = JSON.parse(e.data);
+      if (msg.hello) { setup(msg.hello); started = performance.now(); }
+      else if (msg.positions) { if (p) frame(msg); }
+      else { window.__live.replies.push(msg); if (msg.error) say('error: ' + msg.error); }
+    };
+  }
+  document.getElementById('pause').onclick = function () {
+    paused = !paused; send({ pause: paused }); this.textContent = paused ? 'Resume' : 'Pause';
+  };
+  document.getElementById('setmix').onclick = function () { send({ set: { mix: document.getElementById('mix').value } }); };
+  document.getElementById('prime').onchange = function () {
+    var f = this.files[0]; if (!f) return;
+    var reader = new FileReader();
+    reader.onload = function () { send({ prime_file: { name: f.name, text: String(reader.result) } }); say('priming from ' + f.name); };
+    reader.readAsText(f);
+  };
+  window.addEventListener('resize', function () { if (p) { fit([p]); render(); } });
+  connect();
 })();
 </script></body></html>
 """

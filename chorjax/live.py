@@ -1,0 +1,463 @@
+"""``chorjax live``: the model dances without end, in real time, for a browser and for creative tools.
+
+One asyncio process. A generator runs ahead of the clock in small jit-compiled chunks (in a worker
+thread, so the event loop never waits on it); a pacer sends one frame every 1/fps seconds to every
+WebSocket client and, with ``--osc``, as an OSC message; ``GET /`` serves the live player page. Clients
+steer the dance with JSON messages; OSC can steer it too, and feed a dancer's own frames in.
+
+Protocol (WebSocket at ``/ws``; every message is one JSON object):
+
+- server -> client, first: ``{"hello": {"fps", "joints", "bones", "joint_names", "up_axis", "motions",
+  "settings"}}``; then one message per frame, paced in real time:
+  ``{"frame": n, "positions": [[x, y, z], ...], "source": "model" | "input"}`` (J joints, the data's
+  units and axes; ``source`` is ``input`` while a dancer's frames are passed through, ``--alternate``).
+- client -> server: ``{"prime": [[[x, y, z], ...], ...]}`` (a phrase of frames in data space: the model
+  continues from its last frame, as ``chorjax sample --prime`` does), ``{"prime_file": {"name":
+  "phrase.bvh", "text": "..."}}`` (a CSV/BVH/NPZ... file's text, read as training reads takes: the live
+  page's "prime from file"), ``{"set": {"pi_temperature": t, "sigma_temperature": s, "mix":
+  "4:0.5,5:0.5"}}`` (any of the three) and ``{"pause": true | false}``. Each gets ``{"ok": KIND}`` or
+  ``{"error": "..."}`` back; the stream goes on either way.
+
+OSC (UDP): with ``--osc HOST:PORT`` every frame is also sent as ``/chorjax/frame`` with J*3 floats
+(x, y, z per joint). With ``--osc-in HOST:PORT`` chorjax listens for ``/chorjax/input`` (J*3 floats: one
+frame of a dancer, for ``--alternate``), ``/chorjax/prime`` (P*J*3 floats: a phrase), ``/chorjax/set``
+(name, value pairs: ``pi_temperature``, ``sigma_temperature``, ``mix``) and ``/chorjax/pause`` (1 or 0).
+
+Latency: a ``set`` acts from the next chunk generated, so it becomes visible after the frames already
+buffered ahead (at most ``AHEAD`` chunks of ``chunk`` frames: about 0.3 s at 30 fps); a prime clears the
+buffer and is visible from the next frame after its chunk is drawn.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import contextlib
+import json
+import math
+import signal
+import tempfile
+from pathlib import Path
+
+import jax
+import numpy as np
+
+from chorjax.errors import UserError
+
+AHEAD = 2  # chunks generated ahead of the clock
+
+
+class Stream:
+  """An endless dance in data space, ``chunk`` frames at a time (not thread-safe: one caller at a time).
+
+  Args:
+    run: a loaded run (``chorjax.run.load_run``, ranged for the sampling).
+    sampling: the sampling controls (``Run.sampling``).
+    weights_M: the motion-id weights that condition the dance (``models.motion_weight_vector``).
+    seed: the sampling seed.
+    chunk: frames per generated chunk.
+  """
+
+  def __init__(self, run, sampling: dict, weights_M, seed: int, chunk: int):
+    from chorjax.sample import draw_controls
+
+    self.run, self.features, self.chunk = run, run.features, chunk
+    self.draw = draw_controls(run.features, sampling)
+    self.decoding = {"rigid": sampling["rigid_bones"], "lock_feet": sampling["foot_lock"]}
+    self.weights = np.asarray(weights_M, np.float32)
+    self.key, self.count = jax.random.key(seed), 0
+    self.keep = run.config.data.seq_length  # frames a re-prime teacher-forces
+    self.history: collections.deque = collections.deque(maxlen=self.keep)
+    self.last = None  # (normalized frame, data-space frame) the next chunk continues from
+    self._start(None)
+
+  def _start(self, prime_PxD) -> None:
+    self.state = self._started(None if prime_PxD is None else np.asarray(prime_PxD, np.float32)[None])
+
+  def _started(self, prime_1xPxD):
+    from chorjax.sample import start_stream
+
+    pace = {"pace_lag": self.draw["pace_lag"], "pace_ref": self.draw["pace_target"][0]} if self.draw["pace"] else {}
+    return start_stream(self.run.graphdef, self.run.params, self.weights[None], prime_1xPxD, **pace)
+
+  def next_chunk(self) -> np.ndarray:
+    """The next ``chunk`` frames ``[C, J, 3]`` in data space."""
+    from chorjax.sample import continue_stream
+
+    key = jax.random.fold_in(self.key, self.count)
+    self.count += 1
+    self.state, z = continue_stream(
+      self.run.graphdef, self.run.params, self.state, key, num_frames=self.chunk, **self.draw
+    )
+    z = np.asarray(z[0])
+    if self.last is None:
+      pos = np.asarray(self.features.decode(z, **self.decoding), np.float32)
+    else:
+      pos = self.features.decode_after(z, *self.last, **self.decoding)
+    self.last = (z[-1], pos[-1])
+    self.history.extend(z)
+    return pos
+
+  def prime(self, positions_PxJx3) -> None:
+    """Continue from a phrase in data space ``[P, J, 3]`` (P >= 2): the model is teacher forced over it
+    and the next chunk starts after its last frame, where that frame stands."""
+    pos = np.asarray(positions_PxJx3, np.float32)
+    j = self.features.skeleton.num_joints
+    if pos.ndim != 3 or pos.shape[1:] != (j, 3) or len(pos) < 2:
+      raise UserError(f"prime: expected at least 2 frames of {j} joints x 3, got shape {list(pos.shape)}")
+    if not np.isfinite(pos).all():
+      raise UserError("prime: positions must be finite numbers")
+    pos = pos[-self.keep :]
+    z = np.asarray(self.features.encode(pos), np.float32)
+    self._start(z)
+    self.last = (z[-1], pos[-1])
+    self.history.clear()
+    self.history.extend(z)
+
+  def warm_up(self) -> None:
+    """Compiles what a prime of ``keep`` frames runs (longer phrases are cut to it; a new mix re-primes
+    with that many), so the usual prime shows in a few frames instead of after a compile."""
+    rest = np.asarray(self.features.decode(np.zeros((self.keep, self.features.dim), np.float32)), np.float32)
+    z = np.asarray(self.features.encode(rest), np.float32)  # the mean pose, held: any phrase will do
+    jax.block_until_ready(self._started(z[None]))
+
+  def set(self, pi_temperature=None, sigma_temperature=None, mix=None) -> None:
+    """New temperatures (from the next chunk) and/or a new motion mix (``"4:0.5,5:0.5"``): the model is
+    conditioned on it and re-primed with the frames it just danced, so the dance changes without a jump."""
+    from chorjax.config import check_sample_control
+    from chorjax.models import parse_mix
+
+    given = {"pi_temperature": pi_temperature, "sigma_temperature": sigma_temperature}
+    checked = {k: check_sample_control(k, v, f"set {k}") for k, v in given.items() if v is not None}
+    weights = None if mix is None else parse_mix(str(mix), self.run.num_motions)
+    self.draw.update(checked)
+    if weights is not None:
+      self.weights = weights
+      self._start(np.asarray(self.history) if len(self.history) >= 2 else None)
+
+
+class Live:
+  """The server's state: clients, the frames generated ahead, the pacing, the recording."""
+
+  def __init__(self, stream: Stream, fps: float, *, osc=None, alternate: float = 0.0, source=None):
+    self.stream, self.fps = stream, fps
+    self.clients: set = set()
+    self.ahead: collections.deque = collections.deque()
+    self.lock = asyncio.Lock()  # one stream call at a time (they run in a worker thread)
+    self.paused = False
+    self.sent: list[np.ndarray] = []
+    self.osc = osc
+    self.turn_frames = max(1, round(alternate * fps)) if alternate else 0
+    self.source = source  # an input: a file's frames (cycled) or frames arriving by OSC
+    self.inputs: collections.deque = collections.deque(maxlen=10 * max(self.turn_frames, 1))
+    self.received: list[np.ndarray] = []
+    self.input_turn = False
+    self.priming = False
+
+  def hello(self) -> str:
+    from chorjax.data.transforms import up_axis_matrix
+
+    f, run = self.stream.features, self.stream.run
+    sk = f.skeleton
+    settings = {k: v for k, v in self.stream.draw.items() if isinstance(v, int | float | bool)}
+    return json.dumps(
+      {
+        "hello": {
+          "fps": self.fps,
+          "joints": sk.num_joints,
+          "bones": [list(b) for b in sk.bones],
+          "joint_names": list(sk.joint_names),
+          "up_axis": f.up_axis,
+          "to_y_up": up_axis_matrix(f.up_axis).tolist(),  # the page draws y-up
+          "motions": run.num_motions,
+          "settings": settings,
+        }
+      }
+    )
+
+  async def call(self, fn, *args, **kwargs):
+    """``fn`` on the stream, in a worker thread, one call at a time."""
+    async with self.lock:
+      return await asyncio.to_thread(fn, *args, **kwargs)
+
+  async def generate(self) -> None:
+    """Keeps ``AHEAD`` chunks ready; the pacer takes frames from them."""
+    while True:
+      if len(self.ahead) < AHEAD * self.stream.chunk and not (self.input_turn or self.priming):
+        self.ahead.extend(await self.call(self.stream.next_chunk))
+      else:
+        await asyncio.sleep(0.25 / self.fps)
+
+  async def pace(self) -> None:
+    """One frame every 1/fps seconds to every client (and OSC), on an absolute clock (no drift)."""
+    from websockets.asyncio.server import broadcast
+
+    loop = asyncio.get_running_loop()
+    period, due = 1.0 / self.fps, loop.time()
+    while True:
+      due += period
+      await asyncio.sleep(max(0.0, due - loop.time()))
+      if loop.time() - due > period:  # late (a stall, a prime compiling): go on from now, never in a burst
+        due = loop.time()
+      if self.paused:
+        continue
+      frame, source = self._next_frame()
+      if frame is None:
+        continue
+      message = {"frame": len(self.sent), "positions": np.round(frame, 5).tolist(), "source": source}
+      broadcast(self.clients, json.dumps(message))
+      if self.osc is not None:
+        self.osc.send_message("/chorjax/frame", [float(v) for v in frame.reshape(-1)])
+      self.sent.append(frame)
+      if self.turn_frames and len(self.sent) % self.turn_frames == 0:
+        self._switch_turn()
+
+  def _next_frame(self):
+    if self.priming:
+      return None, None
+    if not self.input_turn:
+      return (self.ahead.popleft(), "model") if self.ahead else (None, None)
+    frame = self.source.next() if isinstance(self.source, Phrase) else (self.inputs.popleft() if self.inputs else None)
+    if frame is not None:
+      self.received.append(frame)
+    return frame, "input"
+
+  def _switch_turn(self) -> None:
+    """``--alternate``: the input dances, then the model continues from what it received, in turns."""
+    if self.source is None:
+      return
+    if self.input_turn and len(self.received) >= 2:
+      phrase, self.received = np.stack(self.received), []
+      self.priming = True  # nothing is sent until the model has taken the phrase in
+      asyncio.get_running_loop().create_task(self.prime(phrase))
+    self.input_turn = not self.input_turn
+
+  async def prime(self, positions) -> None:
+    try:
+      await self.call(self.stream.prime, positions)
+      self.ahead.clear()  # the continuation shows at once, not after the frames already drawn
+    finally:
+      self.priming = False
+
+  async def handle(self, message) -> str:
+    """One client message -> the reply (``{"ok": KIND}`` or ``{"error": ...}``)."""
+    try:
+      data = json.loads(message)
+    except (json.JSONDecodeError, UnicodeDecodeError, TypeError) as e:
+      return json.dumps({"error": f"not JSON: {e}"})
+    kinds = ("prime", "prime_file", "set", "pause")
+    if not isinstance(data, dict) or len(data) != 1 or next(iter(data)) not in kinds:
+      return json.dumps({"error": f"expected one of {', '.join(kinds)} as the only key"})
+    kind, value = next(iter(data.items()))
+    try:
+      await self.apply(kind, value)
+    except UserError as e:
+      return json.dumps({"error": str(e)})
+    return json.dumps({"ok": kind})
+
+  async def apply(self, kind: str, value) -> None:
+    if kind == "pause":
+      if not isinstance(value, bool):
+        raise UserError("pause: expected true or false")
+      self.paused = value
+    elif kind == "set":
+      if not isinstance(value, dict) or not value or set(value) - {"pi_temperature", "sigma_temperature", "mix"}:
+        raise UserError("set: expected an object with pi_temperature, sigma_temperature and/or mix")
+      await self.call(self.stream.set, **value)
+    elif kind == "prime":
+      try:
+        positions = np.asarray(value, np.float32)
+      except (ValueError, TypeError):
+        raise UserError("prime: expected frames of [x, y, z] per joint") from None
+      await self.prime(positions)
+    else:
+      await self.prime(await asyncio.to_thread(self.read_file, value))
+
+  def read_file(self, value) -> np.ndarray:
+    """A ``prime_file`` message's file, read as training reads takes (any format chorjax reads)."""
+    from chorjax.sample import read_phrase
+
+    if not isinstance(value, dict) or not isinstance(value.get("name"), str) or not isinstance(value.get("text"), str):
+      raise UserError('prime_file: expected {"name": "phrase.csv", "text": "..."}')
+    suffix = Path(value["name"]).suffix.lower()
+    with tempfile.TemporaryDirectory() as tmp:
+      path = Path(tmp) / f"phrase{suffix}"
+      path.write_text(value["text"])
+      try:
+        return read_phrase(str(path), self.stream.features, self.stream.run.config.data, "prime_file")
+      except UserError as e:
+        raise UserError(str(e).replace(str(path), value["name"])) from None
+
+
+class Phrase:
+  """A file's frames played as if live (``--input``): the next frame on each call, cycled."""
+
+  def __init__(self, positions_TxJx3):
+    self.positions, self.at = positions_TxJx3, 0
+
+  def next(self) -> np.ndarray:
+    frame = self.positions[self.at % len(self.positions)]
+    self.at += 1
+    return frame
+
+
+def host_port(text: str, flag: str) -> tuple[str, int]:
+  """``HOST:PORT`` (or ``PORT``, on 127.0.0.1) -> ``(host, port)``; a bad one is a UserError."""
+  host, _, port = text.rpartition(":")
+  if not port.isdigit() or not 0 <= int(port) < 65536:
+    raise UserError(f"{flag} {text}: expected HOST:PORT, e.g. 127.0.0.1:9000")
+  return host or "127.0.0.1", int(port)
+
+
+async def serve(live: Live, host: str, port: int, *, osc_in=None, on_ready=print) -> None:
+  """Serves until SIGINT or SIGTERM; ``on_ready`` gets the line ``serving http://HOST:PORT``."""
+  from websockets.asyncio.server import serve as ws_serve
+  from websockets.datastructures import Headers
+  from websockets.http11 import Response
+
+  from chorjax.render.html import live_html
+
+  page = live_html(title=f"chorjax live ({live.stream.run.workdir})").encode("utf-8")
+
+  def route(connection, request):
+    if request.path == "/ws":
+      return None  # the WebSocket handshake goes on
+    if request.path in ("/", "/index.html"):
+      headers = Headers([("Content-Type", "text/html; charset=utf-8"), ("Content-Length", str(len(page)))])
+      return Response(200, "OK", headers, page)
+    return connection.respond(404, "not found: the page is at / and the stream at /ws\n")
+
+  async def client(ws):
+    live.clients.add(ws)
+    try:
+      await ws.send(live.hello())
+      async for message in ws:
+        await ws.send(await live.handle(message))
+    except Exception:  # a client that goes away mid-message is its own business, never the stream's
+      pass
+    finally:
+      live.clients.discard(ws)
+
+  loop = asyncio.get_running_loop()
+  stop = loop.create_future()
+  for sig in (signal.SIGINT, signal.SIGTERM):
+    loop.add_signal_handler(sig, lambda: stop.done() or stop.set_result(None))
+  transport = await _listen_osc(live, *osc_in) if osc_in else None
+  for _ in range(AHEAD):  # compiled (the first chunk and the continuing ones) before "serving"
+    live.ahead.extend(await live.call(live.stream.next_chunk))
+  await live.call(live.stream.warm_up)
+  async with ws_serve(client, host, port, process_request=route, ping_interval=None) as server:
+    bound = server.sockets[0].getsockname()[1] if server.sockets else port
+    tasks = [asyncio.create_task(live.generate()), asyncio.create_task(live.pace())]
+    on_ready(f"serving http://{host}:{bound}")
+    await stop
+    for t in tasks:
+      t.cancel()
+    server.close(close_connections=True)
+  if transport is not None:
+    transport.close()
+
+
+async def _listen_osc(live: Live, host: str, port: int):
+  """``--osc-in``: OSC messages steer the stream (see the module docstring)."""
+  from pythonosc.dispatcher import Dispatcher
+  from pythonosc.osc_server import AsyncIOOSCUDPServer
+
+  j3 = live.stream.features.skeleton.num_joints * 3
+  loop = asyncio.get_running_loop()
+  act = lambda kind, value: loop.create_task(_quietly(live.apply(kind, value)))
+
+  def frames(values) -> np.ndarray | None:
+    ok = len(values) >= j3 and len(values) % j3 == 0 and all(isinstance(v, int | float) for v in values)
+    return np.asarray(values, np.float32).reshape(-1, j3 // 3, 3) if ok else None
+
+  def on_input(_, *values):
+    f = frames(values)
+    if f is not None and len(f) == 1:
+      live.inputs.append(f[0])
+
+  def on_prime(_, *values):
+    f = frames(values)
+    if f is not None:
+      act("prime", f)
+
+  def on_set(_, *pairs):
+    act("set", {str(k): v for k, v in zip(pairs[::2], pairs[1::2])})
+
+  dispatcher = Dispatcher()
+  dispatcher.map("/chorjax/input", on_input)
+  dispatcher.map("/chorjax/prime", on_prime)
+  dispatcher.map("/chorjax/set", on_set)
+  dispatcher.map("/chorjax/pause", lambda _, on=1, *rest: act("pause", bool(on)))
+  server = AsyncIOOSCUDPServer((host, port), dispatcher, loop)  # type: ignore[arg-type]  # any running loop
+  transport, _ = await server.create_serve_endpoint()
+  return transport
+
+
+async def _quietly(coro) -> None:
+  """An OSC command has no one to answer: a bad one is dropped (the stream goes on)."""
+  with contextlib.suppress(UserError):
+    await coro
+
+
+def run_live(
+  workdir,
+  *,
+  host: str = "127.0.0.1",
+  port: int = 8765,
+  fps: float | None = None,
+  seed: int = 0,
+  controls: dict | None = None,
+  weights=None,
+  osc: str | None = None,
+  osc_in: str | None = None,
+  alternate: float = 0.0,
+  input_spec: str | None = None,
+  record=None,
+  checkpoint="latest",
+  on_ready=print,
+) -> int:
+  """``chorjax live``: loads the run, serves until Ctrl-C, writes the recording; returns 0."""
+  from chorjax.data.npz import write_npz
+  from chorjax.models import motion_weight_vector
+  from chorjax.run import load_run
+  from chorjax.sample import read_phrase
+
+  try:
+    import pythonosc  # noqa: F401
+    import websockets  # noqa: F401
+  except ImportError:
+    raise UserError("chorjax live needs the live extra: pip install -e '.[live]'") from None
+  osc_out = host_port(osc, "--osc") if osc else None
+  listen = host_port(osc_in, "--osc-in") if osc_in else None
+  if fps is not None and not (math.isfinite(fps) and fps > 0):
+    raise UserError(f"--fps {fps}: must be a finite number above 0")
+  if alternate and not (input_spec or listen):
+    raise UserError("--alternate: needs an input to alternate with (--input FILE or --osc-in HOST:PORT)")
+  if alternate < 0 or not math.isfinite(alternate):
+    raise UserError(f"--alternate {alternate}: must be a number of seconds >= 0")
+  if record is not None and Path(record).suffix.lower() != ".npz":
+    raise UserError(f"{record}: --record writes an .npz")
+  run = load_run(workdir, checkpoint)
+  sampling = run.sampling(**(controls or {}))
+  run = run.ranged(sampling)
+  weights = motion_weight_vector(run.num_motions) if weights is None else weights
+  rate = fps or run.fps
+  source = Phrase(read_phrase(input_spec, run.features, run.config.data, "--input")) if input_spec else None
+  stream = Stream(run, sampling, weights, seed, chunk=max(1, math.ceil(rate / 8)))
+  sender = None
+  if osc_out:
+    from pythonosc.udp_client import SimpleUDPClient
+
+    sender = SimpleUDPClient(*osc_out)
+  live = Live(stream, rate, osc=sender, alternate=alternate, source=source)
+  try:
+    asyncio.run(serve(live, host, port, osc_in=listen, on_ready=on_ready))
+  except OSError as e:  # the port is taken, the host is not this machine's
+    raise UserError(f"cannot serve on {host}:{port}: {e.strerror or e}") from None
+  finally:
+    if record is not None and live.sent:
+      f, settings = run.features, {"workdir": str(workdir), "seed": seed, "fps": rate, **sampling}
+      sent = np.stack(live.sent)[None]
+      write_npz(record, sent, fps=rate, skeleton=f.skeleton, up_axis=f.up_axis, units="data", settings=settings)
+  return 0

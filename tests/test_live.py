@@ -1,0 +1,308 @@
+"""``chorjax live``: chunked decoding on real takes, the stream's steering, and the server end to end (a
+WebSocket client, an OSC listener, the live page in headless Chromium, Ctrl-C, the recording)."""
+
+import base64
+import io
+import itertools
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+import urllib.request
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+from helpers import tiny_config
+from test_sample_render import chromium
+
+from chorjax.data.csv import read_csv
+from chorjax.data.dataset import bundled_path, load_dataset
+from chorjax.data.npz import read_npz
+from chorjax.errors import UserError
+from chorjax.live import Stream
+from chorjax.models import motion_weight_vector
+from chorjax.run import load_run
+from chorjax.train import train_and_evaluate
+
+TAKE = bundled_path("cmu94") / "94_07_skeleton_3d.csv"
+FPS = 20.0
+# the quickstart's way of drawing: smoothed noise, persistence, crossfade, clamp, pace, rigid bones, foot lock
+QUICKSTART_SAMPLING = [
+  "data.representation=canonical",
+  "sample.noise_smoothing=0.9",
+  "sample.persistence=6.0",
+  "sample.crossfade=0.8",
+  "sample.clamp=true",
+  "sample.pace=0.5",
+  "sample.rigid_bones=true",
+  "sample.foot_lock=true",
+]
+
+
+@pytest.fixture(scope="module")
+def live_run(tmp_path_factory):
+  w = tmp_path_factory.mktemp("live_run")
+  train_and_evaluate(tiny_config("train.num_steps=3", "log.tensorboard=false", *QUICKSTART_SAMPLING), w)
+  return w
+
+
+@pytest.mark.parametrize("representation", ["canonical", "directions", "bone_relative"])
+def test_chunks_decoded_one_after_another_equal_one_decode(representation):
+  """A real take encoded, then decoded in chunks of 7 frames, each continuing from the last: the same
+  positions as decoding it whole (heading and floor position carried across every seam)."""
+  features = load_dataset(tiny_config(f"data.representation={representation}").data).features
+  pos = read_csv(TAKE).positions[:120]
+  z = np.asarray(features.encode(pos))
+  whole = np.asarray(features.decode(z))
+  chunks, last = [np.asarray(features.decode(z[:7]))], (z[6], np.asarray(features.decode(z[:7]))[-1])
+  for start in range(7, len(z), 7):
+    chunk = features.decode_after(z[start : start + 7], *last)
+    chunks.append(chunk)
+    last = (z[start + len(chunk) - 1], chunk[-1])
+  joined = np.concatenate(chunks)
+  size = np.ptp(pos[..., 1])
+  assert joined.shape == whole.shape
+  assert np.abs(joined - whole).max() < 1e-3 * size
+  assert np.abs(whole - pos).max() > 1.0 or representation == "bone_relative"  # canonical: placed at the origin
+
+
+def test_stream_continues_without_jumps_and_takes_steering(live_run):
+  run = load_run(live_run)
+  sampling = run.sampling()
+  run = run.ranged(sampling)
+  stream = Stream(run, sampling, motion_weight_vector(run.num_motions), seed=0, chunk=5)
+  frames = np.concatenate([stream.next_chunk() for _ in range(6)])
+  assert frames.shape == (30, 16, 3) and np.isfinite(frames).all()
+  steps = np.linalg.norm(np.diff(frames[:, 6], axis=0), axis=-1)  # the pelvis, frame to frame
+  seams = steps[4::5]  # the step into each new chunk
+  assert seams.max() < 4 * np.median(steps) + 1e-6  # no jump at the seams
+  phrase = read_csv(TAKE).positions[100:140]
+  stream.prime(phrase)
+  after = stream.next_chunk()
+  take_step = np.linalg.norm(np.diff(phrase[:, 6], axis=0), axis=-1).max()
+  assert np.linalg.norm(after[0, 6] - phrase[-1, 6]) < 10 * take_step  # continues where the phrase ends
+  stream.set(pi_temperature=0.5, sigma_temperature=0.8, mix="1:0.5,2:0.5")
+  assert stream.draw["pi_temperature"] == 0.5 and stream.weights[1] == 0.5
+  before = stream.last[1]
+  assert np.linalg.norm(stream.next_chunk()[0, 6] - before[6]) < 10 * take_step  # a new mix does not jump
+  for bad in ({"pi_temperature": -1}, {"sigma_temperature": "hot"}, {"mix": "99:1"}):
+    with pytest.raises(UserError):
+      stream.set(**bad)
+  with pytest.raises(UserError, match="prime: expected at least 2 frames"):
+    stream.prime(np.zeros((5, 3, 3)))
+
+
+def _osc_listener():
+  """A UDP socket on localhost and the frames it receives (decoded with python-osc's own parser)."""
+  from pythonosc.osc_message import OscMessage
+
+  sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+  sock.bind(("127.0.0.1", 0))
+  sock.settimeout(0.2)
+  got, stop = [], threading.Event()
+
+  def listen():
+    while not stop.is_set():
+      try:
+        data = sock.recv(65536)
+      except TimeoutError:
+        continue
+      msg = OscMessage(data)
+      got.append((msg.address, list(msg.params)))
+
+  threading.Thread(target=listen, daemon=True).start()
+  return sock.getsockname()[1], got, stop
+
+
+def _start_live(run_dir, *flags):
+  proc = subprocess.Popen(
+    [sys.executable, "-m", "chorjax.cli", "live", str(run_dir), "--port", "0", *flags],
+    stdout=subprocess.PIPE,
+    stderr=subprocess.PIPE,
+    text=True,
+    env={**os.environ, "JAX_PLATFORMS": "cpu"},
+  )
+  assert proc.stdout is not None
+  line = proc.stdout.readline()  # blocks until ready (or the process died)
+  if not line.startswith("serving http://"):
+    proc.kill()
+    pytest.fail(f"chorjax live did not start: {line!r} {proc.stderr.read() if proc.stderr else ''}")
+  return proc, line.split()[1]
+
+
+@pytest.mark.slow
+def test_live_server_end_to_end(live_run, tmp_path):
+  from websockets.sync.client import connect
+
+  osc_port, osc_frames, osc_stop = _osc_listener()
+  record = tmp_path / "rec.npz"
+  proc, url = _start_live(live_run, "--fps", str(FPS), "--osc", f"127.0.0.1:{osc_port}", "--record", str(record))
+  received = {}
+  try:
+    with urllib.request.urlopen(url + "/") as page:  # the live page, offline
+      html = page.read().decode()
+    assert "new WebSocket" in html and "<script src" not in html and "https://" not in html
+    with connect(url.replace("http://", "ws://") + "/ws") as ws:
+      hello = json.loads(ws.recv())["hello"]
+      assert hello["joints"] == 16 and hello["fps"] == FPS and len(hello["bones"]) == 15
+      start, count = time.monotonic(), 0
+      while time.monotonic() - start < 5.0:
+        msg = json.loads(ws.recv())
+        received[msg["frame"]] = np.asarray(msg["positions"])
+        count += 1
+      rate = count / (time.monotonic() - start)
+      assert abs(rate - FPS) < 0.2 * FPS, rate  # paced at the run's fps in real time
+      assert all(p.shape == (16, 3) for p in received.values())
+
+      replies = []
+      phrase = read_csv(TAKE).positions[:30].tolist()
+      for message in (
+        json.dumps({"prime": phrase}),
+        json.dumps({"set": {"pi_temperature": 0.7, "sigma_temperature": 0.9, "mix": "2:1,3:1"}}),
+        "not json",
+        json.dumps({"set": {"temperature": 2}}),
+        json.dumps({"prime": [[[0, 0]]]}),
+        json.dumps({"prime_file": {"name": "phrase.csv", "text": "".join(TAKE.read_text().splitlines(True)[:60])}}),
+      ):
+        ws.send(message)
+      start, after = time.monotonic(), 0
+      while time.monotonic() - start < 4.0 and (len(replies) < 6 or after < FPS):
+        msg = json.loads(ws.recv())
+        if "frame" in msg:
+          received[msg["frame"]] = np.asarray(msg["positions"])
+          after += len(replies) >= 6
+        else:
+          replies.append(msg)
+      assert [next(iter(r)) for r in replies] == ["ok", "ok", "error", "error", "error", "ok"], replies
+      assert "not JSON" in replies[2]["error"] and "prime: expected" in replies[4]["error"]
+      assert after >= FPS  # frames keep coming after steering and bad messages
+
+    shots = _screenshots_of_live_page(url, tmp_path)
+    assert shots["state"]["errors"] == [] and shots["state"]["frames"] > 5
+    assert shots["changed_pixels"] > 200  # the figure moved between the two screenshots
+  finally:
+    t0 = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    code = proc.wait(timeout=10)
+    took = time.monotonic() - t0
+    osc_stop.set()
+  assert code == 0 and took < 2.0, (code, took, proc.stderr.read() if proc.stderr else "")
+  assert any(addr == "/chorjax/frame" and len(v) == 48 for addr, v in osc_frames)
+  rec = read_npz(record)[0].positions
+  assert len(rec) >= max(received) + 1  # every frame sent is in the recording
+  for n, pos in received.items():
+    np.testing.assert_allclose(rec[n], pos, atol=1e-3)
+
+
+def _screenshots_of_live_page(url: str, tmp_path) -> dict:
+  """Opens the live page in headless Chromium and takes two screenshots 1.5 s apart (DevTools protocol)."""
+  from websockets.sync.client import connect
+
+  browser = subprocess.Popen(
+    [
+      chromium(),
+      "--no-sandbox",
+      "--disable-gpu",
+      "--no-first-run",
+      "--remote-debugging-port=0",
+      f"--user-data-dir={tmp_path / 'profile'}",
+      "--window-size=1280,800",
+      url + "/",
+    ],
+    stdout=subprocess.DEVNULL,
+    stderr=subprocess.PIPE,
+    text=True,
+  )
+  try:
+    assert browser.stderr is not None
+    line = ""
+    while "DevTools listening on" not in line:
+      line = browser.stderr.readline()
+      assert line, "chromium exited"
+    port = line.split("ws://")[1].split("/")[0].split(":")[1]
+    for _ in range(50):
+      targets = json.loads(urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list").read())
+      pages = [t for t in targets if t.get("type") == "page"]
+      if pages:
+        break
+      time.sleep(0.1)
+    with connect(pages[0]["webSocketDebuggerUrl"], max_size=2**26) as cdp:
+      calls = iter(range(1, 1000))
+
+      def call(method, **params):
+        n = next(calls)
+        cdp.send(json.dumps({"id": n, "method": method, "params": params}))
+        while True:
+          reply = json.loads(cdp.recv())
+          if reply.get("id") == n:
+            return reply["result"]
+
+      def state():
+        expr = "JSON.stringify(window.__live || null)"
+        return json.loads(call("Runtime.evaluate", expression=expr, returnByValue=True)["result"]["value"])
+
+      for _ in range(100):  # until frames arrive
+        s = state()
+        if s and s["frames"] > 5:
+          break
+        time.sleep(0.1)
+      grab = lambda: iio.imread(io.BytesIO(base64.b64decode(call("Page.captureScreenshot")["data"])))
+      first = grab()
+      time.sleep(1.5)
+      second = grab()
+      s = state()
+  finally:
+    browser.kill()
+    browser.wait()
+  changed = int((np.abs(first.astype(int) - second.astype(int)).sum(-1) > 30).sum())
+  return {"state": s, "changed_pixels": changed}
+
+
+def test_live_refuses_bad_flags_in_one_line(live_run, tmp_path, capsys):
+  from chorjax import cli
+
+  (tmp_path / "rec.npz").write_bytes(b"mine")
+  cases = [
+    (["--record", str(tmp_path / "rec.npz")], "already exists"),
+    (["--record", str(tmp_path / "rec.csv")], "output must end in"),
+    (["--osc", "nowhere"], "--osc nowhere: expected HOST:PORT"),
+    (["--alternate", "2"], "--alternate: needs an input"),
+    (["--port", "-1"], "--port -1: must be at least 0"),
+    (["--mix", "99:1"], "out of range"),
+  ]
+  for flags, expected in cases:
+    assert cli.main(["live", str(live_run), *flags]) == 2
+    err = capsys.readouterr().err
+    assert expected in err and err.count("\n") == 1, err
+  assert (tmp_path / "rec.npz").read_bytes() == b"mine"
+
+
+@pytest.mark.slow
+def test_alternate_passes_the_input_through_then_continues_from_it(live_run):
+  from websockets.sync.client import connect
+
+  proc, url = _start_live(live_run, "--fps", str(FPS), "--alternate", "0.5", "--input", f"{TAKE}:0:200")
+  try:
+    with connect(url.replace("http://", "ws://") + "/ws") as ws:
+      json.loads(ws.recv())
+      msgs = []
+      start = time.monotonic()
+      while time.monotonic() - start < 3.5:
+        msgs.append(json.loads(ws.recv()))
+  finally:
+    proc.send_signal(signal.SIGINT)
+    assert proc.wait(timeout=10) == 0
+  sources = [m["source"] for m in msgs]
+  assert "input" in sources and "model" in sources
+  take = read_csv(TAKE).positions
+  inputs = [np.asarray(m["positions"]) for m in msgs if m["source"] == "input"]
+  np.testing.assert_allclose(np.stack(inputs), take[: len(inputs)], atol=1e-3)  # the take's frames, in order
+  for a, b in itertools.pairwise(msgs):  # the model takes over where the input left off
+    if a["source"] == "input" and b["source"] == "model":
+      jump = np.linalg.norm(np.asarray(b["positions"])[6] - np.asarray(a["positions"])[6])
+      assert jump < 10 * np.linalg.norm(np.diff(take[:, 6], axis=0), axis=-1).max()
