@@ -148,11 +148,11 @@ class Live:
     self.sent: list[np.ndarray] = []
     self.osc = osc
     self.turn_frames = max(1, round(alternate * fps)) if alternate else 0
-    self.source = source  # an input: a file's frames (cycled) or frames arriving by OSC
-    self.inputs: collections.deque = collections.deque(maxlen=10 * max(self.turn_frames, 1))
+    self.source = source  # the input to alternate with: a Phrase or an OscInput (or None)
     self.received: list[np.ndarray] = []
     self.input_turn = False
     self.priming = False
+    self.ticks = 0  # frame periods gone by, paused ones left out
 
   def hello(self) -> str:
     from chorjax.data.transforms import up_axis_matrix
@@ -201,6 +201,9 @@ class Live:
         due = loop.time()
       if self.paused:
         continue
+      self.ticks += 1
+      if self.turn_frames and self.ticks % self.turn_frames == 0:  # turns go by the clock, sent or not
+        self._switch_turn()
       frame, source = self._next_frame()
       if frame is None:
         continue
@@ -209,15 +212,13 @@ class Live:
       if self.osc is not None:
         self.osc.send_message("/chorjax/frame", [float(v) for v in frame.reshape(-1)])
       self.sent.append(frame)
-      if self.turn_frames and len(self.sent) % self.turn_frames == 0:
-        self._switch_turn()
 
   def _next_frame(self):
     if self.priming:
       return None, None
     if not self.input_turn:
       return (self.ahead.popleft(), "model") if self.ahead else (None, None)
-    frame = self.source.next() if isinstance(self.source, Phrase) else (self.inputs.popleft() if self.inputs else None)
+    frame = self.source.next() if self.source is not None else None
     if frame is not None:
       self.received.append(frame)
     return frame, "input"
@@ -301,6 +302,16 @@ class Phrase:
     return frame
 
 
+class OscInput:
+  """Frames arriving as OSC ``/chorjax/input`` (``--osc-in``): the oldest not yet passed on, or None."""
+
+  def __init__(self, keep: int = 1000):
+    self.frames: collections.deque = collections.deque(maxlen=keep)
+
+  def next(self) -> np.ndarray | None:
+    return self.frames.popleft() if self.frames else None
+
+
 def host_port(text: str, flag: str) -> tuple[str, int]:
   """``HOST:PORT`` (or ``PORT``, on 127.0.0.1) -> ``(host, port)``; a bad one is a UserError."""
   host, _, port = text.rpartition(":")
@@ -373,8 +384,8 @@ async def _listen_osc(live: Live, host: str, port: int):
 
   def on_input(_, *values):
     f = frames(values)
-    if f is not None and len(f) == 1:
-      live.inputs.append(f[0])
+    if f is not None and len(f) == 1 and isinstance(live.source, OscInput):
+      live.source.frames.append(f[0])
 
   def on_prime(_, *values):
     f = frames(values)
@@ -444,6 +455,7 @@ def run_live(
   weights = motion_weight_vector(run.num_motions) if weights is None else weights
   rate = fps or run.fps
   source = Phrase(read_phrase(input_spec, run.features, run.config.data, "--input")) if input_spec else None
+  source = source or (OscInput() if listen else None)
   stream = Stream(run, sampling, weights, seed, chunk=max(1, math.ceil(rate / 8)))
   sender = None
   if osc_out:

@@ -306,3 +306,53 @@ def test_alternate_passes_the_input_through_then_continues_from_it(live_run):
     if a["source"] == "input" and b["source"] == "model":
       jump = np.linalg.norm(np.asarray(b["positions"])[6] - np.asarray(a["positions"])[6])
       assert jump < 10 * np.linalg.norm(np.diff(take[:, 6], axis=0), axis=-1).max()
+
+
+def _free_udp_port() -> int:
+  with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+    s.bind(("127.0.0.1", 0))
+    return s.getsockname()[1]
+
+
+@pytest.mark.slow
+def test_osc_input_takes_turns_and_osc_pauses_the_stream(live_run):
+  from pythonosc.udp_client import SimpleUDPClient
+  from websockets.sync.client import connect
+
+  port = _free_udp_port()
+  proc, url = _start_live(live_run, "--fps", str(FPS), "--alternate", "0.5", "--osc-in", f"127.0.0.1:{port}")
+  osc = SimpleUDPClient("127.0.0.1", port)
+  take = read_csv(TAKE).positions
+  sending = threading.Event()
+  sending.set()
+
+  def dancer():  # a dancer's frames arriving by OSC at the stream's rate
+    for k in range(400):
+      if not sending.is_set():
+        break
+      osc.send_message("/chorjax/input", [float(v) for v in take[k].reshape(-1)])
+      time.sleep(1 / FPS)
+
+  threading.Thread(target=dancer, daemon=True).start()
+  try:
+    with connect(url.replace("http://", "ws://") + "/ws") as ws:
+      json.loads(ws.recv())
+      msgs = [json.loads(ws.recv()) for _ in range(int(2.5 * FPS))]
+      osc.send_message("/chorjax/pause", 1)
+      time.sleep(0.3)
+      paused_at = time.monotonic()
+      during = []
+      with pytest.raises(TimeoutError):
+        while True:
+          during.append(json.loads(ws.recv(timeout=0.6)))
+      assert time.monotonic() - paused_at >= 0.5
+      osc.send_message("/chorjax/pause", 0)
+      assert "frame" in json.loads(ws.recv(timeout=5))  # resumed
+  finally:
+    sending.clear()
+    proc.send_signal(signal.SIGINT)
+    assert proc.wait(timeout=10) == 0
+  inputs = [np.asarray(m["positions"]) for m in msgs if m["source"] == "input"]
+  assert inputs and {m["source"] for m in msgs} == {"input", "model"}
+  for p in inputs:  # every passed-through frame is one the dancer sent
+    assert np.abs(take[:400] - p).max(axis=(1, 2)).min() < 1e-3
