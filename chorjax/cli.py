@@ -430,7 +430,7 @@ def _controls(args) -> dict:
   (unset ones are None: the run's config)."""
   from chorjax.config import check_sample_control
 
-  numbers = ("pi_temperature", "sigma_temperature", "noise_smoothing", "persistence", "crossfade", "pace")
+  numbers = ("pi_temperature", "sigma_temperature", "noise_smoothing", "persistence", "crossfade", "pace", "scale_cap")
   given = {k: getattr(args, k) for k in numbers}
   for name, value in given.items():
     if value is not None:
@@ -479,6 +479,13 @@ def _add_sampling_args(p) -> None:
     metavar="GAIN",
     help="hold the dancer to the training pace: scale temperature x (training / own pace)^GAIN, >= 0 "
     "(default: the run's sample.pace)",
+  )
+  p.add_argument(
+    "--scale-cap",
+    type=float,
+    metavar="Q",
+    help="hold the MDN scales at most at their Q quantile on the training frames, 0 <= Q < 1, 0 = off "
+    "(default: the run's sample.scale_cap)",
   )
   p.add_argument(
     "--rigid-bones",

@@ -199,6 +199,16 @@ class SampleConfig:
     minimum=0.0,
     resumable=True,
   )
+  scale_cap: float = _field(
+    0.0,
+    "MDN scale ceiling: every drawn component's scale is held, feature by feature, at most at this quantile "
+    "of the scales the model predicts for its own training frames (teacher forced), e.g. 0.95; a model that "
+    "wanders into a state it is unsure of (scales 4x wider than on its data) then draws a calm frame, not a "
+    "jerky one, and finds its way back (0 = off; needs the run's training data at sampling time)",
+    minimum=0.0,
+    below=1.0,
+    resumable=True,
+  )
   seed: int = _field(0, "sampling seed", resumable=True)
 
   def controls(self, **given) -> dict:
@@ -216,6 +226,7 @@ class SampleConfig:
     "persistence",
     "crossfade",
     "pace",
+    "scale_cap",
     "rigid_bones",
     "foot_lock",
     "clamp",

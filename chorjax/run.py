@@ -171,25 +171,33 @@ class Run:
     return self.config.sample.controls(**given)
 
   def ranged(self, sampling: dict) -> Run:
-    """This run with the training range and pace that ``sampling`` (``clamp``, ``pace``) holds to. Runs
-    trained before they were recorded get them from their training data, which must still give the very
-    normalization they were trained with."""
+    """This run with the training range and pace that ``sampling`` (``clamp``, ``pace``) holds to, and
+    the scale ceiling of ``scale_cap`` (measured on the model's training frames). Runs trained before
+    the range and pace were recorded get them from their training data; both read the training data,
+    which must still give the very normalization the run was trained with."""
     f = self.features
     needs = (sampling.get("clamp") and f.low is None) or (sampling.get("pace") and f.pace is None)
-    if not needs:
+    if not needs and not sampling.get("scale_cap"):
       return self
     from chorjax.data.dataset import load_dataset
+    from chorjax.sample import with_ceiling
 
+    what = "a training range or pace" if needs else "a scale ceiling"
     try:
-      fresh = load_dataset(self.config.data).features
+      ds = load_dataset(self.config.data)
     except UserError as e:
-      raise UserError(f"{self.workdir}: records no training range or pace and its data cannot be read ({e})") from None
+      raise UserError(
+        f"{self.workdir}: sampling needs {what} from its training data, which cannot be read ({e})"
+      ) from None
+    fresh = ds.features
     close = lambda a, b: np.allclose(a, b, atol=1e-5)
     same = fresh.dim == f.dim and close(fresh.mean, f.mean) and close(fresh.std, f.std)
     if not same:
-      raise UserError(f"{self.workdir}: records no training range or pace and its training data changed")
-    stats = {k: getattr(fresh, k) for k in (*Features.RANGES, "pace_lag", "pace")}
-    return dataclasses.replace(self, features=dataclasses.replace(f, **stats))
+      raise UserError(f"{self.workdir}: sampling needs {what} from its training data, which changed")
+    stats = {k: getattr(fresh, k) for k in (*Features.RANGES, "pace_lag", "pace")} if needs else {}
+    f = dataclasses.replace(f, **stats)
+    f = with_ceiling(f, self.graphdef, self.params, ds.train, self.config.data.seq_length, sampling)
+    return dataclasses.replace(self, features=f)
 
 
 def load_run(workdir, which: str | int = "latest") -> Run:

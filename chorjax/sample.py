@@ -8,6 +8,7 @@ inverse of the feature pipeline.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from pathlib import Path
 
@@ -41,6 +42,7 @@ def generate(
   pace: float = 0.0,
   pace_lag: int = 15,
   pace_target=None,
+  scale_cap=None,
 ):
   """Generates ``num_frames`` normalized frames per dancer.
 
@@ -60,6 +62,7 @@ def generate(
       and returned (``Features.low``/``high``: the training range; ``sample.clamp``).
     pace, pace_lag, pace_target: the pace governor (0 = off; :func:`_generate_smoothly`); ``pace_target``
       is ``(the training pace over pace_lag frames, [D] weights that average the pose features)``.
+    scale_cap: optional ``[S]`` ceiling on the MDN scales (:func:`scale_ceiling`; ``sample.scale_cap``).
 
   Returns:
     ``[B, num_frames, D]`` normalized frames.
@@ -72,7 +75,7 @@ def generate(
   else:
     x0 = jnp.zeros((jnp.shape(motion)[0], model.dim), jnp.float32)
 
-  if greedy or noise_smoothing == persistence == crossfade == pace == 0:
+  if greedy or (noise_smoothing == persistence == crossfade == pace == 0 and scale_cap is None):
 
     def body(c, k):
       carry, x = c
@@ -88,6 +91,7 @@ def generate(
     "sigma_temperature": sigma_temperature,
     "persistence": persistence,
     "crossfade": crossfade,
+    "scale_cap": scale_cap,
   }
   if pace and pace_target is None:
     raise ValueError("pace needs pace_target = (the training pace, the pose weights): Features.pace")
@@ -176,9 +180,13 @@ def draw_controls(features, controls: dict) -> dict:
   Raises UserError if the run cannot do what is asked (checked before generating, not after)."""
   try:
     features.check_decode(controls["rigid_bones"], controls["foot_lock"], controls["clamp"], controls["pace"])
+    if controls.get("scale_cap") and features.scale_ceiling is None:
+      raise ValueError("scale_cap: the run's scale ceiling was not measured (Run.ranged, sample.with_ceiling)")
   except ValueError as e:
     raise UserError(str(e)) from None
-  drawn = {k: v for k, v in controls.items() if k not in ("rigid_bones", "foot_lock", "clamp")}
+  drawn = {k: v for k, v in controls.items() if k not in ("rigid_bones", "foot_lock", "clamp", "scale_cap")}
+  if controls.get("scale_cap"):
+    drawn["scale_cap"] = features.scale_ceiling
   if controls["clamp"]:
     drawn["bounds"] = tuple(getattr(features, k) for k in features.RANGES)
   if controls["pace"]:
@@ -186,6 +194,34 @@ def draw_controls(features, controls: dict) -> dict:
     weights[features.pose_channels] = 1.0 / len(features.pose_channels)
     drawn.update(pace_lag=features.pace_lag, pace_target=(features.pace, weights))
   return drawn
+
+
+def scale_ceiling(graphdef, params, train, seq_length: int, quantile: float):
+  """The ceiling ``sample.scale_cap`` holds MDN draws to: per feature, the ``quantile`` of the scales the
+  model predicts for its own training frames (``train``: ``(motion id, features [T, D])`` per take;
+  teacher forced, the most likely component's scale), ``[S]``; no ceiling (inf) for a head without scales
+  (MSE)."""
+  from chorjax.data.dataset import eval_windows
+  from chorjax.models.heads import MDNHead
+
+  model = nnx.merge(graphdef, params)
+  if not isinstance(model.head, MDNHead):
+    return np.full(1, np.inf, np.float32)
+  win = eval_windows(train, seq_length, max_windows=256)
+  if not win:
+    raise UserError("scale_cap: the training takes are shorter than one window")
+  logpi, _, scale = model.head.params(model(jnp.asarray(win["inputs"]), jnp.asarray(win["motion_ids"])))
+  top = jnp.argmax(logpi, axis=-1)[..., None, None]
+  scale_NxS = jnp.take_along_axis(scale, top, axis=-2)[..., 0, :].reshape(-1, scale.shape[-1])
+  return np.quantile(np.asarray(scale_NxS), quantile, axis=0).astype(np.float32)
+
+
+def with_ceiling(features, graphdef, params, train, seq_length: int, controls: dict):
+  """``features`` with the scale ceiling that ``controls["scale_cap"]`` asks for (unchanged when off)."""
+  q = controls.get("scale_cap")
+  if not q:
+    return features
+  return dataclasses.replace(features, scale_ceiling=scale_ceiling(graphdef, params, train, seq_length, q))
 
 
 @functools.partial(jax.jit, static_argnames=("graphdef", "pace_lag"))
@@ -222,6 +258,7 @@ def continue_stream(
   pace: float = 0.0,
   pace_lag: int = 15,
   pace_target=None,
+  scale_cap=None,
 ):
   """The next ``num_frames`` of an endless dance: ``(state, normalized frames [B, N, D])``. The same draw
   as :func:`generate`'s smoothed path (``greedy``: the most likely component's mean), resumable chunk
@@ -234,6 +271,7 @@ def continue_stream(
     "sigma_temperature": sigma_temperature,
     "persistence": persistence,
     "crossfade": crossfade,
+    "scale_cap": scale_cap,
   }
   pacing = (pace, pace_lag, *pace_target) if pace and pace_target is not None else None
   return _smooth_scan(model, state, key, num_frames, noise_smoothing, controls, bounds, pacing)

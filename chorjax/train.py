@@ -39,7 +39,7 @@ from chorjax.data.dataset import Dataset, WindowSampler, eval_windows, load_data
 from chorjax.errors import Interrupted, UserError, atomic_write
 from chorjax.models import motion_weight_vector
 from chorjax.run import Feedback, StepSpec, create_train_state, run_meta
-from chorjax.sample import dance
+from chorjax.sample import dance, with_ceiling
 
 
 class TrainingDiverged(UserError):
@@ -461,7 +461,9 @@ def figure_hook(writer, graphdef, host_params, ds: Dataset, cfg: Config):
     n, s, sk = 120, cfg.sample, ds.features.skeleton
     real_id, real_z = (ds.val or ds.train)[0]
     key = jax.random.key(loop.step)
-    gen = dance(graphdef, host_params(loop.state["params"]), ds.features, np.array([real_id]), key, n, s.controls())
+    params, controls = host_params(loop.state["params"]), s.controls()
+    features = with_ceiling(ds.features, graphdef, params, ds.train, cfg.data.seq_length, controls)
+    gen = dance(graphdef, params, features, np.array([real_id]), key, n, controls)
     fig, axes = plt.subplots(1, 2, figsize=(10, 3), sharey=True)
     real = np.asarray(ds.features.decode(real_z[:n]))
     for ax, pos_TxJx3, title in ((axes[0], real, "real"), (axes[1], gen[0], "generated")):  # drawn as samples are
@@ -481,10 +483,9 @@ def write_end_sample(workdir: Path, graphdef, params, ds: Dataset, cfg: Config) 
   from chorjax.data.motion import Motion
   from chorjax.render.html import write_player
 
-  s = cfg.sample
-  pos = dance(
-    graphdef, params, ds.features, np.full((s.num,), s.motion), jax.random.key(s.seed), s.frames, s.controls()
-  )
+  s, controls = cfg.sample, cfg.sample.controls()
+  features = with_ceiling(ds.features, graphdef, params, ds.train, cfg.data.seq_length, controls)
+  pos = dance(graphdef, params, features, np.full((s.num,), s.motion), jax.random.key(s.seed), s.frames, controls)
   out = workdir / "samples"
   csv = write_csv(pos[0], out / "sample.csv")
   name = {v: k for k, v in ds.id_map.items()}[s.motion]

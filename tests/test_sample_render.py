@@ -385,7 +385,7 @@ def test_clamp_keeps_every_frame_in_the_training_range(loaded, run_dir, tmp_path
   old = dataclasses.replace(loaded, features=dataclasses.replace(f, **dict.fromkeys(f.RANGES)))
   assert old.ranged({"clamp": False}) is old
   np.testing.assert_array_equal(old.ranged({"clamp": True}).features.low, f.low)
-  with pytest.raises(UserError, match=r"no training range or pace .*changed"):  # ... unless that data no longer matches
+  with pytest.raises(UserError, match=r"needs a training range or pace .*changed"):  # ... unless that data no longer matches
     dataclasses.replace(old, features=dataclasses.replace(old.features, mean=old.features.mean + 1)).ranged(
       {"clamp": True}
     )
@@ -420,6 +420,38 @@ def test_pace_governor_drives_the_dancer_towards_the_training_pace(loaded, run_d
   out = tmp_path / "p.npz"
   assert cli.main(["sample", str(run_dir), "-o", str(out), "--frames", "100", "--pace", "1"]) == 0
   assert json.loads(str(np.load(out)["meta"]))["settings"]["pace"] == 1.0
+
+
+def test_scale_cap_holds_draws_to_the_scales_the_model_predicts_on_its_data(loaded, run_dir, tmp_path, capsys):
+  from chorjax.errors import UserError
+  from chorjax.models.heads import MDNHead
+  from chorjax.sample import dance, scale_ceiling
+
+  train = load_dataset(loaded.config.data).train
+  seq = loaded.config.data.seq_length
+  low, high = (scale_ceiling(loaded.graphdef, loaded.params, train, seq, q) for q in (0.5, 0.99))
+  assert low.shape == high.shape == (loaded.features.dim,) and (low > 0).all() and (high >= low).all()
+  model = nnx.merge(loaded.graphdef, loaded.params)
+  assert isinstance(model.head, MDNHead) and (high >= model.head.min_scale).all()
+  w = jnp.tile(as_weights(jnp.array([3]), 10), (4, 1))
+  base = {"pi_temperature": 1.0, "sigma_temperature": 1.0, "noise_smoothing": 0.5}
+  gen = lambda **kw: np.asarray(generate(loaded.graphdef, loaded.params, w, jax.random.key(0), num_frames=300, **kw))
+  free = gen(**base)
+  np.testing.assert_array_equal(gen(**base, scale_cap=np.full(low.shape, np.inf, np.float32)), free)  # no cap: same
+  tight = gen(**base, scale_cap=np.full(low.shape, 1e-3, np.float32))  # draws at the component means
+  step = lambda z: np.abs(np.diff(z, axis=1)).mean()
+  assert step(tight) < 0.5 * step(free) and np.isfinite(tight).all()
+  # through the run: measured from its training data when asked for, recorded in the sample's settings
+  controls = loaded.sampling(scale_cap=0.9)
+  with pytest.raises(UserError, match="scale ceiling was not measured"):
+    dance(loaded.graphdef, loaded.params, loaded.features, np.array([0]), jax.random.key(0), 10, controls)
+  ceiled = loaded.ranged(controls).features.scale_ceiling
+  np.testing.assert_allclose(ceiled, scale_ceiling(loaded.graphdef, loaded.params, train, seq, 0.9))
+  out = tmp_path / "s.npz"
+  assert cli.main(["sample", str(run_dir), "-o", str(out), "--frames", "100", "--scale-cap", "0.95"]) == 0
+  assert json.loads(str(np.load(out)["meta"]))["settings"]["scale_cap"] == 0.95
+  assert cli.main(["sample", str(run_dir), "-o", str(tmp_path / "t.npz"), "--scale-cap", "1.5"]) == 2
+  assert "scale_cap" in capsys.readouterr().err
 
 
 def test_foot_lock_needs_the_canonical_representation(run_dir, tmp_path, capsys):

@@ -36,6 +36,8 @@ class Features:
     pace_lag, pace: how far the training frames' pose moves in ``pace_lag`` frames (half a second): the
       mean absolute change of the normalized ``pose_channels`` over that lag; generation can hold its
       own pace to it (``sample.pace``).
+    scale_ceiling: ``[S]`` the model's own MDN scale ceiling for ``sample.scale_cap`` (measured on the
+      training frames when sampling asks for it, ``sample.with_ceiling``; not saved with the run).
 
   Representations: ``absolute``, ``bone_relative`` and ``root_relative`` are per-frame ``[J, 3]``;
   ``canonical`` (HumanML3D-style: heading change, root step in the facing frame, root height, joints
@@ -55,6 +57,7 @@ class Features:
   high: np.ndarray | None = None
   pace_lag: int | None = None
   pace: float | None = None
+  scale_ceiling: np.ndarray | None = None
 
   @property
   def dim(self) -> int:

@@ -147,15 +147,19 @@ class MDNHead(nnx.Module):
     sigma_temperature=1.0,
     persistence=0.0,
     crossfade=0.0,
+    scale_cap=None,
   ):
     """A frame drawn with the given noise; ``state = (previous component [B] (-1: none), offset [B, D])``.
 
     ``persistence`` is added to the previous component's log-weight. ``crossfade``: when the component
     changes, the jump between the two components' means is carried into the frame and decays by this
-    factor per frame (0 = off), so a switch is a short glide, not a cut. Returns ``(frame, state)``.
+    factor per frame (0 = off), so a switch is a short glide, not a cut. ``scale_cap`` (``[S]`` or None):
+    the components' scales are held at most at it. Returns ``(frame, state)``.
     """
     previous_B, offset_BxD = state
     logpi, mu, scale = self.params(out_BxP)
+    if scale_cap is not None:
+      scale = jnp.minimum(scale, scale_cap)
     bias = persistence * jax.nn.one_hot(previous_B, self.num_mixtures)
     x, comp = mdn_draw(key, logpi, mu, scale, noise_BxD, pi_temperature, sigma_temperature, bias)
     mean_of = lambda c: jnp.take_along_axis(mu, jnp.maximum(c, 0)[:, None, None], axis=1)[:, 0]
