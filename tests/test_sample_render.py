@@ -385,7 +385,7 @@ def test_clamp_keeps_every_frame_in_the_training_range(loaded, run_dir, tmp_path
   old = dataclasses.replace(loaded, features=dataclasses.replace(f, **dict.fromkeys(f.RANGES)))
   assert old.ranged({"clamp": False}) is old
   np.testing.assert_array_equal(old.ranged({"clamp": True}).features.low, f.low)
-  with pytest.raises(UserError, match=r"needs a training range or pace .*changed"):  # ... unless that data no longer matches
+  with pytest.raises(UserError, match=r"needs a training range or pace .*changed"):  # ... unless that data changed
     dataclasses.replace(old, features=dataclasses.replace(old.features, mean=old.features.mean + 1)).ranged(
       {"clamp": True}
     )
