@@ -180,7 +180,6 @@ class Run:
     if not needs and not sampling.get("scale_cap"):
       return self
     from chorjax.data.dataset import load_dataset
-    from chorjax.sample import with_ceiling
 
     what = "a training range or pace" if needs else "a scale ceiling"
     try:
@@ -254,3 +253,31 @@ def _intact_step(manager, steps) -> int | None:
       _read_step(manager, step)
       return step
   return None
+
+
+def scale_ceiling(graphdef, params, train, seq_length: int, quantile: float):
+  """The ceiling ``sample.scale_cap`` holds MDN draws to: per feature, the ``quantile`` of the scales the
+  model predicts for its own training frames (``train``: ``(motion id, features [T, D])`` per take;
+  teacher forced, the most likely component's scale), ``[S]``; no ceiling (inf) for a head without scales
+  (MSE)."""
+  from chorjax.data.dataset import eval_windows
+  from chorjax.models.heads import MDNHead
+
+  model = nnx.merge(graphdef, params)
+  if not isinstance(model.head, MDNHead):
+    return np.full(1, np.inf, np.float32)
+  win = eval_windows(train, seq_length, max_windows=256)
+  if not win:
+    raise UserError("scale_cap: the training takes are shorter than one window")
+  logpi, _, scale = model.head.params(model(jnp.asarray(win["inputs"]), jnp.asarray(win["motion_ids"])))
+  top = jnp.argmax(logpi, axis=-1)[..., None, None]
+  scale_NxS = jnp.take_along_axis(scale, top, axis=-2)[..., 0, :].reshape(-1, scale.shape[-1])
+  return np.quantile(np.asarray(scale_NxS), quantile, axis=0).astype(np.float32)
+
+
+def with_ceiling(features, graphdef, params, train, seq_length: int, controls: dict):
+  """``features`` with the scale ceiling that ``controls["scale_cap"]`` asks for (unchanged when off)."""
+  q = controls.get("scale_cap")
+  if not q:
+    return features
+  return dataclasses.replace(features, scale_ceiling=scale_ceiling(graphdef, params, train, seq_length, q))

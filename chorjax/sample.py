@@ -8,7 +8,6 @@ inverse of the feature pipeline.
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 from pathlib import Path
 
@@ -62,18 +61,13 @@ def generate(
       and returned (``Features.low``/``high``: the training range; ``sample.clamp``).
     pace, pace_lag, pace_target: the pace governor (0 = off; :func:`_generate_smoothly`); ``pace_target``
       is ``(the training pace over pace_lag frames, [D] weights that average the pose features)``.
-    scale_cap: optional ``[S]`` ceiling on the MDN scales (:func:`scale_ceiling`; ``sample.scale_cap``).
+    scale_cap: optional ``[S]`` ceiling on the MDN scales (``run.scale_ceiling``; ``sample.scale_cap``).
 
   Returns:
     ``[B, num_frames, D]`` normalized frames.
   """
   model = nnx.merge(graphdef, params)
-  carry = model.initial_carry(motion)
-  if prime_BxPxD is not None:
-    _, carry = model.teacher_force(prime_BxPxD[:, :-1], carry)
-    x0 = prime_BxPxD[:, -1]
-  else:
-    x0 = jnp.zeros((jnp.shape(motion)[0], model.dim), jnp.float32)
+  carry, x0 = _primed(model, motion, prime_BxPxD)
 
   if greedy or (noise_smoothing == persistence == crossfade == pace == 0 and scale_cap is None):
 
@@ -86,17 +80,32 @@ def generate(
     _, xs_NxBxD = jax.lax.scan(body, (carry, x0), jax.random.split(key, num_frames))
     return jnp.swapaxes(xs_NxBxD, 0, 1)
 
-  controls = {
+  controls = _draw_args(pi_temperature, sigma_temperature, persistence, crossfade, scale_cap)
+  if pace and pace_target is None:
+    raise ValueError("pace needs pace_target = (the training pace, the pose weights): Features.pace")
+  pacing = (pace, pace_lag, *pace_target) if pace and pace_target is not None else None
+  return _generate_smoothly(model, carry, x0, key, num_frames, noise_smoothing, controls, bounds, pacing)
+
+
+def _primed(model, motion, prime_BxPxD):
+  """``(carry, first input)``: the motion's initial state, teacher forced over the prime if there is one
+  (generation continues after its last frame); without one, the zero frame (the mean pose)."""
+  carry = model.initial_carry(motion)
+  if prime_BxPxD is None:
+    return carry, jnp.zeros((jnp.shape(motion)[0], model.dim), jnp.float32)
+  _, carry = model.teacher_force(prime_BxPxD[:, :-1], carry)
+  return carry, prime_BxPxD[:, -1]
+
+
+def _draw_args(pi_temperature, sigma_temperature, persistence, crossfade, scale_cap) -> dict:
+  """The MDN draw's keyword arguments (``heads.MDNHead.draw``)."""
+  return {
     "pi_temperature": pi_temperature,
     "sigma_temperature": sigma_temperature,
     "persistence": persistence,
     "crossfade": crossfade,
     "scale_cap": scale_cap,
   }
-  if pace and pace_target is None:
-    raise ValueError("pace needs pace_target = (the training pace, the pose weights): Features.pace")
-  pacing = (pace, pace_lag, *pace_target) if pace and pace_target is not None else None
-  return _generate_smoothly(model, carry, x0, key, num_frames, noise_smoothing, controls, bounds, pacing)
 
 
 def _clip(x_BxD, bounds):
@@ -181,7 +190,7 @@ def draw_controls(features, controls: dict) -> dict:
   try:
     features.check_decode(controls["rigid_bones"], controls["foot_lock"], controls["clamp"], controls["pace"])
     if controls.get("scale_cap") and features.scale_ceiling is None:
-      raise ValueError("scale_cap: the run's scale ceiling was not measured (Run.ranged, sample.with_ceiling)")
+      raise ValueError("scale_cap: the run's scale ceiling was not measured (Run.ranged, run.with_ceiling)")
   except ValueError as e:
     raise UserError(str(e)) from None
   drawn = {k: v for k, v in controls.items() if k not in ("rigid_bones", "foot_lock", "clamp", "scale_cap")}
@@ -196,34 +205,6 @@ def draw_controls(features, controls: dict) -> dict:
   return drawn
 
 
-def scale_ceiling(graphdef, params, train, seq_length: int, quantile: float):
-  """The ceiling ``sample.scale_cap`` holds MDN draws to: per feature, the ``quantile`` of the scales the
-  model predicts for its own training frames (``train``: ``(motion id, features [T, D])`` per take;
-  teacher forced, the most likely component's scale), ``[S]``; no ceiling (inf) for a head without scales
-  (MSE)."""
-  from chorjax.data.dataset import eval_windows
-  from chorjax.models.heads import MDNHead
-
-  model = nnx.merge(graphdef, params)
-  if not isinstance(model.head, MDNHead):
-    return np.full(1, np.inf, np.float32)
-  win = eval_windows(train, seq_length, max_windows=256)
-  if not win:
-    raise UserError("scale_cap: the training takes are shorter than one window")
-  logpi, _, scale = model.head.params(model(jnp.asarray(win["inputs"]), jnp.asarray(win["motion_ids"])))
-  top = jnp.argmax(logpi, axis=-1)[..., None, None]
-  scale_NxS = jnp.take_along_axis(scale, top, axis=-2)[..., 0, :].reshape(-1, scale.shape[-1])
-  return np.quantile(np.asarray(scale_NxS), quantile, axis=0).astype(np.float32)
-
-
-def with_ceiling(features, graphdef, params, train, seq_length: int, controls: dict):
-  """``features`` with the scale ceiling that ``controls["scale_cap"]`` asks for (unchanged when off)."""
-  q = controls.get("scale_cap")
-  if not q:
-    return features
-  return dataclasses.replace(features, scale_ceiling=scale_ceiling(graphdef, params, train, seq_length, q))
-
-
 @functools.partial(jax.jit, static_argnames=("graphdef", "pace_lag"))
 def start_stream(graphdef, params, motion, prime_BxPxD=None, *, pace_lag: int | None = None, pace_ref=1.0):
   """The state of an endless dance (:func:`continue_stream`) before its first frame: conditioned on
@@ -231,12 +212,7 @@ def start_stream(graphdef, params, motion, prime_BxPxD=None, *, pace_lag: int | 
   :func:`generate` primes). ``pace_lag``/``pace_ref``: the governor's lag and the training pace, where
   the stream will be paced (None: it will not)."""
   model = nnx.merge(graphdef, params)
-  carry = model.initial_carry(motion)
-  if prime_BxPxD is not None:
-    _, carry = model.teacher_force(prime_BxPxD[:, :-1], carry)
-    x0 = prime_BxPxD[:, -1]
-  else:
-    x0 = jnp.zeros((jnp.shape(motion)[0], model.dim), jnp.float32)
+  carry, x0 = _primed(model, motion, prime_BxPxD)
   return _smooth_start(carry, x0, None if pace_lag is None else (None, pace_lag, pace_ref, None))
 
 
@@ -266,13 +242,7 @@ def continue_stream(
   model = nnx.merge(graphdef, params)
   if greedy:
     pi_temperature = sigma_temperature = 0.0
-  controls = {
-    "pi_temperature": pi_temperature,
-    "sigma_temperature": sigma_temperature,
-    "persistence": persistence,
-    "crossfade": crossfade,
-    "scale_cap": scale_cap,
-  }
+  controls = _draw_args(pi_temperature, sigma_temperature, persistence, crossfade, scale_cap)
   pacing = (pace, pace_lag, *pace_target) if pace and pace_target is not None else None
   return _smooth_scan(model, state, key, num_frames, noise_smoothing, controls, bounds, pacing)
 

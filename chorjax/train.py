@@ -38,8 +38,8 @@ from chorjax.config import Config, config_diff, config_from_dict, resumable_keys
 from chorjax.data.dataset import Dataset, WindowSampler, eval_windows, load_dataset
 from chorjax.errors import Interrupted, UserError, atomic_write
 from chorjax.models import motion_weight_vector
-from chorjax.run import Feedback, StepSpec, create_train_state, run_meta
-from chorjax.sample import dance, with_ceiling
+from chorjax.run import Feedback, StepSpec, create_train_state, run_meta, with_ceiling
+from chorjax.sample import dance
 
 
 class TrainingDiverged(UserError):

@@ -425,7 +425,8 @@ def test_pace_governor_drives_the_dancer_towards_the_training_pace(loaded, run_d
 def test_scale_cap_holds_draws_to_the_scales_the_model_predicts_on_its_data(loaded, run_dir, tmp_path, capsys):
   from chorjax.errors import UserError
   from chorjax.models.heads import MDNHead
-  from chorjax.sample import dance, scale_ceiling
+  from chorjax.run import scale_ceiling
+  from chorjax.sample import dance
 
   train = load_dataset(loaded.config.data).train
   seq = loaded.config.data.seq_length

@@ -37,7 +37,7 @@ class Features:
       mean absolute change of the normalized ``pose_channels`` over that lag; generation can hold its
       own pace to it (``sample.pace``).
     scale_ceiling: ``[S]`` the model's own MDN scale ceiling for ``sample.scale_cap`` (measured on the
-      training frames when sampling asks for it, ``sample.with_ceiling``; not saved with the run).
+      training frames when sampling asks for it, ``run.with_ceiling``; not saved with the run).
 
   Representations: ``absolute``, ``bone_relative`` and ``root_relative`` are per-frame ``[J, 3]``;
   ``canonical`` (HumanML3D-style: heading change, root step in the facing frame, root height, joints
