@@ -444,6 +444,15 @@ def _controls(args) -> dict:
   }
 
 
+def _add_motion_args(p) -> None:
+  """``--motion`` or ``--mix``: what conditions the dance (sample, live)."""
+  ids = p.add_mutually_exclusive_group()
+  ids.add_argument("--motion", type=int, help="motion id that conditions the dance (default 0)")
+  ids.add_argument(
+    "--mix", metavar="ID:W,ID:W", help="blend motion ids, e.g. 4:0.5,5:0.5 (weights >= 0, normalized to sum 1)"
+  )
+
+
 def _add_sampling_args(p) -> None:
   """Sampling controls shared by `sample` and `eval`; unset ones come from the run's [sample] config."""
   p.add_argument(
@@ -603,11 +612,7 @@ def _add_run_commands(sub) -> None:
   )
   sample.add_argument("--frames", type=int, default=1000, help="frames to generate (default 1000)")
   sample.add_argument("--num", type=int, default=1, help="dancers generated in parallel (default 1)")
-  ids = sample.add_mutually_exclusive_group()
-  ids.add_argument("--motion", type=int, help="motion id that conditions the dance (default 0)")
-  ids.add_argument(
-    "--mix", metavar="ID:W,ID:W", help="blend motion ids, e.g. 4:0.5,5:0.5 (weights >= 0, normalized to sum 1)"
-  )
+  _add_motion_args(sample)
   sample.add_argument(
     "--prime", metavar="FILE[:START:LEN]", help="continue a real phrase (chor-rnn's collaboration mode)"
   )
@@ -638,11 +643,7 @@ def _add_live_command(sub) -> None:
     help="listen for OSC /chorjax/input, /chorjax/prime, /chorjax/set, /chorjax/pause (default: off)",
   )
   live.add_argument("--fps", type=_positive, help="frames sent per second (default: the run's frame rate)")
-  ids = live.add_mutually_exclusive_group()
-  ids.add_argument("--motion", type=int, help="motion id that conditions the dance (default 0)")
-  ids.add_argument(
-    "--mix", metavar="ID:W,ID:W", help="blend motion ids, e.g. 4:0.5,5:0.5 (weights >= 0, normalized to sum 1)"
-  )
+  _add_motion_args(live)
   live.add_argument(
     "--alternate",
     type=float,
