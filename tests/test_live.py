@@ -158,6 +158,14 @@ def test_live_server_end_to_end(live_run, tmp_path):
       rate = count / (time.monotonic() - start)
       assert abs(rate - FPS) < 0.2 * FPS, rate  # paced at the run's fps in real time
       assert all(p.shape == (16, 3) for p in received.values())
+      with connect(url.replace("http://", "ws://") + "/ws") as other:  # a second watcher sees the same stream
+        assert "hello" in json.loads(other.recv())
+        seen = [json.loads(other.recv()) for _ in range(5)]
+        for msg in [json.loads(ws.recv()) for _ in range(10)]:
+          received[msg["frame"]] = np.asarray(msg["positions"])
+      assert [m["frame"] for m in seen] == list(range(seen[0]["frame"], seen[0]["frame"] + 5))
+      for m in seen:
+        np.testing.assert_array_equal(np.asarray(m["positions"]), received[m["frame"]])
 
       replies = []
       phrase = read_csv(TAKE).positions[:30].tolist()
