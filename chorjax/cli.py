@@ -220,12 +220,6 @@ def _live(args) -> int:
   if args.record:
     _output(args.record, (".npz",))
     _refuse_existing([args.record], args.force)
-  weights = None
-  if args.motion is not None or args.mix:
-    from chorjax.models import motion_weight_vector
-    from chorjax.run import load_run
-
-    weights = motion_weight_vector(load_run(args.workdir, args.checkpoint).num_motions, args.motion, args.mix)
 
   def ready(line: str) -> None:
     print(line, flush=True)
@@ -237,7 +231,8 @@ def _live(args) -> int:
     fps=args.fps,
     seed=args.seed,
     controls=_controls(args),
-    weights=weights,
+    motion=args.motion,
+    mix=args.mix,
     osc=args.osc,
     osc_in=args.osc_in,
     alternate=args.alternate,

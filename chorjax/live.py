@@ -419,7 +419,8 @@ def run_live(
   fps: float | None = None,
   seed: int = 0,
   controls: dict | None = None,
-  weights=None,
+  motion: int | None = None,
+  mix: str | None = None,
   osc: str | None = None,
   osc_in: str | None = None,
   alternate: float = 0.0,
@@ -452,7 +453,7 @@ def run_live(
   run = load_run(workdir, checkpoint)
   sampling = run.sampling(**(controls or {}))
   run = run.ranged(sampling)
-  weights = motion_weight_vector(run.num_motions) if weights is None else weights
+  weights = motion_weight_vector(run.num_motions, motion, mix)  # --motion ID or --mix ID:W,...; default 0
   rate = fps or run.fps
   source = Phrase(read_phrase(input_spec, run.features, run.config.data, "--input")) if input_spec else None
   source = source or (OscInput() if listen else None)
