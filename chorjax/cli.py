@@ -74,7 +74,7 @@ def _data_convert(args) -> int:
   from chorjax.data import transforms
   from chorjax.data.csv import write_csv
   from chorjax.data.dataset import read_motions, read_takes, resolve_files, to_up_axis
-  from chorjax.data.skeletons import to_mpii16
+  from chorjax.data.mapping import map_takes
   from chorjax.metrics import body_size
 
   motions = [
@@ -86,7 +86,9 @@ def _data_convert(args) -> int:
   if args.drop_first_frame:
     motions = [m.replace(positions=m.positions[1:]) for m in motions]
   if args.joints == "mpii16":
-    motions = [to_mpii16(m) for m in motions]
+    motions, used = map_takes(motions, args.joint_map)
+    for how in dict.fromkeys(m.describe() for m in used.values()):
+      print(f"joints mapped {how}")
   if args.like:
     ref = read_takes([args.like])
     canon = lambda m: np.asarray(transforms.to_y_up(m.positions, m.up_axis))
@@ -543,8 +545,14 @@ def _add_data_commands(sub) -> None:
     "--joints",
     choices=("mpii16", "native"),
     default="native",
-    help="map onto the 16-joint training layout (known CMU and Bandai skeletons), or keep all joints "
-    "(default native; training reads mpii16 CSVs only)",
+    help="map onto the 16-joint training layout (automatic for common rigs: by family, joint names or "
+    "topology; else --joint-map), or keep all joints (default native)",
+  )
+  conv.add_argument(
+    "--joint-map",
+    metavar="MAP.toml",
+    help='with --joints mpii16: the source joint of each training joint, one `target = "joint"` line each '
+    "(default: automatic)",
   )
   conv.add_argument(
     "--like",

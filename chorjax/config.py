@@ -53,6 +53,11 @@ class DataConfig:
     "train on the 16-joint layout (BVH/ASF/AMC takes are mapped by joint name) or on the files' own skeleton",
     choices=("mpii16", "native"),
   )
+  joint_map: str = _field(
+    "",
+    'a TOML file, one `target = "source joint"` line per training joint, for skeletons whose joints '
+    "cannot be placed automatically (default: by family, names, then topology)",
+  )
   fps: float = _field(30.0, "frame rate of CSV takes (CSV files do not record it)", minimum=1e-3)
   up_axis: str = _field(
     "-y", "signed up axis of the files (cmu94: -y, y points down)", choices=("y", "-y", "z", "-z", "x", "-x")

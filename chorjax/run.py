@@ -118,8 +118,9 @@ def model_template(cfg: Config, dim: int, num_motions: int) -> tuple[Any, dict]:
   return graphdef, nnx.to_pure_dict(params)
 
 
-def run_meta(cfg: Config, features: Features, id_map: dict, train_takes, val_takes, step: int) -> dict:
-  """The JSON meta every checkpoint carries: what sampling needs, and what resuming checks."""
+def run_meta(cfg: Config, features: Features, id_map: dict, train_takes, val_takes, step: int, mappings=None) -> dict:
+  """The JSON meta every checkpoint carries: what sampling needs, what resuming checks, and how each
+  mapped take was put on the 16-joint layout (``joint_maps``)."""
   return {
     "config": cfg.to_dict(),
     "features": features.to_dict(),
@@ -129,6 +130,7 @@ def run_meta(cfg: Config, features: Features, id_map: dict, train_takes, val_tak
     "rng": {"seed": cfg.train.seed, "fold_in": "step"},
     "sampler": {"seed": cfg.train.seed, "position": step},
     "step": step,
+    "joint_maps": {name: m.to_dict() for name, m in (mappings or {}).items()},
   }
 
 
@@ -145,6 +147,7 @@ class Run:
     graphdef, params: the model (``nnx.merge(graphdef, params)``).
     step: the checkpoint's step.
     val_loss: the validation loss saved with that checkpoint (None without held-out takes).
+    joint_maps: take name -> how it was mapped onto the 16-joint layout (``Mapping.to_dict()``).
   """
 
   workdir: Path
@@ -157,6 +160,7 @@ class Run:
   params: dict
   step: int
   val_loss: float | None
+  joint_maps: dict = dataclasses.field(default_factory=dict)
 
   @property
   def num_motions(self) -> int:
@@ -231,6 +235,7 @@ def load_run(workdir, which: str | int = "latest") -> Run:
     params=params,
     step=int(meta["step"]),
     val_loss=meta.get("val_loss"),
+    joint_maps=dict(meta.get("joint_maps", {})),
   )
 
 

@@ -253,7 +253,7 @@ def score(
 def read_for_scoring(specs, data_cfg) -> list:
   """Takes named by ``specs`` as mpii16 motions (BVH/ASF/AMC mapped by joint name), any format."""
   from chorjax.data.dataset import read_takes
-  from chorjax.data.skeletons import to_mpii16
+  from chorjax.data.mapping import to_mpii16
 
   return [to_mpii16(m) for m in read_takes(list(specs), data_cfg)]
 

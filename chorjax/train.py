@@ -35,7 +35,7 @@ from flax import nnx
 
 from chorjax import checkpoint as ckpt
 from chorjax.config import Config, config_diff, config_from_dict, resumable_keys
-from chorjax.data.dataset import Dataset, WindowSampler, eval_windows, load_dataset
+from chorjax.data.dataset import Dataset, WindowSampler, dataset_notes, eval_windows, load_dataset
 from chorjax.errors import Interrupted, UserError, atomic_write
 from chorjax.models import motion_weight_vector
 from chorjax.run import Feedback, StepSpec, create_train_state, run_meta, with_ceiling
@@ -517,6 +517,9 @@ def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=No
   with workdir_lock(workdir) if is_main else contextlib.nullcontext():
     keep_old_config = _check_saved_config(workdir, cfg, force) and is_main
     ds = load_dataset(cfg.data)
+    if is_main:
+      for line in dataset_notes(ds):
+        print(line, file=sys.stderr if line.startswith("warning") else sys.stdout, flush=True)
     if cfg.sample.frames > 0:  # fail now, not after hours of training, if the end sample cannot be drawn
       motion_weight_vector(ds.num_motions, cfg.sample.motion, source="sample.motion =")
     if cfg.train.feedback != "none" and cfg.model.dropout > 0:
@@ -585,7 +588,7 @@ def _train(
     log = MetricsLog(workdir, cfg, start)
     cleanup.callback(log.close)
     loop.listeners.append(log)
-  meta_of = lambda step: run_meta(cfg, ds.features, ds.id_map, ds.train_names, ds.val_names, step)
+  meta_of = lambda step: run_meta(cfg, ds.features, ds.id_map, ds.train_names, ds.val_names, step, ds.mappings)
   loop.add_hook(evaluation_hook(val, spec.graphdef), cfg.train.eval_every)
   save = checkpoint_hook(manager, meta_of)
   loop.add_hook(save, cfg.train.checkpoint_every)

@@ -92,11 +92,16 @@ def to_up_axis(motion: Motion, up_axis: str) -> Motion:
   return motion.replace(positions=np.asarray(transforms.rotate(motion.positions, m), np.float32), up_axis=up_axis)
 
 
-def conform(motions: Sequence[Motion], data_cfg) -> list[Motion]:
-  """Brings takes of any format into the dataset's layout: joints (``data.joints``) and up axis."""
-  from chorjax.data.skeletons import to_mpii16
+def conform(motions: Sequence[Motion], data_cfg, mappings: dict | None = None) -> list[Motion]:
+  """Brings takes of any format into the dataset's layout: joints (``data.joints``, mapped as
+  ``chorjax.data.mapping`` decides; the mappings used are put into ``mappings``) and up axis."""
+  from chorjax.data.mapping import map_takes
 
-  out = [to_mpii16(m) if data_cfg.joints == "mpii16" else m for m in motions]
+  out = list(motions)
+  if data_cfg.joints == "mpii16":
+    out, used = map_takes(out, data_cfg.joint_map or None)
+    if mappings is not None:
+      mappings.update(used)
   out = [to_up_axis(m, data_cfg.up_axis) for m in out]
   names = {m.skeleton.joint_names for m in out}
   if len(names) > 1:
@@ -115,6 +120,7 @@ class Dataset:
     features: the feature pipeline fitted on the training split.
     train: ``(motion_id, features [T, D])`` per training sequence, augmentations included.
     val: the same for the held-out takes (no augmentation).
+    mappings: take name -> the ``Mapping`` that put it on the 16-joint layout (mapped takes only).
   """
 
   id_map: dict
@@ -124,6 +130,7 @@ class Dataset:
   features: Features
   train: tuple
   val: tuple
+  mappings: dict = dataclasses.field(default_factory=dict)
 
   @property
   def num_motions(self) -> int:
@@ -154,7 +161,8 @@ def load_dataset(data_cfg) -> Dataset:
   Raises:
     UserError: for unreadable files, an empty selection, or a take shorter than one window.
   """
-  motions = conform(read_takes([data_cfg.dataset], data_cfg), data_cfg)
+  mappings: dict = {}
+  motions = conform(read_takes([data_cfg.dataset], data_cfg), data_cfg, mappings)
   names = [m.name for m in motions]
   if len(set(names)) != len(names):
     raise UserError(f"{data_cfg.dataset}: two takes share a name; ids come from file names")
@@ -210,7 +218,27 @@ def load_dataset(data_cfg) -> Dataset:
     features,
     train,
     tuple((i, enc(x)) for i, x in val_raw),
+    mappings,
   )
+
+
+def dataset_notes(ds: Dataset) -> list[str]:
+  """What a user should know about the dataset before training: how each skeleton was mapped onto the
+  16-joint layout, and a warning when nothing is held out for validation."""
+  out: list[str] = []
+  by_method: dict[str, list[str]] = {}
+  for name, m in ds.mappings.items():
+    by_method.setdefault(m.describe(), []).append(name)
+  for how, names in by_method.items():
+    takes = names[0] if len(names) == 1 else f"{names[0]} and {len(names) - 1} more"
+    out.append(f"joints of {takes} mapped {how}")
+  if not ds.val_names:
+    why = "a single take" if len(ds.id_map) == 1 else "data.val_takes = []"
+    out.append(
+      f"warning: no validation split ({why}): val_loss is not measured and cannot show overfitting; "
+      "add a take or name one in data.val_takes"
+    )
+  return out
 
 
 def _generation_stats(features: Features, train, fps: float) -> Features:
