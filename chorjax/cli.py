@@ -68,15 +68,53 @@ def _data_plot(args) -> int:
   return 0
 
 
+def _data_check(args) -> int:
+  from rich.console import Console
+  from rich.table import Table
+
+  from chorjax.data.check import check_paths
+
+  reports, config = check_paths(args.inputs, joint_map=args.joint_map, fps=args.fps)
+  table = Table(title="takes", show_lines=False)
+  for col in ("take", "frames", "fps", "seconds", "joints", "up", "units", "bone CV", "held", "jumps"):
+    table.add_column(col, justify="left" if col in ("take", "up", "units", "bone CV") else "right")
+  good = [r for r in reports if not r.fatal]
+  for r in good:
+    row = (r.frames, f"{r.fps:g}", f"{r.duration:.1f}", r.joints, r.up_axis, r.units, r.bone_cv or "-")
+    table.add_row(Path(r.path).name, *map(str, row), str(r.held_frames), str(r.teleports))
+  console = Console(width=200)
+  console.print(table)
+  for r in good:
+    print(f"{r.path}:")
+    print(f"  up axis {r.up_axis}: {r.up_evidence}")
+    print(f"  units {r.units}: {r.units_evidence}")
+    print(f"  skeleton {r.skeleton} ({r.joints} joints), mapped by {r.mapping or '-'}")
+    print(f"  floor under the feet, first -> last second: {r.floor}")
+    for note in r.notes:
+      print(f"  note: {note}")
+  total = sum(r.frames for r in good)
+  seconds = sum(r.duration for r in good)
+  print(f"{len(good)} of {len(reports)} takes readable: {total} frames, {seconds / 60:.1f} minutes")
+  if config:
+    print("config keys for these takes:")
+    for line in config:
+      print(f"  {line}")
+  for r in reports:
+    for line in r.fatal:
+      print(f"chorjax: error: {line}", file=sys.stderr)
+  return 2 if any(r.fatal for r in reports) else 0
+
+
 def _data_convert(args) -> int:
   import numpy as np
 
   from chorjax.data import transforms
   from chorjax.data.csv import write_csv
   from chorjax.data.dataset import read_motions, read_takes, resolve_files, to_up_axis
-  from chorjax.data.mapping import map_takes
+  from chorjax.data.mapping import map_takes, to_mpii16
   from chorjax.metrics import body_size
 
+  character = _character(args.skeleton, Path(args.output))
   motions = [
     m
     for spec in args.inputs
@@ -118,9 +156,13 @@ def _data_convert(args) -> int:
     if len(motions) != 1:
       raise UserError(f"{out}: one .bvh holds one motion; give one input or an output folder")
     from chorjax.data.bvh import write_bvh
+    from chorjax.data.retarget import write_retargeted
 
     _refuse_existing([out], args.force)
-    written = [write_bvh(motions[0], out, exact=not args.rigid)]
+    if character is not None:
+      written = [write_retargeted(to_mpii16(motions[0], args.joint_map), character, out)]
+    else:
+      written = [write_bvh(motions[0], out, exact=not args.rigid)]
   else:
     targets = [out / f"{m.name}.csv" for m in motions]
     _refuse_existing(targets, args.force)
@@ -190,7 +232,10 @@ def _sample(args) -> int:
   out, _ = _output(args.output, (".csv", ".npz", ".bvh", ".html"))
   paths = _sample_paths(out, args.num)
   _refuse_existing(paths, args.force)  # the files really written (OUT_k.csv for several dancers)
+  character = _character(args.skeleton, out)
   run = load_run(args.workdir, args.checkpoint)
+  if character is not None and run.features.skeleton.name != "mpii16":
+    raise UserError(f"--skeleton: {args.workdir} dances on its own skeleton, not the 16 joints it retargets from")
   sampling = run.sampling(**_controls(args))
   run = run.ranged(sampling)
   features = run.features
@@ -210,7 +255,7 @@ def _sample(args) -> int:
     "seed": args.seed,
     **sampling,
   }
-  written = _write_sample(out, paths, pos, run.fps, features.skeleton, features.up_axis, settings)
+  written = _write_sample(out, paths, pos, run.fps, features.skeleton, features.up_axis, settings, character)
   print("wrote " + ", ".join(map(str, written)))
   return 0
 
@@ -285,6 +330,17 @@ def _output(path, allowed) -> tuple[Path, str]:
   return out, suffix
 
 
+def _character(path, out: Path):
+  """The ``--skeleton`` character (read and mapped now, before any long work), or None."""
+  if path is None:
+    return None
+  if out.suffix.lower() != ".bvh":
+    raise UserError(f"--skeleton {path}: retargeting writes BVH; give -o OUT.bvh (not {out.name})")
+  from chorjax.data.retarget import Character
+
+  return Character(path)
+
+
 def _sample_paths(out: Path, num: int) -> list[Path]:
   """The files a sample of ``num`` dancers writes: OUT itself, or OUT_k per dancer for CSV/BVH."""
   if num == 1 or out.suffix.lower() in (".npz", ".html"):
@@ -298,7 +354,7 @@ def _refuse_existing(paths, force: bool):
       raise UserError(f"{p}: already exists (use --force to overwrite)")
 
 
-def _write_sample(out: Path, paths, pos, fps, sk, up, settings) -> list:
+def _write_sample(out: Path, paths, pos, fps, sk, up, settings, character=None) -> list:
   from chorjax.data.csv import write_csv
   from chorjax.data.motion import Motion
   from chorjax.data.npz import write_npz
@@ -312,8 +368,12 @@ def _write_sample(out: Path, paths, pos, fps, sk, up, settings) -> list:
     return [write_player(ms, out, title=f"chorjax sample ({settings['workdir']})")]
   if suffix == ".bvh":
     from chorjax.data.bvh import write_bvh
+    from chorjax.data.retarget import write_retargeted
 
-    return [write_bvh(Motion(p, fps, sk, up, name=out.stem), path) for p, path in zip(pos, paths)]
+    ms = [Motion(p, fps, sk, up, name=out.stem) for p in pos]
+    if character is not None:
+      return [write_retargeted(m, character, path) for m, path in zip(ms, paths)]
+    return [write_bvh(m, path) for m, path in zip(ms, paths)]
   return [write_csv(p, path) for p, path in zip(pos, paths)]
 
 
@@ -518,20 +578,7 @@ def _add_sampling_args(p) -> None:
   p.add_argument("--force", action="store_true", help="overwrite the output if it exists")
 
 
-def _add_data_commands(sub) -> None:
-  """`chorjax data info|plot|convert` and `chorjax config show`."""
-  data = sub.add_parser("data", help="inspect and plot motion data")
-  dsub = data.add_subparsers(dest="data_command", required=True, metavar="DATA_COMMAND")
-  info = dsub.add_parser("info", help="per take: frames, joints, fps, value ranges, bone lengths and CV")
-  info.add_argument(
-    "inputs", nargs="+", metavar="PATH_OR_NAME", help="a bundled dataset (cmu94), a folder of takes, or a file"
-  )
-  info.set_defaults(func=_data_info)
-  plot = dsub.add_parser("plot", help="pelvis and end joints over time (first 200 frames, the rest) as PNG")
-  plot.add_argument("input", metavar="PATH", help="one motion file")
-  plot.add_argument("-o", "--output", required=True, metavar="FILE.png", help="the PNG to write (required)")
-  plot.add_argument("--split", type=int, default=200, help="frames in the first row (default 200)")
-  plot.set_defaults(func=_data_plot)
+def _add_convert_command(dsub) -> None:
   conv = dsub.add_parser("convert", help="convert BVH, ASF/AMC, C3D or CSV takes to the training CSV layout or to BVH")
   conv.add_argument("inputs", nargs="+", metavar="IN", help="motion files or folders")
   conv.add_argument(
@@ -571,8 +618,40 @@ def _add_data_commands(sub) -> None:
     action="store_true",
     help="BVH: rigid bones of mean length (rotations only) instead of exact per-frame offsets",
   )
+  conv.add_argument(
+    "--skeleton",
+    metavar="CHARACTER.bvh",
+    help="with -o OUT.bvh: write the motion on this character's hierarchy, names, offsets and rest pose by "
+    "inverse kinematics (default: the motion's own skeleton)",
+  )
   conv.add_argument("--force", action="store_true", help="overwrite outputs that exist")
   conv.set_defaults(func=_data_convert)
+
+
+def _add_data_commands(sub) -> None:
+  """`chorjax data info|plot|convert` and `chorjax config show`."""
+  data = sub.add_parser("data", help="inspect and plot motion data")
+  dsub = data.add_subparsers(dest="data_command", required=True, metavar="DATA_COMMAND")
+  info = dsub.add_parser("info", help="per take: frames, joints, fps, value ranges, bone lengths and CV")
+  info.add_argument(
+    "inputs", nargs="+", metavar="PATH_OR_NAME", help="a bundled dataset (cmu94), a folder of takes, or a file"
+  )
+  info.set_defaults(func=_data_info)
+  plot = dsub.add_parser("plot", help="pelvis and end joints over time (first 200 frames, the rest) as PNG")
+  plot.add_argument("input", metavar="PATH", help="one motion file")
+  plot.add_argument("-o", "--output", required=True, metavar="FILE.png", help="the PNG to write (required)")
+  plot.add_argument("--split", type=int, default=200, help="frames in the first row (default 200)")
+  plot.set_defaults(func=_data_plot)
+  check = dsub.add_parser(
+    "check",
+    help="per take and for the set: frames, rate, units and up axis (with the evidence), skeleton and mapping, "
+    "bone stability, gaps, root jumps, the floor; the config keys to use; exit 2 on a fatal problem",
+  )
+  check.add_argument("inputs", nargs="+", metavar="PATH", help="motion files, folders or a bundled dataset name")
+  check.add_argument("--joint-map", metavar="MAP.toml", help="map skeletons by this file (default: automatic)")
+  check.add_argument("--fps", type=_positive, default=30.0, help="frame rate of CSV inputs (default 30)")
+  check.set_defaults(func=_data_check)
+  _add_convert_command(dsub)
 
   config = sub.add_parser("config", help="inspect run configs")
   csub = config.add_subparsers(dest="config_command", required=True, metavar="CONFIG_COMMAND")
@@ -618,6 +697,12 @@ def _add_run_commands(sub) -> None:
   _add_motion_args(sample)
   sample.add_argument(
     "--prime", metavar="FILE[:START:LEN]", help="continue a real phrase (chor-rnn's collaboration mode)"
+  )
+  sample.add_argument(
+    "--skeleton",
+    metavar="CHARACTER.bvh",
+    help="with -o OUT.bvh: the dance on this character's hierarchy, joint names, offsets and rest pose "
+    "(inverse kinematics; mapped joints driven, the rest at rest; default: the 16-joint skeleton)",
   )
   _add_sampling_args(sample)
   sample.set_defaults(func=_sample)

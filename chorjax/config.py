@@ -47,7 +47,11 @@ def _field(
 @dataclasses.dataclass(frozen=True)
 class DataConfig:
   dataset: str = _field("cmu94", "a bundled dataset name (cmu94), a folder of takes, or one file")
-  skeleton: str = _field("mpii16", "joint layout of CSV takes", choices=("mpii16",))
+  skeleton: str = _field(
+    "mpii16",
+    "joint layout of CSV takes: mpii16, or a skeleton file (FILE.skeleton.json, as `data convert --joints "
+    "native` writes beside each CSV; such a sidecar is found by itself)",
+  )
   joints: str = _field(
     "mpii16",
     "train on the 16-joint layout (BVH/ASF/AMC takes are mapped by joint name) or on the files' own skeleton",
@@ -59,6 +63,12 @@ class DataConfig:
     "cannot be placed automatically (default: by family, names, then topology)",
   )
   fps: float = _field(30.0, "frame rate of CSV takes (CSV files do not record it)", minimum=1e-3)
+  resample_fps: float = _field(
+    0.0,
+    "resample every take to this frame rate after reading, any format (0 = keep the files' rates; "
+    "takes of mixed rates go to the most common one)",
+    minimum=0.0,
+  )
   up_axis: str = _field(
     "-y", "signed up axis of the files (cmu94: -y, y points down)", choices=("y", "-y", "z", "-z", "x", "-x")
   )

@@ -118,19 +118,20 @@ def model_template(cfg: Config, dim: int, num_motions: int) -> tuple[Any, dict]:
   return graphdef, nnx.to_pure_dict(params)
 
 
-def run_meta(cfg: Config, features: Features, id_map: dict, train_takes, val_takes, step: int, mappings=None) -> dict:
-  """The JSON meta every checkpoint carries: what sampling needs, what resuming checks, and how each
-  mapped take was put on the 16-joint layout (``joint_maps``)."""
+def run_meta(cfg: Config, features: Features, step: int, ds) -> dict:
+  """The JSON meta every checkpoint carries: what sampling needs, what resuming checks, the frame rate
+  of the training takes, and how each mapped take was put on the 16-joint layout (``joint_maps``)."""
   return {
     "config": cfg.to_dict(),
     "features": features.to_dict(),
-    "id_map": id_map,
-    "train_takes": list(train_takes),
-    "val_takes": list(val_takes),
+    "id_map": ds.id_map,
+    "train_takes": list(ds.train_names),
+    "val_takes": list(ds.val_names),
+    "fps": ds.fps,
     "rng": {"seed": cfg.train.seed, "fold_in": "step"},
     "sampler": {"seed": cfg.train.seed, "position": step},
     "step": step,
-    "joint_maps": {name: m.to_dict() for name, m in (mappings or {}).items()},
+    "joint_maps": {name: m.to_dict() for name, m in ds.mappings.items()},
   }
 
 
@@ -161,6 +162,7 @@ class Run:
   step: int
   val_loss: float | None
   joint_maps: dict = dataclasses.field(default_factory=dict)
+  frame_rate: float | None = None
 
   @property
   def num_motions(self) -> int:
@@ -168,7 +170,8 @@ class Run:
 
   @property
   def fps(self) -> float:
-    return self.config.data.fps
+    """The frame rate of the training takes (runs from before it was recorded: ``data.fps``)."""
+    return self.frame_rate or self.config.data.fps
 
   def sampling(self, **given) -> dict:
     """Sampling controls: the ones given (not None), else the run's ``[sample]`` config."""
@@ -236,6 +239,7 @@ def load_run(workdir, which: str | int = "latest") -> Run:
     step=int(meta["step"]),
     val_loss=meta.get("val_loss"),
     joint_maps=dict(meta.get("joint_maps", {})),
+    frame_rate=meta.get("fps"),
   )
 
 

@@ -588,7 +588,7 @@ def _train(
     log = MetricsLog(workdir, cfg, start)
     cleanup.callback(log.close)
     loop.listeners.append(log)
-  meta_of = lambda step: run_meta(cfg, ds.features, ds.id_map, ds.train_names, ds.val_names, step, ds.mappings)
+  meta_of = lambda step: run_meta(cfg, ds.features, step, ds)
   loop.add_hook(evaluation_hook(val, spec.graphdef), cfg.train.eval_every)
   save = checkpoint_hook(manager, meta_of)
   loop.add_hook(save, cfg.train.checkpoint_every)

@@ -32,7 +32,9 @@ def test_every_bvh_parses_with_header_frames_and_rate(shared_data):
     assert m.num_frames == frames, f
     assert m.fps == pytest.approx(1 / frame_time, rel=1e-3), f
     assert np.isfinite(m.positions).all()
-    joints = len(re.findall(r"\b(?:ROOT|JOINT)\s", text)) + len(re.findall(r"End Site", text))
+    ends = re.findall(r"End Site\s*\{\s*OFFSET\s+(\S+)\s+(\S+)\s+(\S+)", text)
+    nonzero = sum(any(float(v) for v in e) for e in ends)  # a zero End Site sits on its joint: not a joint
+    joints = len(re.findall(r"\b(?:ROOT|JOINT)\s", text)) + nonzero
     assert m.skeleton.num_joints == joints, f
 
 
@@ -138,7 +140,9 @@ def test_written_bvh_reads_with_an_independent_reader(tmp_path):
     assert len(other.get_joints_names()) == joints
 
 
-def test_generated_sample_exports_to_bvh(tmp_path):
+def test_generated_sample_exports_to_bvh(tmp_path, shared_data):
+  from test_retarget import check_retargeted
+
   from chorjax.train import train_and_evaluate
 
   train_and_evaluate(tiny_config("train.num_steps=2", "log.tensorboard=false"), tmp_path / "run")
@@ -148,6 +152,10 @@ def test_generated_sample_exports_to_bvh(tmp_path):
   csv, bvh = read_csv(tmp_path / "s.csv"), read_bvh(tmp_path / "s.bvh")
   idx = [bvh.skeleton.joint_names.index(n) for n in csv.skeleton.joint_names]
   assert np.abs(bvh.positions[:, idx] - csv.positions).max() < 1e-3 * height(csv)
+  # on a character: the Mixamo rig's hierarchy, names and rest pose, driven by the generated motion
+  mixamo = shared_data / "bvh" / "bvh_python" / "test_freebvh.bvh"
+  assert cli.main([*args, "-o", str(tmp_path / "m.bvh"), "--skeleton", str(mixamo)]) == 0
+  check_retargeted(tmp_path / "m.bvh", mixamo, csv)
 
 
 # ---------------------------------------------------------------- mapping, dataset, CLI

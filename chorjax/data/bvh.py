@@ -3,7 +3,9 @@
 Reading: ROOT/JOINT/End Site, 3 or 6 channels on any joint, any Euler order per joint (mixed orders in
 one file), CRLF/LF and tab separators. Position channels, where present, ARE the joint's translation
 in its parent's frame (they replace the OFFSET, as Blender reads them). End Sites become joints named
-``<parent>_end``. Positions stay in the file's units.
+``<parent>_end``, except those with a zero offset: they sit on their parent and say nothing (and a
+file written here closes every leaf joint with one, so a round trip adds no joints). Positions stay in
+the file's units.
 
 Writing (``write_bvh``): for every joint with children, the rotation that takes its rest-pose bone
 directions to the observed ones, composed down the chain. One child: the smallest rotation (swing)
@@ -155,14 +157,17 @@ def read_bvh(
   if drop_first_frame:
     data = data[1:]
   pos = forward_kinematics(joints, data) * scale
+  keep = [k for k, j in enumerate(joints) if not (j.end and not np.any(j.offset))]
+  new = {k: i for i, k in enumerate(keep)}
+  joints, pos = [joints[k] for k in keep], pos[:, keep]
   names = tuple(j.name for j in joints)
-  parents = tuple(-1 if j.parent is None else j.parent for j in joints)
+  parents = tuple(-1 if j.parent is None else new[j.parent] for j in joints)
   skeleton = Skeleton(
     name=path.stem,
     joint_names=names,
     parents=parents,
     twins=_guess_twins(names),
-    end_joints=tuple(k for k, j in enumerate(joints) if j.end),
+    end_joints=tuple(k for k in range(len(joints)) if k not in parents),
     feet=_guess_feet(names),
   )
   fps = 1.0 / frame_time

@@ -1,16 +1,20 @@
 """CSV motion files: one row per frame, ``3 * J`` comma-separated numbers ``x1,y1,z1,...``, no header.
 
 This is the layout of the bundled CMU subject 94 takes (16 joints, 48 columns, y pointing down).
+A CSV of any other skeleton carries a sidecar, ``<stem>.skeleton.json`` beside it (written by
+``write_csv``): the joint tree, frame rate, up axis and units, which CSV cannot hold. When present,
+it decides them; otherwise the caller's arguments (``data.skeleton``, ``data.fps``, ``data.up_axis``) do.
 """
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 
 from chorjax.data.motion import Motion, Skeleton
-from chorjax.data.skeletons import MPII16
+from chorjax.data.skeletons import MPII16, read_sidecar
 from chorjax.errors import UserError, atomic_write, parse_numbers, read_text
 
 
@@ -34,6 +38,9 @@ def read_csv(
       non-numeric cell, or a NaN/Inf value.
   """
   path = Path(path)
+  side = sidecar_path(path)
+  if side.is_file():
+    skeleton, fps, up_axis, units = read_sidecar(side)
   text = read_text(path, "CSV")
   want = 3 * skeleton.num_joints
   rows = []
@@ -54,9 +61,19 @@ def read_csv(
   return Motion(positions, fps=fps, skeleton=skeleton, up_axis=up_axis, units=units, name=path.stem, source=str(path))
 
 
+def sidecar_path(csv_path) -> Path:
+  path = Path(csv_path)
+  return path.with_name(path.stem + ".skeleton.json")
+
+
 def write_csv(motion_or_positions, path, *, overwrite: bool = True) -> Path:
-  """Writes ``[T, J, 3]`` positions (or a Motion) in the CSV layout, atomically."""
+  """Writes ``[T, J, 3]`` positions (or a Motion) in the CSV layout, atomically; a Motion of any
+  skeleton but the 16-joint one also gets its sidecar (see the module docstring)."""
   pos = getattr(motion_or_positions, "positions", motion_or_positions)
   pos = np.asarray(pos, dtype=np.float32)
   flat = pos.reshape(pos.shape[0], -1)
+  m = motion_or_positions
+  if isinstance(m, Motion) and m.skeleton.joint_names != MPII16.joint_names:
+    side = {"skeleton": m.skeleton.to_dict(), "fps": m.fps, "up_axis": m.up_axis, "units": m.units}
+    atomic_write(sidecar_path(path), lambda tmp: tmp.write_text(json.dumps(side, indent=1)), overwrite=overwrite)
   return atomic_write(path, lambda tmp: np.savetxt(tmp, flat, delimiter=",", fmt="%.7g"), overwrite=overwrite)

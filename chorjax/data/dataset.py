@@ -92,6 +92,33 @@ def to_up_axis(motion: Motion, up_axis: str) -> Motion:
   return motion.replace(positions=np.asarray(transforms.rotate(motion.positions, m), np.float32), up_axis=up_axis)
 
 
+def to_rate(motion: Motion, fps: float) -> Motion:
+  """The same motion at another frame rate (linear interpolation; unchanged at its own rate)."""
+  if motion.fps == fps:
+    return motion
+  return motion.replace(
+    positions=np.asarray(transforms.resample(motion.positions, motion.fps, fps), np.float32), fps=fps
+  )
+
+
+def one_rate(motions: Sequence[Motion], seq_length: int) -> tuple[list[Motion], float, list[str]]:
+  """Takes at one frame rate (mixed rates: the most common one, ties to the higher), and notes for the
+  user: which takes were resampled, and when a training window lasts under a second."""
+  rates = [m.fps for m in motions]
+  fps = max(set(rates), key=lambda r: (rates.count(r), r))
+  notes = []
+  if len(set(rates)) > 1:
+    mixed = ", ".join(f"{rates.count(r)} at {r:g} fps" for r in sorted(set(rates)))
+    notes.append(f"takes of mixed frame rates ({mixed}): resampled to {fps:g} fps (data.resample_fps chooses)")
+  if seq_length / fps < 1.0:
+    fix = f"data.resample_fps = 30 makes it {seq_length / 30:.2g} s, or " if fps > 30 else ""
+    notes.append(
+      f"note: a training window of {seq_length} frames lasts {seq_length / fps:.2g} s at {fps:g} fps "
+      f"(a phrase of dance lasts seconds); {fix}lengthen data.seq_length"
+    )
+  return [to_rate(m, fps) for m in motions], fps, notes
+
+
 def conform(motions: Sequence[Motion], data_cfg, mappings: dict | None = None) -> list[Motion]:
   """Brings takes of any format into the dataset's layout: joints (``data.joints``, mapped as
   ``chorjax.data.mapping`` decides; the mappings used are put into ``mappings``) and up axis."""
@@ -103,6 +130,8 @@ def conform(motions: Sequence[Motion], data_cfg, mappings: dict | None = None) -
     if mappings is not None:
       mappings.update(used)
   out = [to_up_axis(m, data_cfg.up_axis) for m in out]
+  if data_cfg.resample_fps:
+    out = [to_rate(m, data_cfg.resample_fps) for m in out]
   names = {m.skeleton.joint_names for m in out}
   if len(names) > 1:
     raise UserError(f"{data_cfg.dataset}: takes have different skeletons; use data.joints='mpii16' to map them")
@@ -121,6 +150,8 @@ class Dataset:
     train: ``(motion_id, features [T, D])`` per training sequence, augmentations included.
     val: the same for the held-out takes (no augmentation).
     mappings: take name -> the ``Mapping`` that put it on the 16-joint layout (mapped takes only).
+    fps: the frame rate every take was brought to (``one_rate``).
+    notes: what the user should know about the takes (resampling, short windows).
   """
 
   id_map: dict
@@ -131,6 +162,8 @@ class Dataset:
   train: tuple
   val: tuple
   mappings: dict = dataclasses.field(default_factory=dict)
+  fps: float = 30.0
+  notes: tuple = ()
 
   @property
   def num_motions(self) -> int:
@@ -163,6 +196,7 @@ def load_dataset(data_cfg) -> Dataset:
   """
   mappings: dict = {}
   motions = conform(read_takes([data_cfg.dataset], data_cfg), data_cfg, mappings)
+  motions, fps, notes = one_rate(motions, data_cfg.seq_length)
   names = [m.name for m in motions]
   if len(set(names)) != len(names):
     raise UserError(f"{data_cfg.dataset}: two takes share a name; ids come from file names")
@@ -209,7 +243,7 @@ def load_dataset(data_cfg) -> Dataset:
   features = dataclasses.replace(proto, mean=stats.mean.astype(np.float32), std=std)
   enc = lambda x: ((x - features.mean) / features.std).astype(np.float32)
   train = tuple((i, enc(x)) for i, x in train_raw)
-  features = _generation_stats(features, train, data_cfg.fps)
+  features = _generation_stats(features, train, fps)
   return Dataset(
     id_map,
     tuple(motions),
@@ -219,12 +253,14 @@ def load_dataset(data_cfg) -> Dataset:
     train,
     tuple((i, enc(x)) for i, x in val_raw),
     mappings,
+    fps,
+    tuple(notes),
   )
 
 
 def dataset_notes(ds: Dataset) -> list[str]:
   """What a user should know about the dataset before training: how each skeleton was mapped onto the
-  16-joint layout, and a warning when nothing is held out for validation."""
+  16-joint layout, the frame rate, and a warning when nothing is held out for validation."""
   out: list[str] = []
   by_method: dict[str, list[str]] = {}
   for name, m in ds.mappings.items():
@@ -232,6 +268,7 @@ def dataset_notes(ds: Dataset) -> list[str]:
   for how, names in by_method.items():
     takes = names[0] if len(names) == 1 else f"{names[0]} and {len(names) - 1} more"
     out.append(f"joints of {takes} mapped {how}")
+  out += ds.notes
   if not ds.val_names:
     why = "a single take" if len(ds.id_map) == 1 else "data.val_takes = []"
     out.append(

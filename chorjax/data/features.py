@@ -14,6 +14,7 @@ import numpy as np
 
 from chorjax.data import transforms
 from chorjax.data.motion import Skeleton, chain_length, mean_bone_lengths
+from chorjax.errors import UserError
 
 REPRESENTATIONS = ("absolute", "bone_relative", "root_relative", "canonical", "directions")
 
@@ -184,10 +185,15 @@ def hips(skeleton: Skeleton) -> tuple[int, int]:
   """``(left, right)``: the root's children that are each other's twins, the left one by name."""
   kids = [c for p, c in skeleton.bones if p == skeleton.root]
   pairs = [(a, skeleton.twins[a]) for a in kids if skeleton.twins[a] != a and skeleton.twins[a] in kids]
+  from chorjax.data.mapping import split_name
+
   for a, b in pairs:
-    if "left" in skeleton.joint_names[a].lower():
+    if split_name(skeleton.joint_names[a])[0] == "left":
       return a, b
-  raise ValueError(f"skeleton {skeleton.name}: no left/right hip pair under the root (needed to find the heading)")
+  raise UserError(
+    f"skeleton {skeleton.name}: no left/right hip pair under the root (the canonical and directions "
+    "representations need one to find the heading); use data.representation = 'bone_relative'"
+  )
 
 
 def leg_length(pos_TxJx3, skeleton: Skeleton) -> float:

@@ -389,23 +389,41 @@ def _checked(motion: Motion, mapping: Mapping, where: str) -> Mapping:
 def map_takes(motions, joint_map=None) -> tuple[list[Motion], dict]:
   """Every take on the 16-joint layout, and ``{take name: Mapping}``.
 
-  One mapping per skeleton (takes with the same joint names): decided on the first such take and
-  checked on the others, so that a dataset never mixes two readings of one rig.
+  One mapping per rig (takes whose joints are the same but for End Sites), decided on the joints all
+  its takes have and checked on each, so that a dataset never mixes two readings of one rig (a Bandai
+  take whose head End Site has a length beside one whose has none).
   """
-  decided: dict[tuple, Mapping] = {}
-  out, used = [], {}
+  rigs: dict[tuple, list[Motion]] = {}
   for m in motions:
-    if m.skeleton.joint_names == MPII16.joint_names:
-      out.append(m)
-      continue
-    key = m.skeleton.joint_names
-    if key not in decided:
-      decided[key] = find_mapping(m, joint_map)
-    else:
-      _checked(m, decided[key], m.source or m.name)
-    used[m.name] = decided[key]
-    out.append(apply_mapping(m, decided[key]))
-  return out, used
+    if m.skeleton.joint_names != MPII16.joint_names:
+      rigs.setdefault(tuple(n for n in m.skeleton.joint_names if not split_name(n)[2]), []).append(m)
+  decided = {}
+  for takes in rigs.values():
+    common = set.intersection(*(set(t.skeleton.joint_names) for t in takes))
+    mapping = find_mapping(_restrict(takes[0], common), joint_map)
+    for t in takes:
+      decided[t.name] = mapping if t is takes[0] else _checked(t, mapping, t.source or t.name)
+  out = [apply_mapping(m, decided[m.name]) if m.name in decided else m for m in motions]
+  return out, decided
+
+
+def _restrict(motion: Motion, names: set) -> Motion:
+  """``motion`` with only the joints named in ``names`` (its leaves may go; a joint whose parent goes
+  stays, and then nothing is dropped)."""
+  sk = motion.skeleton
+  keep = [k for k, n in enumerate(sk.joint_names) if n in names]
+  if len(keep) == sk.num_joints or any(sk.parents[k] >= 0 and sk.parents[k] not in keep for k in keep):
+    return motion
+  new = {k: i for i, k in enumerate(keep)}
+  skeleton = dataclasses.replace(
+    sk,
+    joint_names=tuple(sk.joint_names[k] for k in keep),
+    parents=tuple(-1 if sk.parents[k] < 0 else new[sk.parents[k]] for k in keep),
+    twins=tuple(new.get(sk.twins[k], new[k]) for k in keep),
+    end_joints=tuple(new[k] for k in sk.end_joints if k in new),
+    feet=tuple(new[k] for k in sk.feet if k in new),
+  )
+  return motion.replace(positions=motion.positions[:, keep], skeleton=skeleton)
 
 
 def to_mpii16(motion: Motion, joint_map=None) -> Motion:

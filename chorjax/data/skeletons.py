@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 from chorjax.data.motion import Skeleton
-from chorjax.errors import UserError
+from chorjax.errors import UserError, read_text
 
 # Joint order as in the cmu94 CSV files (see bundled/cmu94/SOURCES.md).
 _MPII16_NAMES = (
@@ -76,8 +79,23 @@ SKELETONS = {"mpii16": MPII16}
 
 
 def get_skeleton(name: str) -> Skeleton:
-  """Looks up a named skeleton; a ``UserError`` lists the known names."""
-  try:
+  """A named skeleton, or the one in a skeleton file (a CSV's ``.skeleton.json`` sidecar); a
+  ``UserError`` lists the known names."""
+  if name in SKELETONS:
     return SKELETONS[name]
-  except KeyError:
-    raise UserError(f"unknown skeleton {name!r}; known: {', '.join(sorted(SKELETONS))}") from None
+  if name.endswith(".json"):
+    if not Path(name).is_file():
+      raise UserError(f"data.skeleton: {name}: no such skeleton file")
+    return read_sidecar(name)[0]
+  raise UserError(f"unknown skeleton {name!r}; known: {', '.join(sorted(SKELETONS))}, or a .skeleton.json file")
+
+
+def read_sidecar(path) -> tuple[Skeleton, float, str, str]:
+  """``(skeleton, fps, up_axis, units)`` from a skeleton sidecar (or any JSON holding a ``skeleton``)."""
+  path = Path(path)
+  try:
+    data = json.loads(read_text(path, "skeleton JSON"))
+    sk = Skeleton.from_dict(data.get("skeleton", data))
+    return sk, float(data.get("fps", 30.0)), str(data.get("up_axis", "y")), str(data.get("units", "arbitrary"))
+  except (json.JSONDecodeError, KeyError, TypeError, ValueError, AttributeError) as e:
+    raise UserError(f"{path}: not a skeleton file ({type(e).__name__}: {e})") from None
