@@ -461,7 +461,7 @@ def _metrics(args) -> int:
 def _sweep(args) -> int:
   from chorjax.experiments import run_sweep
 
-  workdirs = run_sweep(args.sweep)
+  workdirs = run_sweep(args.sweep, shard=args.shard)
   print("points: " + " ".join(map(str, workdirs)))
   return 0
 
@@ -768,7 +768,18 @@ The sweep file (TOML):
   data = ["cmu94"]                       # num, seed, seeds, splits, window and the sampling
   seeds = [0, 1, 2, 3]                   # controls (pi_temperature, noise_smoothing, ...)
 
+Split over N cluster jobs: chorjax sweep FILE --shard I/N (job I of 0..N-1 runs points I, I+N, ...).
 Then: chorjax compare ROOT/* -o report.md"""
+
+
+def _shard(text: str) -> tuple[int, int]:
+  try:
+    i, n = (int(x) for x in text.split("/"))
+  except ValueError:
+    raise argparse.ArgumentTypeError(f"{text!r} is not I/N (e.g. 0/4)") from None
+  if not 0 <= i < n:
+    raise argparse.ArgumentTypeError(f"{text!r}: needs 0 <= I < N")
+  return i, n
 
 
 def _add_render_command(sub) -> None:
@@ -855,6 +866,14 @@ def _add_report_commands(sub) -> None:
     formatter_class=argparse.RawDescriptionHelpFormatter,
   )
   sw.add_argument("sweep", metavar="SWEEP.toml", help="the sweep file (format above)")
+  sw.add_argument(
+    "--shard",
+    type=_shard,
+    default=(0, 1),
+    metavar="I/N",
+    help="run only every N-th point, starting at point I (0-based), so N jobs of an array split the sweep "
+    "with no coordinator (default 0/1: every point)",
+  )
   sw.set_defaults(func=_sweep)
 
   cmp_ = sub.add_parser("compare", help="a markdown report comparing evaluated runs, with plots")

@@ -114,15 +114,22 @@ def is_finished(workdir: Path, num_steps: int, with_eval: bool) -> bool:
   return done and (not with_eval or metrics_path(workdir).exists())
 
 
-def run_sweep(path, log=print) -> list[Path]:
-  """Trains (and evaluates) every point of a sweep; returns the point workdirs."""
+def run_sweep(path, log=print, shard: tuple[int, int] = (0, 1)) -> list[Path]:
+  """Trains (and evaluates) every point of a sweep; returns the point workdirs.
+
+  ``shard = (i, n)``: only the points whose index in :func:`sweep_points` order is ``i`` modulo ``n``
+  (0-based ``i``), so ``n`` jobs with no coordinator split a sweep (a job array), each skipping what is
+  already finished; ``compare`` over the shared root merges them."""
   from chorjax.evaluate import evaluate, metrics_path, write_metrics
   from chorjax.train import train_and_evaluate
 
   sweep = load_sweep(path)
   ev = sweep.get("eval")
   workdirs = []
-  for name, overrides in sweep_points(sweep):
+  index, count = shard
+  for k, (name, overrides) in enumerate(sweep_points(sweep)):
+    if k % count != index:
+      continue
     cfg = load_config(sweep["base"], [*overrides, f"name={_fmt(name)}"])
     workdir = Path(sweep["root"]) / name
     workdirs.append(workdir)

@@ -42,7 +42,7 @@ def check_retargeted(path, character, want):
   # an independent reader sees the same joints, frames and channel values
   other = Bvh(text)
   assert other.nframes == back.num_frames == want.num_frames
-  names = [n for n in other.get_joints_names()]
+  names = list(other.get_joints_names())
   assert names == [n for n in char.skeleton.joint_names if n in names]
   rows, _ = _parse_motion(path, text, sum(len(other.joint_channels(n)) for n in names))
   col = 0
@@ -93,7 +93,7 @@ def test_retargeting_onto_a_rig_with_a_root_below_the_hips(shared_data, tmp_path
   character = shared_data / "bvh" / "bandai" / "dataset-1_dance-short_normal_001.bvh"  # joint_Root on the floor
   out = tmp_path / "on_bandai.bvh"
   assert cli.main(["data", "convert", str(TAKE), "-o", str(out), "--skeleton", str(character)]) == 0
-  back, mapped = check_retargeted(out, character, read_csv(TAKE))
+  _, mapped = check_retargeted(out, character, read_csv(TAKE))
   j = MPII16.joint_names.index
   feet = np.minimum(mapped[:, j("left_foot"), 1], mapped[:, j("right_foot"), 1])
   char = to_mpii16(read_bvh(character)).positions
@@ -107,7 +107,7 @@ def test_skeleton_needs_a_bvh_output_and_a_readable_character(shared_data, tmp_p
   assert "retargeting writes BVH; give -o OUT.bvh" in capsys.readouterr().err
   bad = tmp_path / "bad.bvh"
   bad.write_text("HIERARCHY\nROOT Hips\n{\n")
-  with pytest.raises(UserError, match="bad.bvh"):
+  with pytest.raises(UserError, match=r"bad\.bvh"):
     from chorjax.data.retarget import Character
 
     Character(bad)
