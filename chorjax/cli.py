@@ -197,8 +197,13 @@ def _train(args) -> int:
     if getattr(args, flag) is not None:
       value = getattr(args, flag)
       overrides.append(f"parallel.{key}={value!r}" if isinstance(value, str) else f"parallel.{key}={value}")
+  from chorjax.vectorized import expand_overrides
+
+  overrides, points = expand_overrides(overrides)
   cfg = load_config(args.config, overrides)
   workdir = Path(args.workdir) if args.workdir else default_workdir(cfg)
+  if len(points) > 1:
+    return _train_points(args, overrides, points, workdir)
   from chorjax.parallel import setup_parallel
 
   parallel = setup_parallel(cfg)
@@ -217,6 +222,22 @@ def _train(args) -> int:
   )
   if "samples" in summary:
     print(f"sample: {summary['samples']['csv']}\nwatch it: {summary['samples']['html']}")
+  return 0
+
+
+def _train_points(args, overrides, points, workdir: Path) -> int:
+  """`train CONFIG train.seed=[0,1,2]`: the points as one vectorized program, one run directory each
+  (WORKDIR/seed=0, ...)."""
+  from chorjax.config import load_config
+  from chorjax.vectorized import train_vectorized
+
+  tag = lambda p: "-".join(f"{k.split('.')[-1]}={v}" for k, v in p)
+  cfgs = [load_config(args.config, [*overrides, *(f"{k}={v!r}" for k, v in p)]) for p in points]
+  dirs = [workdir / tag(p) for p in points]
+  for d, s in zip(dirs, train_vectorized(cfgs, dirs, force=args.force)):
+    loss = f", train loss {s['final_train_loss']:.4g}" if "final_train_loss" in s else ""
+    val = f", val loss {s['final_val_loss']:.4g}" if "final_val_loss" in s else ""
+    print(f"trained {d.name}: steps {s['start_step']}->{s['final_step']}{loss}{val}; workdir {d}")
   return 0
 
 
@@ -757,6 +778,8 @@ The sweep file (TOML):
   name = "lr_sweep"                      # run directories are named NAME-KEY=VALUE-...
   base = "../configs/quickstart.toml"    # the config every point starts from (relative to this file)
   root = "runs/lr_sweep"                 # where the run directories go (relative to the working directory)
+  vectorize = ["train.seed"]             # points differing only in these train as one program (optional;
+                                         # train.seed, optim.lr, train.input_noise)
   [set]                                  # keys set for every point (optional)
   "train.num_steps" = 1000
   [grid]                                 # every combination of these values is one point

@@ -25,6 +25,10 @@ of different recipes is one file::
     [grid]
     "train.seed" = [0, 1, 2]
 
+``vectorize = ["train.seed", "optim.lr", "train.input_noise"]`` (any of them) trains the points that
+differ only in those keys as one vectorized program (``chorjax.vectorized``): one run's cost for
+several seeds on a CPU whose cores one small model leaves idle.
+
 Every point is an ordinary run directory (``<root>/<name>-<key>=<value>...``) with its evaluation in
 ``eval/metrics.json`` (and its first sample in ``eval/sample.npz``); re-running a sweep skips finished
 points and resumes unfinished ones. ``chorjax compare`` groups points that differ only in
@@ -48,7 +52,7 @@ from chorjax.config import SampleConfig, load_config, suggest, valid_keys
 from chorjax.errors import UserError, atomic_write
 from chorjax.scoring import mean_of, upgrade
 
-SWEEP_KEYS = {"name", "base", "root", "grid", "set", "eval", "candidates"}
+SWEEP_KEYS = {"name", "base", "root", "grid", "set", "eval", "candidates", "vectorize"}
 EVAL_KEYS = {"data", "frames", "num", "seed", "seeds", "splits", "window", *SampleConfig.CONTROLS}
 
 
@@ -82,6 +86,15 @@ def load_sweep(path) -> dict:
     for key in body:
       if key not in valid_keys():
         raise UserError(f"{path}: [candidates.{name}] key {key!r} is not a config key{suggest(key, valid_keys())}")
+  from chorjax.vectorized import VECTOR_KEYS
+
+  vec = sweep.get("vectorize", [])
+  if not isinstance(vec, list) or any(k not in VECTOR_KEYS for k in vec):
+    wrong = next((k for k in vec if k not in VECTOR_KEYS), vec) if isinstance(vec, list) else vec
+    raise UserError(
+      f"{path}: vectorize: cannot vectorize {wrong!r}; a list of {', '.join(VECTOR_KEYS)} "
+      "(keys that change shapes or the data train apart)"
+    )
   bad = set(sweep.get("eval", {})) - EVAL_KEYS
   if bad:
     raise UserError(f"{path}: unknown [eval] key {sorted(bad)[0]!r}; one of {', '.join(sorted(EVAL_KEYS))}")
@@ -114,35 +127,65 @@ def is_finished(workdir: Path, num_steps: int, with_eval: bool) -> bool:
   return done and (not with_eval or metrics_path(workdir).exists())
 
 
+def sweep_groups(sweep: dict) -> list[list[tuple[str, list[str]]]]:
+  """The points of :func:`sweep_points` grouped for training: points that differ only in the sweep's
+  ``vectorize`` keys form one group (trained as one vectorized program); without it, one point each."""
+  vec = set(sweep.get("vectorize", []))
+  groups: dict[tuple, list] = {}
+  for name, overrides in sweep_points(sweep):
+    key = tuple(o for o in overrides if o.split("=", 1)[0] not in vec)
+    groups.setdefault(key, []).append((name, overrides))
+  return list(groups.values())
+
+
 def run_sweep(path, log=print, shard: tuple[int, int] = (0, 1)) -> list[Path]:
   """Trains (and evaluates) every point of a sweep; returns the point workdirs.
 
-  ``shard = (i, n)``: only the points whose index in :func:`sweep_points` order is ``i`` modulo ``n``
-  (0-based ``i``), so ``n`` jobs with no coordinator split a sweep (a job array), each skipping what is
-  already finished; ``compare`` over the shared root merges them."""
+  Points that differ only in the ``vectorize`` keys train together (``chorjax.vectorized``); points
+  whose checkpoints are at different steps fall back to training one by one. ``shard = (i, n)``: only
+  the groups (points, without ``vectorize``) whose index is ``i`` modulo ``n`` (0-based ``i``), so ``n``
+  jobs with no coordinator split a sweep (a job array), each skipping what is already finished;
+  ``compare`` over the shared root merges them."""
+  from chorjax import checkpoint as ckpt
   from chorjax.evaluate import evaluate, metrics_path, write_metrics
-  from chorjax.train import train_and_evaluate
 
   sweep = load_sweep(path)
   ev = sweep.get("eval")
   workdirs = []
   index, count = shard
-  for k, (name, overrides) in enumerate(sweep_points(sweep)):
+  for k, group in enumerate(sweep_groups(sweep)):
     if k % count != index:
       continue
-    cfg = load_config(sweep["base"], [*overrides, f"name={_fmt(name)}"])
-    workdir = Path(sweep["root"]) / name
-    workdirs.append(workdir)
-    if is_finished(workdir, cfg.train.num_steps, bool(ev)):
+    points = [(n, o, load_config(sweep["base"], [*o, f"name={_fmt(n)}"]), Path(sweep["root"]) / n) for n, o in group]
+    workdirs += [w for *_, w in points]
+    todo = [p for p in points if not is_finished(p[3], p[2].train.num_steps, bool(ev))]
+    for name, *_ in (p for p in points if p not in todo):
       log(f"{name}: finished, skipped")
-      continue
+    train = [p for p in todo if not (ckpt.checkpoint_dir(p[3]) / str(p[2].train.num_steps)).is_dir()]
+    _train_points(train, log)
+    for name, _, cfg, workdir in todo:
+      if ev:
+        log(f"{name}: evaluating")
+        kw = {k: v for k, v in ev.items() if k != "data"}
+        write_metrics(evaluate(workdir, ev.get("data", [cfg.data.dataset]), **kw), metrics_path(workdir))
+  return workdirs
+
+
+def _train_points(points, log) -> None:
+  """Trains ``(name, overrides, cfg, workdir)`` points: together when there are several, else alone."""
+  from chorjax.train import train_and_evaluate
+  from chorjax.vectorized import NotAligned, train_vectorized
+
+  if len(points) > 1:
+    log(f"{', '.join(n for n, *_ in points)}: training together ({' '.join(points[0][1])} ...)")
+    try:
+      train_vectorized([c for _, _, c, _ in points], [w for *_, w in points])
+      return
+    except NotAligned as e:
+      log(f"{e}: one by one")
+  for name, overrides, cfg, workdir in points:
     log(f"{name}: training ({' '.join(overrides)})")
     train_and_evaluate(cfg, workdir)
-    if ev:
-      log(f"{name}: evaluating")
-      kw = {k: v for k, v in ev.items() if k != "data"}
-      write_metrics(evaluate(workdir, ev.get("data", [cfg.data.dataset]), **kw), metrics_path(workdir))
-  return workdirs
 
 
 # ---------------------------------------------------------------- comparison report

@@ -46,11 +46,15 @@ class TrainingDiverged(UserError):
   """A non-finite loss; the message names the step and the last good checkpoint."""
 
 
-def _loss_fn(params, batch, key, spec: StepSpec):
+def _loss_fn(params, batch, key, spec: StepSpec, noise=None):
+  """The teacher-forced loss; ``noise``: the input noise as a traced value (vectorized training,
+  where points differ in it), else ``spec.input_noise``."""
   model = nnx.merge(spec.graphdef, params)
   x = batch["inputs"]
   noise_key, dropout_key = jax.random.split(key)
-  if spec.input_noise > 0:
+  if noise is not None:
+    x = x + noise * jax.random.normal(noise_key, x.shape, x.dtype)
+  elif spec.input_noise > 0:
     x = x + spec.input_noise * jax.random.normal(noise_key, x.shape, x.dtype)
   out = model(x, batch["motion_ids"], dropout_key if spec.dropout > 0 else None)
   return model.loss(out, batch["targets"])

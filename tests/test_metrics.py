@@ -110,12 +110,15 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
   (tmp_path / "base.toml").write_text("")
   sweep = tmp_path / "s.toml"
   sweep.write_text(
-    f'name = "t"\nbase = "base.toml"\n[grid]\n"model.head" = ["mdn", "mse"]\n"train.seed" = [0, 1]\n'
+    'name = "t"\nbase = "base.toml"\nvectorize = ["train.seed"]\n'
+    f'[grid]\n"model.head" = ["mdn", "mse"]\n"train.seed" = [0, 1]\n'
     f'[set]\n{set_lines}\n"log.tensorboard" = false\n'
     '[eval]\ndata = ["cmu94/94_10_skeleton_3d.csv"]\nframes = 240\nnum = 1\nseeds = [0, 1]\nsplits = 3\n'
   )
   assert cli.main(["sweep", str(sweep), "--shard", "0/2"]) == 0  # two jobs of an array, no coordinator
-  assert sorted(r.name for r in (tmp_path / "runs" / "t").iterdir()) == ["t-head=mdn-seed=0", "t-head=mse-seed=0"]
+  # the seeds of one head trained together (vectorize), as one group of the shard
+  assert sorted(r.name for r in (tmp_path / "runs" / "t").iterdir()) == ["t-head=mdn-seed=0", "t-head=mdn-seed=1"]
+  assert "t-head=mdn-seed=0, t-head=mdn-seed=1: training together" in capsys.readouterr().out
   assert cli.main(["sweep", str(sweep), "--shard", "1/2"]) == 0
   with pytest.raises(SystemExit, match="2"):  # argparse: one usage line, exit 2
     cli.main(["sweep", str(sweep), "--shard", "2/2"])

@@ -1,0 +1,298 @@
+"""Vectorized training: K runs of one shape trained as one jitted, vmapped program.
+
+Points that differ only in ``VECTOR_KEYS`` (training seed, learning rate, input noise) and in what each
+point writes (``name``, ``sample.*``, ``log.*``) share every shape, so their parameters, optimizer
+states, RNG keys and batches are stacked on a leading axis and one ``jax.vmap`` of the train step
+advances all of them: on a CPU the per-step overhead and the small matrix products of one quickstart
+run leave most of the machine idle, and K runs fill it.
+
+What each point gets is exactly what it would get alone: its own initialization (``train.seed``), its
+own window sampler and RNG stream, its own input noise (a traced value), and its own learning rate (the
+optimizer's update computed at the first point's rate and scaled by ``lr_k / lr_0``: every optimizer
+chorjax offers is linear in the rate after clipping, so this differs from a lone run by rounding only).
+Each point is written as an ordinary run directory (config.json, metrics.jsonl, TensorBoard events,
+checkpoints with their own meta, the end sample), so ``sample``, ``eval``, ``compare`` and resuming
+work unchanged. Points resume together when their latest checkpoints are at one step
+(``NotAligned`` otherwise: train them apart). Not vectorized: the TensorBoard figure of a generated
+sample (each point's end sample is written as usual) and data-parallel training.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import functools
+import json
+import sys
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from chorjax import checkpoint as ckpt
+from chorjax.config import Config
+from chorjax.data.dataset import WindowSampler, dataset_notes, eval_windows, load_dataset
+from chorjax.errors import UserError
+from chorjax.run import StepSpec, run_meta
+from chorjax.train import (
+  Loop,
+  MetricsLog,
+  TrainingDiverged,
+  _check_saved_config,
+  _feedback_loss_fn,
+  _keep_aside,
+  _loss_fn,
+  _restore_or_init,
+  _truncate_metrics,
+  _write_config,
+  eval_step,
+  stop_on_signals,
+  workdir_lock,
+  write_end_sample,
+)
+
+VECTOR_KEYS = ("train.seed", "optim.lr", "train.input_noise")
+_FREE = ("name",)  # keys that change only what a point writes
+_FREE_SECTIONS = ("sample.", "log.")
+
+
+class NotAligned(UserError):
+  """The points' latest checkpoints are at different steps: they cannot continue as one program."""
+
+
+def flat_config(cfg: Config) -> dict:
+  """``{"section.key": value}`` of a config."""
+  out = {}
+  for k, v in cfg.to_dict().items():
+    if isinstance(v, dict):
+      out.update({f"{k}.{kk}": vv for kk, vv in v.items()})
+    else:
+      out[k] = v
+  return out
+
+
+def check_group(cfgs) -> list[str]:
+  """The vectorizable keys in which ``cfgs`` differ; a UserError names any other key that differs."""
+  flats = [flat_config(c) for c in cfgs]
+  differ = [k for k in flats[0] if len({json.dumps(f[k], sort_keys=True) for f in flats}) > 1]
+  for key in differ:
+    if key in VECTOR_KEYS or key in _FREE or key.startswith(_FREE_SECTIONS):
+      continue
+    what = "changes the model's shapes" if key.startswith("model.") else "changes the program or the data"
+    a, b = (f[key] for f in flats[:2]) if flats[0][key] != flats[1][key] else (flats[0][key], flats[-1][key])
+    raise UserError(
+      f"cannot vectorize {key} ({a!r} vs {b!r}): it {what}; only {', '.join(VECTOR_KEYS)} "
+      "can differ between points trained together (train the others apart)"
+    )
+  if cfgs[0].optim.lr <= 0 and "optim.lr" in differ:
+    raise UserError("optim.lr: vectorized learning rates need a positive first rate")
+  if cfgs[0].train.feedback != "none" and "train.input_noise" in differ:
+    raise UserError("train.input_noise cannot differ between vectorized points with train.feedback")
+  if cfgs[0].parallel.distributed:
+    raise UserError("vectorized training runs in one process (parallel.distributed = false)")
+  return [k for k in differ if k in VECTOR_KEYS]
+
+
+def _point_step(state, batch, key, lr_scale, noise, spec: StepSpec):
+  """One point's train step (as ``train._train_step``, with a traced noise and a scaled rate)."""
+  key = jax.random.fold_in(jax.random.wrap_key_data(key), state["step"])
+  if spec.feedback is None:
+    grad_fn = jax.value_and_grad(_loss_fn, has_aux=True)
+    (loss, aux), grads = grad_fn(state["params"], batch, key, spec, noise)
+  else:
+    grad_fn = jax.value_and_grad(_feedback_loss_fn, has_aux=True)
+    (loss, aux), grads = grad_fn(state["params"], batch, key, state["step"], spec)
+  updates, opt_state = spec.tx.update(grads, state["opt_state"], state["params"])
+  updates = jax.tree.map(lambda u: u * lr_scale.astype(u.dtype), updates)
+  params = optax.apply_updates(state["params"], updates)
+  metrics = {
+    "loss": loss,
+    **aux,
+    "grad_norm": optax.tree.norm(grads),
+    "param_norm": optax.tree.norm(params),
+    "update_norm": optax.tree.norm(updates),
+    "lr": spec.schedule(state["step"]) * lr_scale,
+  }
+  return {"params": params, "opt_state": opt_state, "step": state["step"] + 1}, metrics
+
+
+@functools.partial(jax.jit, static_argnums=4, donate_argnums=0)
+def vec_train_step(states, batches, keys, hyper, spec: StepSpec):
+  """``K`` train steps at once: every argument but ``spec`` is stacked on a leading axis."""
+  step = functools.partial(_point_step, spec=spec)
+  return jax.vmap(step)(states, batches, keys, hyper["lr_scale"], hyper["noise"])
+
+
+@functools.partial(jax.jit, static_argnums=2)
+def vec_eval_step(params, batch, graphdef):
+  """Each point's validation loss on the same windows, ``[K]``."""
+  return jax.vmap(lambda p: eval_step(p, batch, graphdef))(params)
+
+
+def _take(tree, k: int):
+  return jax.tree.map(lambda x: x[k], tree)
+
+
+class VecLoop(Loop):
+  """The training loop over stacked points: listener ``k`` hears point ``k``'s scalars. ``val_loss`` and
+  ``losses`` hold the points' mean; ``vec_val`` and ``vec_losses`` each point's."""
+
+  def __init__(self, *args):
+    super().__init__(*args)
+    self.vec_losses: dict[int, np.ndarray] = {}
+    self.vec_val: np.ndarray | None = None
+
+  def publish(self, step: int, metrics: dict, val_loss=None) -> None:
+    losses = np.asarray(metrics["loss"], np.float64)
+    bad = np.flatnonzero(~np.isfinite(losses))
+    if len(bad):
+      where = f"step {self.last_good}" if self.last_good is not None else "none (no checkpoint was written yet)"
+      raise TrainingDiverged(
+        f"point {bad[0]}: non-finite loss ({losses[bad[0]]}) at step {step}; training stopped; "
+        f"last good checkpoint: {where}"
+      )
+    self.losses[step], self.vec_losses[step] = float(losses.mean()), losses
+    host = {k: np.asarray(v) for k, v in metrics.items()}
+    vals = [None] * len(losses) if val_loss is None or self.vec_val is None else [float(v) for v in self.vec_val]
+    for k, listener in enumerate(self.listeners):
+      listener(step, float(losses[k]), {n: v[k] for n, v in host.items()}, vals[k])
+
+
+def _quiet(cfg: Config) -> Config:
+  return dataclasses.replace(cfg, log=dataclasses.replace(cfg.log, progress="none"))
+
+
+def train_vectorized(cfgs, workdirs, *, force: bool = False) -> list[dict]:
+  """Trains the points ``cfgs`` (one run directory each in ``workdirs``) as one vectorized program;
+  returns each point's summary, as ``train.train_and_evaluate`` does.
+
+  Raises:
+    UserError: points that differ in a key that cannot be vectorized (``check_group``).
+    NotAligned: points whose latest checkpoints are at different steps.
+  """
+  cfgs, workdirs = list(cfgs), [Path(w).absolute() for w in workdirs]
+  check_group(cfgs)
+  with contextlib.ExitStack() as stack:
+    for w in workdirs:
+      if w.exists() and not w.is_dir():
+        raise UserError(f"{w}: is a file, not a run directory")
+      stack.enter_context(workdir_lock(w))
+    keep_old = [_check_saved_config(w, c, force) for w, c in zip(workdirs, cfgs)]
+    ds = load_dataset(cfgs[0].data)
+    for line in dataset_notes(ds):
+      print(line, file=sys.stderr if line.startswith("warning") else sys.stdout, flush=True)
+    managers = [ckpt.create_manager(w, keep=c.train.keep_checkpoints) for w, c in zip(workdirs, cfgs)]
+    for m in managers:
+      stack.callback(ckpt.close_quietly, m)
+    restored = [_restore_or_init(c, w, ds, m, None) for c, w, m in zip(cfgs, workdirs, managers)]
+    starts = [s for _, _, s in restored]
+    if len(set(starts)) > 1:
+      raise NotAligned(f"points are at different steps ({', '.join(map(str, starts))}): train them apart")
+    for w, c, keep in zip(workdirs, cfgs, keep_old):
+      if keep:
+        _keep_aside(w)
+      _write_config(w, c)
+      _truncate_metrics(w / "metrics.jsonl", starts[0])
+    return _run(cfgs, workdirs, ds, managers, restored, stack)
+
+
+def _run(cfgs, workdirs, ds, managers, restored, stack) -> list[dict]:
+  t_start, start, spec = time.time(), restored[0][2], restored[0][1]
+  c0, k_points = cfgs[0], len(cfgs)
+  states = jax.tree.map(lambda *xs: jnp.stack(xs), *[s for s, _, _ in restored])
+  hyper = {
+    "lr_scale": jnp.asarray([c.optim.lr / c0.optim.lr if c0.optim.lr > 0 else 1.0 for c in cfgs], jnp.float32),
+    "noise": jnp.asarray([c.train.input_noise for c in cfgs], jnp.float32),
+  }
+  keys = jnp.stack([jax.random.key_data(jax.random.key(c.train.seed)) for c in cfgs])
+  samplers = [WindowSampler(ds.train, c0.data.seq_length, c0.train.batch_size, c.train.seed) for c in cfgs]
+  get_batch = lambda step: jax.tree.map(lambda *xs: np.stack(xs), *[s.batch(step) for s in samplers])
+  val = eval_windows(ds.val, c0.data.seq_length, c0.train.val_windows)
+  step_fn = lambda st, b, k: vec_train_step(st, b, k, hyper, spec)
+  loop = VecLoop(step_fn, get_batch, keys, states, start, c0.train.num_steps)
+  for k, (c, w) in enumerate(zip(cfgs, workdirs)):
+    log = MetricsLog(w, c if k == 0 else _quiet(c), start)
+    stack.callback(log.close)
+    loop.listeners.append(log)
+
+  def evaluate(_: Loop) -> None:
+    if val:
+      loop.vec_val = np.asarray(vec_eval_step(loop.state["params"], val, spec.graphdef))
+      loop.val_loss = float(loop.vec_val.mean())
+    loop.flush()
+
+  def save(_: Loop) -> None:
+    loop.flush()
+    for k, (c, m) in enumerate(zip(cfgs, managers)):
+      val_k = None if loop.val_loss is None or loop.vec_val is None else float(loop.vec_val[k])
+      ckpt.save(m, loop.step, _take(loop.state, k), run_meta(c, ds.features, loop.step, ds), val_k)
+    loop.last_good = loop.step
+
+  def save_now(_: Loop) -> None:
+    if managers[0].latest_step() != loop.step:
+      save(loop)
+    for m in managers:
+      ckpt.wait(m)
+
+  loop.add_hook(evaluate, c0.train.eval_every)
+  loop.add_hook(save, c0.train.checkpoint_every)
+
+  def wait(_: Loop) -> None:
+    for m in managers:
+      ckpt.wait(m)
+
+  loop.end_hooks.append(wait)
+  loop.on_stop = save_now
+  samples: list[dict] = [{} for _ in cfgs]
+
+  def end_samples(_: Loop) -> None:
+    for k, (c, w) in enumerate(zip(cfgs, workdirs)):
+      if c.sample.frames > 0 and c.train.num_steps > 0:
+        samples[k] = write_end_sample(w, spec.graphdef, _take(loop.state["params"], k), ds, c)
+
+  loop.end_hooks.append(end_samples)
+  print(f"training {k_points} points as one program: {', '.join(str(w.name) for w in workdirs)}", flush=True)
+  with stop_on_signals() as stop:
+    loop.stop = stop
+    loop.run()
+  return [_summary(loop, k, start, t_start, samples[k]) for k in range(k_points)]
+
+
+def _summary(loop: VecLoop, k: int, start: int, t_start: float, samples: dict) -> dict:
+  losses = {s: float(v[k]) for s, v in loop.vec_losses.items()}
+  out = {
+    "start_step": start,
+    "final_step": loop.step,
+    "train_losses": losses,
+    "seconds": time.time() - t_start,
+    "compile_s": loop.compile_s,
+  }
+  if losses:
+    out["final_train_loss"] = losses[max(losses)]
+  if loop.val_loss is not None and loop.vec_val is not None:
+    out["final_val_loss"] = float(loop.vec_val[k])
+  if samples:
+    out["samples"] = samples
+  return out
+
+
+def expand_overrides(overrides) -> tuple[list[str], list[list[tuple[str, object]]]]:
+  """``train.seed=[0,1,2]`` (a list for a vectorizable key) -> the plain overrides and the points:
+  one ``[(key, value), ...]`` per combination (a single point, ``[[]]``, when no list is given)."""
+  import itertools
+
+  from chorjax.config import parse_override
+
+  plain, lists = [], []
+  for text in overrides:
+    key, value = parse_override(text)
+    if isinstance(value, list) and key in VECTOR_KEYS:
+      if not value:
+        raise UserError(f"{key}: an empty list of values")
+      lists.append([(key, v) for v in value])
+    else:
+      plain.append(text)
+  return plain, [list(p) for p in itertools.product(*lists)] if lists else [[]]
