@@ -115,17 +115,22 @@ def _feedback_loss_fn(params, batch, key, step, spec: StepSpec):
   return loss, {**aux, "feedback": mask_BxT.mean()}
 
 
-def _train_step(state, batch, key, spec: StepSpec):
+def _train_step(state, batch, key, spec: StepSpec, lr_scale=None, noise=None):
+  """One optimizer step. ``lr_scale`` and ``noise`` (traced; vectorized training, see
+  ``chorjax.vectorized``): the update scaled by ``lr_scale``, the input noise ``noise`` instead of
+  ``spec.input_noise``."""
   if not jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
     key = jax.random.wrap_key_data(key)  # raw uint32 key data (replicated across processes)
   key = jax.random.fold_in(key, state["step"])
   if spec.feedback is None:  # teacher forcing: the fused layers over whole windows
     grad_fn = jax.value_and_grad(_loss_fn, has_aux=True)
-    (loss, aux), grads = grad_fn(state["params"], batch, key, spec)
+    (loss, aux), grads = grad_fn(state["params"], batch, key, spec, noise)
   else:
     grad_fn = jax.value_and_grad(_feedback_loss_fn, has_aux=True)
     (loss, aux), grads = grad_fn(state["params"], batch, key, state["step"], spec)
   updates, opt_state = spec.tx.update(grads, state["opt_state"], state["params"])
+  if lr_scale is not None:
+    updates = jax.tree.map(lambda u: u * lr_scale.astype(u.dtype), updates)
   params = optax.apply_updates(state["params"], updates)
   metrics = {
     "loss": loss,
@@ -133,7 +138,7 @@ def _train_step(state, batch, key, spec: StepSpec):
     "grad_norm": optax.tree.norm(grads),
     "param_norm": optax.tree.norm(params),
     "update_norm": optax.tree.norm(updates),
-    "lr": spec.schedule(state["step"]),
+    "lr": spec.schedule(state["step"]) * (1.0 if lr_scale is None else lr_scale),
   }
   return {"params": params, "opt_state": opt_state, "step": state["step"] + 1}, metrics
 

@@ -30,7 +30,6 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optax
 
 from chorjax import checkpoint as ckpt
 from chorjax.config import Config
@@ -42,10 +41,9 @@ from chorjax.train import (
   MetricsLog,
   TrainingDiverged,
   _check_saved_config,
-  _feedback_loss_fn,
   _keep_aside,
-  _loss_fn,
   _restore_or_init,
+  _train_step,
   _truncate_metrics,
   _write_config,
   eval_step,
@@ -96,33 +94,10 @@ def check_group(cfgs) -> list[str]:
   return [k for k in differ if k in VECTOR_KEYS]
 
 
-def _point_step(state, batch, key, lr_scale, noise, spec: StepSpec):
-  """One point's train step (as ``train._train_step``, with a traced noise and a scaled rate)."""
-  key = jax.random.fold_in(jax.random.wrap_key_data(key), state["step"])
-  if spec.feedback is None:
-    grad_fn = jax.value_and_grad(_loss_fn, has_aux=True)
-    (loss, aux), grads = grad_fn(state["params"], batch, key, spec, noise)
-  else:
-    grad_fn = jax.value_and_grad(_feedback_loss_fn, has_aux=True)
-    (loss, aux), grads = grad_fn(state["params"], batch, key, state["step"], spec)
-  updates, opt_state = spec.tx.update(grads, state["opt_state"], state["params"])
-  updates = jax.tree.map(lambda u: u * lr_scale.astype(u.dtype), updates)
-  params = optax.apply_updates(state["params"], updates)
-  metrics = {
-    "loss": loss,
-    **aux,
-    "grad_norm": optax.tree.norm(grads),
-    "param_norm": optax.tree.norm(params),
-    "update_norm": optax.tree.norm(updates),
-    "lr": spec.schedule(state["step"]) * lr_scale,
-  }
-  return {"params": params, "opt_state": opt_state, "step": state["step"] + 1}, metrics
-
-
 @functools.partial(jax.jit, static_argnums=4, donate_argnums=0)
 def vec_train_step(states, batches, keys, hyper, spec: StepSpec):
   """``K`` train steps at once: every argument but ``spec`` is stacked on a leading axis."""
-  step = functools.partial(_point_step, spec=spec)
+  step = lambda state, batch, key, lr_scale, noise: _train_step(state, batch, key, spec, lr_scale, noise)
   return jax.vmap(step)(states, batches, keys, hyper["lr_scale"], hyper["noise"])
 
 

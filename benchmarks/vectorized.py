@@ -1,0 +1,118 @@
+"""Vectorized sweeps: K quickstart seeds trained as one program against the same K runs one by one.
+
+    python -m benchmarks.vectorized                 # K = 4 and 8, 300 steps each (about 15 minutes)
+    python -m benchmarks.vectorized --steps 100     # quicker
+
+Two figures per K, both on the quickstart config (configs/quickstart.toml, its data and model):
+
+- **steady step**: the median time of one vectorized step of K points over K times the median time of
+  one lone step (the heart of the matter: how much of the machine one small model leaves idle);
+- **whole training**: the wall time of `train_vectorized` on K fresh points over the summed wall time of
+  the same K points trained one by one with `train_and_evaluate` (compile, data, checkpoints and the
+  validation evaluations included; end samples off on both sides).
+
+Writes ``benchmarks/vectorized.json`` and prints a table for BENCHMARKS.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import tempfile
+import time
+from pathlib import Path
+
+import jax
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+
+
+def _cfgs(k: int, steps: int):
+  from chorjax.config import load_config
+
+  base = ["log.tensorboard=false", "log.progress=none", "sample.frames=0", f"train.num_steps={steps}"]
+  return [load_config("configs/quickstart.toml", [*base, f"train.seed={s}"]) for s in range(k)]
+
+
+def steady_steps(k: int, reps: int = 30) -> dict:
+  """Median seconds of one lone step and of one vectorized step of ``k`` points."""
+  from chorjax.data.dataset import WindowSampler, load_dataset
+  from chorjax.run import create_train_state
+  from chorjax.train import train_step
+  from chorjax.vectorized import vec_train_step
+
+  cfgs = _cfgs(k, 100)
+  ds = load_dataset(cfgs[0].data)
+  made = [create_train_state(c, ds.features.dim, ds.num_motions) for c in cfgs]
+  spec = made[0][1]
+  samplers = [WindowSampler(ds.train, cfgs[0].data.seq_length, cfgs[0].train.batch_size, c.train.seed) for c in cfgs]
+  box = {"one": made[0][0], "all": jax.tree.map(lambda *xs: jax.numpy.stack(xs), *[s for s, _ in made])}
+  key = jax.random.key(0)
+  keys = jax.numpy.stack([jax.random.key_data(jax.random.key(c.train.seed)) for c in cfgs])
+  hyper = {"lr_scale": jax.numpy.ones(k), "noise": jax.numpy.full(k, cfgs[0].train.input_noise)}
+
+  def one(step):
+    box["one"], m = train_step(box["one"], samplers[0].batch(step), key, spec)
+    return m["loss"]
+
+  def together(step):
+    batch = jax.tree.map(lambda *xs: np.stack(xs), *[s.batch(step) for s in samplers])
+    box["all"], m = vec_train_step(box["all"], batch, keys, hyper, spec)
+    return m["loss"]
+
+  out = {}
+  for name, fn in (("one", one), ("together", together)):
+    for s in range(3):  # compile and settle
+      jax.block_until_ready(fn(s))
+    times = []
+    for s in range(reps):
+      t = time.perf_counter()
+      jax.block_until_ready(fn(3 + s))
+      times.append(time.perf_counter() - t)
+    out[name] = float(np.median(times))
+  return out
+
+
+def whole_training(k: int, steps: int) -> dict:
+  from chorjax.train import train_and_evaluate
+  from chorjax.vectorized import train_vectorized
+
+  cfgs = _cfgs(k, steps)
+  with tempfile.TemporaryDirectory() as d:
+    t = time.perf_counter()
+    train_vectorized(cfgs, [Path(d) / f"v{i}" for i in range(k)])
+    together = time.perf_counter() - t
+    t = time.perf_counter()
+    for i, c in enumerate(cfgs):
+      train_and_evaluate(c, Path(d) / f"a{i}")
+    alone = time.perf_counter() - t
+  return {"together_s": together, "one_by_one_s": alone}
+
+
+def main(argv=None):
+  ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+  ap.add_argument("--steps", type=int, default=300, help="training steps per point (default 300)")
+  ap.add_argument("--ks", type=int, nargs="+", default=[4, 8], help="points trained together (default 4 8)")
+  args = ap.parse_args(argv)
+  results = {"machine": platform.processor() or platform.machine(), "jax": jax.__version__, "steps": args.steps}
+  print(
+    "| K | lone step | K points' step | step ratio (K together / K alone) | training: together | one by one | ratio |"
+  )
+  print("|---|---|---|---|---|---|---|")
+  for k in args.ks:
+    s = steady_steps(k)
+    w = whole_training(k, args.steps)
+    r = {**s, **w, "step_ratio": s["together"] / (k * s["one"]), "wall_ratio": w["together_s"] / w["one_by_one_s"]}
+    results[f"k{k}"] = r
+    print(
+      f"| {k} | {s['one'] * 1e3:.0f} ms | {s['together'] * 1e3:.0f} ms | {r['step_ratio']:.2f} | "
+      f"{w['together_s']:.0f} s | {w['one_by_one_s']:.0f} s | {r['wall_ratio']:.2f} |",
+      flush=True,
+    )
+  (HERE / "vectorized.json").write_text(json.dumps(results, indent=1))
+
+
+if __name__ == "__main__":
+  main()
