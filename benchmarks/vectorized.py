@@ -9,7 +9,7 @@ Two figures per K, both on the quickstart config (configs/quickstart.toml, its d
   one lone step (the heart of the matter: how much of the machine one small model leaves idle);
 - **whole training**: the wall time of `train_vectorized` on K fresh points over the summed wall time of
   the same K points trained one by one with `train_and_evaluate` (compile, data, checkpoints and the
-  validation evaluations included; end samples off on both sides).
+  validation evaluations included; a 10-frame end sample on both sides).
 
 Writes ``benchmarks/vectorized.json`` and prints a table for BENCHMARKS.md.
 """
@@ -32,7 +32,7 @@ HERE = Path(__file__).resolve().parent
 def _cfgs(k: int, steps: int):
   from chorjax.config import load_config
 
-  base = ["log.tensorboard=false", "log.progress=none", "sample.frames=0", f"train.num_steps={steps}"]
+  base = ["log.tensorboard=false", "log.progress=none", "sample.frames=10", f"train.num_steps={steps}"]
   return [load_config("configs/quickstart.toml", [*base, f"train.seed={s}"]) for s in range(k)]
 
 
