@@ -280,8 +280,9 @@ def test_a_folder_of_mixamo_bvh_trains_with_only_the_dataset_set(shared_data, tm
   folder.mkdir()
   for take in ("131_01", "131_02"):
     _renamed_bvh(shared_data / "bvh" / "cmu131" / f"{take}.bvh", folder / f"{take}.bvh", CONVERTER, "mixamorig:")
+  (tmp_path / "defaults.toml").write_text("")  # nothing but the dataset
   code = cli.main(
-    ["train", "configs/quickstart.toml", *TINY, f"data.dataset={folder}", "--workdir", str(tmp_path / "run")]
+    ["train", str(tmp_path / "defaults.toml"), *TINY, f"data.dataset={folder}", "--workdir", str(tmp_path / "run")]
   )
   out = capsys.readouterr().out
   assert code == 0
