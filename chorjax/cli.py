@@ -110,7 +110,7 @@ def _data_convert(args) -> int:
 
   from chorjax.data import transforms
   from chorjax.data.csv import write_csv
-  from chorjax.data.dataset import read_motions, read_takes, resolve_files, to_up_axis
+  from chorjax.data.dataset import read_motions, read_takes, resolve_files, to_rate, to_up_axis
   from chorjax.data.mapping import map_takes, to_mpii16
   from chorjax.metrics import body_size
 
@@ -137,14 +137,7 @@ def _data_convert(args) -> int:
       for m in motions
     ]
     # same frame rate, and the same average place of the root (the root is absolute in the features)
-    motions = [
-      m
-      if m.fps == ref[0].fps
-      else m.replace(
-        positions=np.asarray(transforms.resample(m.positions, m.fps, ref[0].fps), np.float32), fps=ref[0].fps
-      )
-      for m in motions
-    ]
+    motions = [to_rate(m, ref[0].fps) for m in motions]
     ref_root = np.mean([r.positions[:, r.skeleton.root].mean(0) for r in ref], axis=0)
     motions = [m.replace(positions=m.positions - m.positions[:, m.skeleton.root].mean(0) + ref_root) for m in motions]
   if args.up_axis:

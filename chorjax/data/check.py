@@ -94,15 +94,10 @@ def detect_up(motion: Motion, mapped: Motion | None) -> tuple[str, str]:
 
 def detect_units(motion: Motion, mapped: Motion | None, up_axis: str) -> tuple[str, float, str]:
   """``(unit, metres per unit, evidence)`` from the body's size (see the module docstring)."""
+  from chorjax.data.mapping import leg_length
+
   if mapped is not None:
-    j = mapped.skeleton.joint_names.index
-    p = mapped.positions
-    legs = [
-      np.linalg.norm(p[:, j(f"{s}_hip")] - p[:, j(f"{s}_knee")], axis=-1)
-      + np.linalg.norm(p[:, j(f"{s}_knee")] - p[:, j(f"{s}_foot")], axis=-1)
-      for s in ("left", "right")
-    ]
-    size, want, what = float(np.mean(legs)), LEG_M, "leg (hip-knee-ankle)"
+    size, want, what = leg_length(mapped.positions), LEG_M, "leg (hip-knee-ankle)"
   else:
     h = motion.positions @ _axis_vector(up_axis)
     size, want, what = float(np.median(h.max(1) - h.min(1))), HEIGHT_M, "height (marker spread)"

@@ -386,6 +386,13 @@ def _checked(motion: Motion, mapping: Mapping, where: str) -> Mapping:
   return mapping
 
 
+def leg_length(positions_TxJx3) -> float:
+  """Mean leg length (hip -> knee -> ankle, mean over frames and both sides) of 16-joint positions."""
+  p, j = np.asarray(positions_TxJx3, np.float64), TARGETS.index
+  bone = lambda a, b: np.linalg.norm(p[:, j(a)] - p[:, j(b)], axis=-1).mean()
+  return sum(bone(f"{s}_hip", f"{s}_knee") + bone(f"{s}_knee", f"{s}_foot") for s in ("left", "right")) / 2
+
+
 def map_takes(motions, joint_map=None) -> tuple[list[Motion], dict]:
   """Every take on the 16-joint layout, and ``{take name: Mapping}``.
 

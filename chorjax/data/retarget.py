@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from chorjax.data.bvh import _POS, _ROT, _parse_hierarchy, forward_kinematics, read_bvh
-from chorjax.data.mapping import apply_mapping, find_mapping
+from chorjax.data.mapping import apply_mapping, find_mapping, leg_length
 from chorjax.data.motion import Motion
 from chorjax.data.rotations import matrix_to_euler, swing
 from chorjax.data.skeletons import MPII16
@@ -69,7 +69,7 @@ class Character:
     return self.at[self.mapping.joints[name]]
 
   def leg(self) -> float:
-    return _leg({n: self.played[:, k] for k, n in enumerate(MPII16.joint_names)})
+    return leg_length(self.played)
 
   def floor(self) -> float:
     """The ankles' height standing: the 5th percentile of the lower ankle over its frames (y up)."""
@@ -128,7 +128,7 @@ def retarget(motion: Motion, character: Character) -> np.ndarray:
       left, right, mid = side["left"], side["right"], next(i for i, c in enumerate(kids) if "_" not in c)
       turn = _frame(obs[:, left] - obs[:, right], obs[:, mid]) @ _frame(rest[left] - rest[right], rest[mid]).T
       glob[:, k] = turn
-  scale = character.leg() / _leg(g)
+  scale = character.leg() / leg_length(gen)
   up = np.eye(3)[1]  # BVH is y-up
   floor = np.percentile(np.minimum(g["left_foot"] @ up, g["right_foot"] @ up), 5)  # ankles standing
   pelvis_at = g["pelvis"] * scale
@@ -156,17 +156,6 @@ def _frame(across, along) -> np.ndarray:
   y = along - np.sum(along * x, -1, keepdims=True) * x
   y = y / np.maximum(np.linalg.norm(y, axis=-1, keepdims=True), 1e-12)
   return np.stack([x, y, np.cross(x, y)], axis=-1)
-
-
-def _leg(g: dict) -> float:
-  return (
-    sum(
-      float(np.linalg.norm(g[f"{s}_{a}"] - g[f"{s}_{b}"], axis=-1).mean())
-      for s in ("left", "right")
-      for a, b in (("hip", "knee"), ("knee", "foot"))
-    )
-    / 2
-  )
 
 
 def write_retargeted(motion: Motion, character, path, *, overwrite: bool = True) -> Path:
