@@ -332,6 +332,9 @@ def _print_metrics(result: dict, keys) -> None:
     print(f"segments of {result['segment_frames']} frames (movement_first/last/min/max, jitter_max)")
   for k in keys:
     real = result.get(k + "_real")
+    if result.get(k) is None:
+      print(f"{k:22s} {'-':>10s}   (none: a GAN has no likelihood)" if k == "heldout_loss" else f"{k:22s} -")
+      continue
     print(f"{k:22s} {mean_of(result[k]):10.4g}" + (f"   (real: {mean_of(real):.4g})" if real is not None else ""))
 
 
@@ -696,7 +699,13 @@ def _add_run_commands(sub) -> None:
   train.add_argument("--process-id", type=int, help="this process's index (parallel.process_id)")
   train.set_defaults(func=_train)
 
-  sample = sub.add_parser("sample", help="generate new dance from a trained run")
+  sample = sub.add_parser(
+    "sample",
+    help="generate new dance from a trained run",
+    description="Generates new dance from a trained run. A GAN run (model.family = 'gan') draws each dancer as one "
+    "sequence of --frames frames from noise: no --prime, no --motion/--mix conditioning, and the MDN draw "
+    "controls do not apply (--clamp, --rigid-bones and --foot-lock do).",
+  )
   sample.add_argument("workdir", metavar="WORKDIR", help="a run directory with checkpoints")
   sample.add_argument(
     "-o",

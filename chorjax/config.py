@@ -89,6 +89,13 @@ class DataConfig:
 
 @dataclasses.dataclass(frozen=True)
 class ModelConfig:
+  family: str = _field(
+    "rnn",
+    "model family: 'rnn' (a recurrent core predicting every next frame through model.head) or 'gan' (an "
+    "LSTM-GAN: a generator turns a noise vector into a whole sequence, a critic tells real from generated; "
+    "configured under [gan])",
+    choices=("rnn", "gan"),
+  )
   cell: str = _field("lnlstm", "recurrent cell", choices=("lstm", "lnlstm", "gru"))
   head: str = _field("mdn", "output head", choices=("mse", "mdn"))
   num_layers: int = _field(3, "stacked recurrent layers", minimum=1)
@@ -102,6 +109,45 @@ class ModelConfig:
   forget_bias: float = _field(1.0, "initial forget-gate bias of (LN-)LSTM cells (notebook: 5.0)")
   initial_state: str = _field(
     "motion", "initial (c, h): projected motion-id weights, or zeros", choices=("motion", "zero")
+  )
+
+
+@dataclasses.dataclass(frozen=True)
+class GanConfig:
+  """The LSTM-GAN family (``model.family = "gan"``); the optimizer is ``[optim]``'s, with these learning rates."""
+
+  latent_size: int = _field(64, "size of the noise vector the generator turns into a sequence", minimum=1)
+  generator_dense: tuple = _field((128,), "the generator's dense ReLU layers between the noise and its LSTM")
+  frame_noise: int = _field(
+    0,
+    "channels of fresh noise fed to the generator's LSTM at every frame beside the repeated vector (0 = the "
+    "tutorial's generator: one noise vector, repeated; its LSTM driven by a constant settles into a still "
+    "pose past the training length)",
+    minimum=0,
+  )
+  generator_layers: int = _field(2, "the generator's stacked recurrent layers", minimum=1)
+  generator_size: int = _field(512, "units per generator recurrent layer", minimum=1)
+  critic_layers: int = _field(2, "the critic's stacked recurrent layers", minimum=1)
+  critic_size: int = _field(512, "units per critic recurrent layer", minimum=1)
+  critic_dense: tuple = _field((512,), "the critic's dense ReLU layers after its last time step")
+  cell: str = _field("lstm", "recurrent cell of generator and critic", choices=("lstm", "lnlstm", "gru"))
+  loss: str = _field(
+    "bce",
+    "adversarial loss: 'bce' (the tutorial's: binary cross-entropy, a non-saturating generator loss) or "
+    "'wgan-gp' (Wasserstein critic with gradient penalty, the stable alternative)",
+    choices=("bce", "wgan-gp"),
+  )
+  gp_weight: float = _field(10.0, "weight of the gradient penalty (wgan-gp)", minimum=0.0)
+  critic_steps: int = _field(1, "critic updates per generator update, each on its own real batch", minimum=1)
+  generator_lr: float = _field(1e-4, "generator learning rate (peak, under optim.schedule)", minimum=0.0)
+  critic_lr: float = _field(1e-4, "critic learning rate (peak, under optim.schedule)", minimum=0.0)
+  pose: str = _field(
+    "directions",
+    "what the generator writes: 'directions' (needs data.representation = directions: every bone's "
+    "direction is made a unit vector after the generator, bones keep the takes' mean lengths, the "
+    "positions-only stand-in for unit quaternions + forward kinematics) or 'features' (the run's "
+    "data.representation as it is)",
+    choices=("directions", "features"),
   )
 
 
@@ -270,6 +316,7 @@ class ParallelConfig:
 class Config:
   data: DataConfig = dataclasses.field(default_factory=DataConfig)
   model: ModelConfig = dataclasses.field(default_factory=ModelConfig)
+  gan: GanConfig = dataclasses.field(default_factory=GanConfig)
   optim: OptimConfig = dataclasses.field(default_factory=OptimConfig)
   train: TrainConfig = dataclasses.field(default_factory=TrainConfig)
   sample: SampleConfig = dataclasses.field(default_factory=SampleConfig)
@@ -285,6 +332,7 @@ class Config:
 _SECTION_CLASSES = {
   "data": DataConfig,
   "model": ModelConfig,
+  "gan": GanConfig,
   "optim": OptimConfig,
   "train": TrainConfig,
   "sample": SampleConfig,

@@ -46,8 +46,9 @@ def evaluate(
       persistence, rigid bones); unset or None: the run's ``[sample]``.
 
   Returns:
-    The held-out loss and every key of :func:`chorjax.scoring.score` (JSON-ready): the generated
-    motion measured against the takes in ``data``, novelty against the run's training takes.
+    The held-out loss (None for a GAN, which has no likelihood) and every key of
+    :func:`chorjax.scoring.score` (JSON-ready): the generated motion measured against the takes in
+    ``data``, novelty against the run's training takes.
   """
   run = load_run(workdir, checkpoint)
   sampling = run.sampling(**controls)
@@ -58,7 +59,7 @@ def evaluate(
   if frames < 2 * window:
     raise UserError(f"--frames {frames}: need at least {2 * window} frames")
 
-  loss = heldout_loss(run, real)
+  loss = None if run.is_gan else heldout_loss(run, real)  # a GAN has no likelihood
   seeds = list(seeds) if seeds else [seed]
   decoded = [generate_positions(run, train, num, frames, s, sampling) for s in seeds]
   y_up = lambda pos: np.asarray(to_y_up(pos, feats.up_axis))  # data space -> y-up: what the metrics measure
@@ -80,7 +81,7 @@ def evaluate(
     "sampling": {**sampling, "seed": seed, "seeds": seeds},
     # the first dancer, in data space: write_metrics stores it beside the JSON (compare draws its strip)
     "first_sample": Motion(decoded[0][0], fps, sk, feats.up_axis, name=f"{Path(workdir).name} seed {seeds[0]}"),
-    "loss_kind": "nll" if run.config.model.head == "mdn" else "mse",
+    "loss_kind": "none" if run.is_gan else "nll" if run.config.model.head == "mdn" else "mse",
     "heldout_loss": loss,
     **scored,
   }

@@ -329,13 +329,15 @@ def _loss_plot(plt, runs, path: Path) -> None:
 
   fig, ax = plt.subplots(figsize=(8, 4))
   for r in runs:
+    if r["config"]["model"].get("family") == "gan":  # adversarial losses are no likelihood: not on this axis
+      continue
     steps = [h["step"] for h in r["history"]]
     ax.plot(steps, [h["train_loss"] for h in r["history"]], label=f"{r['name']} train")
     val = [(h["step"], h["val_loss"]) for h in r["history"] if "val_loss" in h]
     if val:
       ax.plot(*zip(*val), "--", label=f"{r['name']} val")
   ax.set_xlabel("step")
-  ax.set_ylabel("loss (NLL per frame or MSE)")
+  ax.set_ylabel("loss (NLL per frame or MSE; GAN runs not drawn)")
   ax.legend(fontsize=7)
   fig.tight_layout()
   save_figure(fig, path)
@@ -399,9 +401,10 @@ def _table(groups) -> list[str]:
   for g in groups:
     c = g["runs"][0]["config"]
     cells = [_cell(g, k, rule) for k, _, rule in COLUMNS]
-    lines.append(
-      f"| {g['name']} | {len(g['runs'])} | {c['model']['cell']} | {c['model']['head']} | " + " | ".join(cells) + " |"
-    )
+    cell, head = c["model"]["cell"], c["model"]["head"]
+    if c["model"].get("family") == "gan":  # the generator's cell; the adversarial loss in the head column
+      cell, head = c["gan"]["cell"], f"gan ({c['gan']['loss']})"
+    lines.append(f"| {g['name']} | {len(g['runs'])} | {cell} | {head} | " + " | ".join(cells) + " |")
   e0 = groups[0]["runs"][0]["eval"]
   real = lambda k: f"{mean_of(e0[k]):.4g}" if e0.get(k) is not None else "-"
   lines.append(

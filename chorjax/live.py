@@ -451,6 +451,8 @@ def run_live(
   if record is not None and Path(record).suffix.lower() != ".npz":
     raise UserError(f"{record}: --record writes an .npz")
   run = load_run(workdir, checkpoint)
+  if run.is_gan:
+    raise UserError(f"{workdir}: a GAN run writes whole sequences from noise; live mode streams the rnn family")
   sampling = run.sampling(**(controls or {}))
   run = run.ranged(sampling)
   weights = motion_weight_vector(run.num_motions, motion, mix)  # --motion ID or --mix ID:W,...; default 0

@@ -27,6 +27,7 @@ from chorjax.config import Config, config_from_dict
 from chorjax.data.features import Features
 from chorjax.errors import UserError
 from chorjax.models import create_model
+from chorjax.models.gan import GanModel, gan_controls
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,15 +83,17 @@ class StepSpec:
   feedback: Feedback | None = None
 
 
-def create_optimizer(cfg: Config) -> tuple[optax.GradientTransformation, optax.Schedule]:
-  """The optax chain of ``cfg.optim``: optional global-norm clipping, then the optimizer."""
+def create_optimizer(cfg: Config, lr: float | None = None) -> tuple[optax.GradientTransformation, optax.Schedule]:
+  """The optax chain of ``cfg.optim``: optional global-norm clipping, then the optimizer; ``lr``: the peak
+  learning rate instead of ``optim.lr`` (the GAN family's two networks)."""
   o = cfg.optim
+  peak = o.lr if lr is None else lr
   if o.schedule == "warmup_cosine":
     schedule = optax.warmup_cosine_decay_schedule(
-      0.0, o.lr, o.warmup_steps, max(cfg.train.num_steps, o.warmup_steps + 1), end_value=o.lr * o.final_lr_ratio
+      0.0, peak, o.warmup_steps, max(cfg.train.num_steps, o.warmup_steps + 1), end_value=peak * o.final_lr_ratio
     )
   else:
-    schedule = optax.constant_schedule(o.lr)
+    schedule = optax.constant_schedule(peak)
   if o.name == "adam":
     opt = optax.adam(schedule, b1=o.b1, b2=o.b2)
   elif o.name == "adamw":
@@ -112,8 +115,14 @@ def create_train_state(cfg: Config, dim: int, num_motions: int) -> tuple[dict, S
 
 
 def model_template(cfg: Config, dim: int, num_motions: int) -> tuple[Any, dict]:
-  """``(graphdef, abstract params)`` of ``cfg``'s model, without computing any parameter."""
-  model = nnx.eval_shape(lambda: create_model(cfg.model, dim, num_motions, cfg.train.seed))
+  """``(graphdef, abstract params)`` of ``cfg``'s model (either family), without computing any parameter."""
+
+  def build():
+    if cfg.model.family == "gan":
+      return GanModel(cfg.gan, dim, unit_directions=cfg.gan.pose == "directions", rngs=nnx.Rngs(cfg.train.seed))
+    return create_model(cfg.model, dim, num_motions, cfg.train.seed)
+
+  model = nnx.eval_shape(build)
   graphdef, params = nnx.split(model, nnx.Param)
   return graphdef, nnx.to_pure_dict(params)
 
@@ -173,9 +182,15 @@ class Run:
     """The frame rate of the training takes (runs from before it was recorded: ``data.fps``)."""
     return self.frame_rate or self.config.data.fps
 
+  @property
+  def is_gan(self) -> bool:
+    return self.config.model.family == "gan"
+
   def sampling(self, **given) -> dict:
-    """Sampling controls: the ones given (not None), else the run's ``[sample]`` config."""
-    return self.config.sample.controls(**given)
+    """Sampling controls: the ones given (not None), else the run's ``[sample]`` config. A GAN draws whole
+    sequences from noise: the frame-by-frame MDN draw controls do not apply and are recorded as off."""
+    controls = self.config.sample.controls(**given)
+    return gan_controls(controls) if self.is_gan else controls
 
   def ranged(self, sampling: dict) -> Run:
     """This run with the training range and pace that ``sampling`` (``clamp``, ``pace``) holds to, and
@@ -273,7 +288,7 @@ def scale_ceiling(graphdef, params, train, seq_length: int, quantile: float):
   from chorjax.models.heads import MDNHead
 
   model = nnx.merge(graphdef, params)
-  if not isinstance(model.head, MDNHead):
+  if not isinstance(getattr(model, "head", None), MDNHead):
     return np.full(1, np.inf, np.float32)
   win = eval_windows(train, seq_length, max_windows=256)
   if not win:

@@ -18,6 +18,7 @@ from flax import nnx
 
 from chorjax.data.dataset import conform, read_takes
 from chorjax.errors import UserError
+from chorjax.models.gan import GanModel, Projection, gan_controls, generate_sequences
 
 _STATIC = ("graphdef", "num_frames", "greedy", "noise_smoothing", "persistence", "crossfade", "pace", "pace_lag")
 
@@ -175,7 +176,19 @@ def dance(graphdef, params, features, motion, key, num_frames: int, controls: di
   """Dancers in data space ``[B, T, J, 3]``: :func:`generate` with ``controls`` (``SampleConfig.controls``;
   clipped to the training range if asked), decoded (with rigid bones and locked feet if asked). A prime
   phrase comes first, decoded as one with its continuation (root-motion features integrate across the
-  seam)."""
+  seam). A GAN (``model.family = "gan"``) draws each dancer as one sequence from noise (``motion`` only
+  counts them; no prime)."""
+  model = nnx.merge(graphdef, params)
+  if isinstance(model, GanModel):
+    if prime_BxPxD is not None:
+      raise UserError("--prime: a GAN draws whole sequences from noise; it cannot continue a phrase")
+    controls = gan_controls(controls)
+    projection = Projection.of(features) if model.unit_directions else None
+    bounds = draw_controls(features, controls).get("bounds")
+    z = generate_sequences(
+      graphdef, params, key, num=int(np.shape(motion)[0]), num_frames=num_frames, projection=projection, bounds=bounds
+    )
+    return np.asarray(features.decode(z, rigid=controls["rigid_bones"], lock_feet=controls["foot_lock"]))
   drawn = draw_controls(features, controls)
   z = generate(graphdef, params, motion, key, num_frames=num_frames, prime_BxPxD=prime_BxPxD, **drawn)
   if prime_BxPxD is not None:

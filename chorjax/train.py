@@ -37,6 +37,7 @@ from chorjax import checkpoint as ckpt
 from chorjax.config import Config, config_diff, config_from_dict, resumable_keys
 from chorjax.data.dataset import Dataset, WindowSampler, dataset_notes, eval_windows, load_dataset
 from chorjax.errors import Interrupted, UserError, atomic_write
+from chorjax.gan import check_gan, create_gan_state, gan_train_step
 from chorjax.models import motion_weight_vector
 from chorjax.run import Feedback, StepSpec, create_train_state, run_meta, with_ceiling
 from chorjax.sample import dance
@@ -522,6 +523,10 @@ def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=No
   workdir = Path(workdir).absolute()
   if workdir.exists() and not workdir.is_dir():
     raise UserError(f"{workdir}: is a file, not a run directory (--workdir names a folder)")
+  if cfg.model.family == "gan":  # before anything is written
+    check_gan(cfg, cfg.data.representation)
+    if parallel is not None:
+      raise UserError("parallel.data_parallel: not available for the GAN family (model.family = 'gan')")
   is_main = parallel is None or parallel.is_main
   with workdir_lock(workdir) if is_main else contextlib.nullcontext():
     keep_old_config = _check_saved_config(workdir, cfg, force) and is_main
@@ -539,13 +544,16 @@ def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=No
       return _train(cfg, workdir, ds, manager, parallel, cleanup, keep_old_config)
 
 
-def _restore_or_init(cfg: Config, workdir: Path, ds: Dataset, manager, parallel) -> tuple[dict, StepSpec, int]:
+def _restore_or_init(cfg: Config, workdir: Path, ds: Dataset, manager, parallel) -> tuple[dict, Any, int]:
   """The newest intact checkpoint's state (checked to be of these takes), or a fresh one if there is none.
 
   A damaged checkpoint (a killed write, a truncated file) is moved aside into ``checkpoints-damaged/``
   with a warning line and the next older one is tried; if every one is damaged, a UserError (never a
   silent restart from step 0)."""
-  state, spec = create_train_state(cfg, ds.features.dim, ds.num_motions)
+  if cfg.model.family == "gan":
+    state, spec = create_gan_state(cfg, ds.features)
+  else:
+    state, spec = create_train_state(cfg, ds.features.dim, ds.num_motions)
   steps = sorted(manager.all_steps(), reverse=True)
   damaged = []
   for start in steps:
@@ -553,7 +561,8 @@ def _restore_or_init(cfg: Config, workdir: Path, ds: Dataset, manager, parallel)
       meta = ckpt.step_meta(manager, start)
       if meta["id_map"] != ds.id_map:
         raise UserError(f"{workdir}: its checkpoints were trained on other takes ({list(meta['id_map'])[:3]}...)")
-      changed = config_from_dict(meta["config"]).model != cfg.model
+      saved = config_from_dict(meta["config"])
+      changed = (saved.model, saved.gan) != (cfg.model, cfg.gan)
       sharding = None if parallel is None else parallel.replicated
       restored = ckpt.restore(manager, start, state, sharding, mismatch=changed)
     except ckpt.Damaged as e:
@@ -581,10 +590,12 @@ def _train(
   if is_main:
     _write_config(workdir, cfg)
     _truncate_metrics(workdir / "metrics.jsonl", start)
-  sampler = WindowSampler(ds.train, cfg.data.seq_length, cfg.train.batch_size, cfg.train.seed)
-  val = eval_windows(ds.val, cfg.data.seq_length, cfg.train.val_windows)
+  gan = cfg.model.family == "gan"  # batches of critic_steps x batch_size windows; no likelihood to validate
+  per_step = cfg.train.batch_size * (cfg.gan.critic_steps if gan else 1)
+  sampler = WindowSampler(ds.train, cfg.data.seq_length, per_step, cfg.train.seed)
+  val = {} if gan else eval_windows(ds.val, cfg.data.seq_length, cfg.train.val_windows)
   key: Any = jax.random.key(cfg.train.seed)
-  jitted, get_batch, host_params = train_step, sampler.batch, lambda p: p
+  jitted, get_batch, host_params = gan_train_step if gan else train_step, sampler.batch, lambda p: p
   if parallel is not None:
     state, val, key = parallel.replicate(state), parallel.replicate(val), parallel.replicate(jax.random.key_data(key))
     jitted = sharded_train_step(parallel)

@@ -1,5 +1,8 @@
 """Small shared helpers for tests: tiny configs that keep the suite fast on 2 CPU cores."""
 
+import struct
+from pathlib import Path
+
 from chorjax.config import load_config
 
 TINY = [
@@ -20,3 +23,20 @@ TINY = [
 def tiny_config(*overrides, path=None):
   """The defaults shrunk to toy sizes (hidden 16, 2 layers, T 12, batch 4, 2 steps)."""
   return load_config(path, [*TINY, *overrides])
+
+
+def read_events(event_file: Path) -> tuple[dict, dict]:
+  """Reads a TensorBoard event file with tensorboardX's bundled protobufs: (scalars, images) by tag."""
+  from tensorboardX.proto import event_pb2
+
+  data, scalars, images, i = event_file.read_bytes(), {}, {}, 0
+  while i < len(data):
+    (n,) = struct.unpack("<Q", data[i : i + 8])
+    ev = event_pb2.Event.FromString(data[i + 12 : i + 12 + n])
+    i += 12 + n + 4
+    for v in ev.summary.value:
+      if v.HasField("image"):
+        images.setdefault(v.tag, []).append((ev.step, v.image.encoded_image_string))
+      else:
+        scalars.setdefault(v.tag, []).append((ev.step, v.simple_value))
+  return scalars, images

@@ -5,7 +5,6 @@ import json
 import os
 import shutil
 import signal
-import struct
 import subprocess
 import sys
 import time
@@ -15,7 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import TINY, tiny_config
+from helpers import TINY, read_events, tiny_config
 
 from chorjax import checkpoint as ckpt
 from chorjax import cli
@@ -120,23 +119,6 @@ def test_non_finite_loss_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_pa
 
 
 # ---------------------------------------------------------------- the run directory
-
-
-def read_events(event_file: Path) -> tuple[dict, dict]:
-  """Reads a TensorBoard event file with tensorboardX's bundled protobufs: (scalars, images) by tag."""
-  from tensorboardX.proto import event_pb2
-
-  data, scalars, images, i = event_file.read_bytes(), {}, {}, 0
-  while i < len(data):
-    (n,) = struct.unpack("<Q", data[i : i + 8])
-    ev = event_pb2.Event.FromString(data[i + 12 : i + 12 + n])
-    i += 12 + n + 4
-    for v in ev.summary.value:
-      if v.HasField("image"):
-        images.setdefault(v.tag, []).append((ev.step, v.image.encoded_image_string))
-      else:
-        scalars.setdefault(v.tag, []).append((ev.step, v.simple_value))
-  return scalars, images
 
 
 def test_run_directory_holds_config_metrics_events_checkpoints_and_sample(tmp_path):

@@ -1,0 +1,151 @@
+"""The LSTM-GAN family (the generative-dance tutorials' LSTM-GAN): a generator turns a noise vector into a
+whole pose sequence, a critic tells real sequences from generated ones.
+
+Generator: noise ``z [B, Z]`` -> dense ReLU layers -> the vector repeated once per frame (beside
+``gan.frame_noise`` channels of fresh noise per frame, where asked: C-RNN-GAN's per-frame input, so the
+recurrent state keeps being driven) -> stacked recurrent layers -> a dense layer per frame to the pose
+features. The recurrent layers unroll to any
+number of frames, so a sequence of any length can be drawn (quality past the training length is measured
+in ``experiments/families``). Critic: stacked recurrent layers over the sequence -> the last time step ->
+dense ReLU layers -> one logit (a probability through a sigmoid for the ``bce`` loss; a Wasserstein
+score for ``wgan-gp``).
+
+Both use the cells of :mod:`chorjax.models.cells` (their fused layers support the second derivative the
+gradient penalty needs; ``tests/test_gan.py`` checks it against a plain scan). :class:`Projection` makes
+the generator's bone directions unit vectors, the positions-only stand-in for normalizing quaternions.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import itertools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import nnx
+
+from chorjax.models.rnn import RecurrentCore
+
+
+def _dense_stack(sizes, *, rngs: nnx.Rngs) -> nnx.List:
+  return nnx.List([nnx.Linear(a, b, rngs=rngs) for a, b in itertools.pairwise(sizes)])
+
+
+class Generator(nnx.Module):
+  """``generator(z_BxZ, num_frames)`` -> normalized features ``[B, num_frames, D]``."""
+
+  def __init__(self, gan, dim: int, *, rngs: nnx.Rngs):
+    sizes = (gan.latent_size, *gan.generator_dense)
+    self.latent_size, self.frame_noise = gan.latent_size, gan.frame_noise
+    self.dense = _dense_stack(sizes, rngs=rngs)
+    self.core = RecurrentCore(
+      gan.cell,
+      sizes[-1] + gan.frame_noise,
+      gan.generator_size,
+      gan.generator_layers,
+      1,
+      initial_state="zero",
+      rngs=rngs,
+    )
+    self.out = nnx.Linear(gan.generator_size, dim, rngs=rngs)
+
+  def __call__(self, z_BxZ, num_frames: int, noise_BxTxF=None):
+    """``noise_BxTxF``: fresh noise for every frame, beside the repeated vector (``gan.frame_noise``
+    channels; needed when it is > 0)."""
+    h = z_BxZ
+    for layer in self.dense:
+      h = nnx.relu(layer(h))
+    x_BxTxE = jnp.broadcast_to(h[:, None], (h.shape[0], num_frames, h.shape[-1]))
+    if self.frame_noise:
+      x_BxTxE = jnp.concatenate([x_BxTxE, noise_BxTxF], -1)
+    h_BxTxH, _ = self.core(x_BxTxE, self.core.initial_carry(jnp.zeros((h.shape[0], 1), h.dtype)))
+    return self.out(h_BxTxH)
+
+
+class Critic(nnx.Module):
+  """``critic(x_BxTxD)`` -> one logit per sequence ``[B]``."""
+
+  def __init__(self, gan, dim: int, *, rngs: nnx.Rngs):
+    self.core = RecurrentCore(gan.cell, dim, gan.critic_size, gan.critic_layers, 1, initial_state="zero", rngs=rngs)
+    sizes = (gan.critic_size, *gan.critic_dense)
+    self.dense = _dense_stack(sizes, rngs=rngs)
+    self.out = nnx.Linear(sizes[-1], 1, rngs=rngs)
+
+  def __call__(self, x_BxTxD):
+    h_BxTxH, _ = self.core(x_BxTxD, self.core.initial_carry(jnp.zeros((x_BxTxD.shape[0], 1), x_BxTxD.dtype)))
+    h = h_BxTxH[:, -1]
+    for layer in self.dense:
+      h = nnx.relu(layer(h))
+    return self.out(h)[:, 0]
+
+
+class GanModel(nnx.Module):
+  """The generator and the critic, one parameter tree ``{generator, critic}`` (one checkpoint).
+  ``unit_directions``: the generator's bone directions are made unit vectors (:class:`Projection`)."""
+
+  def __init__(self, gan, dim: int, *, unit_directions: bool, rngs: nnx.Rngs):
+    self.dim, self.latent_size, self.unit_directions = dim, gan.latent_size, unit_directions
+    self.generator = Generator(gan, dim, rngs=rngs)
+    self.critic = Critic(gan, dim, rngs=rngs)
+
+
+@dataclasses.dataclass(frozen=True)
+class Projection:
+  """Makes the bone directions of generated ``directions`` features unit vectors (in normalized feature
+  space: denormalized, each bone's triple divided by its length, normalized again). Hashable, so it can
+  be part of a static jit argument.
+
+  Attributes:
+    starts: the first feature of every bone-direction triple.
+    mean, std: the ``[D]`` normalization statistics, as tuples.
+  """
+
+  starts: tuple
+  mean: tuple
+  std: tuple
+
+  @classmethod
+  def of(cls, features) -> Projection:
+    """For a run's ``Features`` of the ``directions`` representation (every joint but the root, whose
+    triple holds its height)."""
+    root = features.skeleton.root
+    starts = tuple(3 + 3 * j for j in range(features.skeleton.num_joints) if j != root)
+    as_tuple = lambda a: tuple(float(v) for v in np.asarray(a))
+    return cls(starts, as_tuple(features.mean), as_tuple(features.std))
+
+  def __call__(self, x_xD):
+    mean, std = jnp.asarray(self.mean, x_xD.dtype), jnp.asarray(self.std, x_xD.dtype)
+    idx = jnp.asarray(self.starts)[:, None] + jnp.arange(3)  # [bones, 3]
+    raw = x_xD * std + mean
+    dirs = raw[..., idx]
+    unit = dirs / jnp.sqrt(jnp.sum(dirs * dirs, -1, keepdims=True) + 1e-8)
+    return (raw.at[..., idx].set(unit) - mean) / std
+
+
+def fake_sequences(generator: Generator, key, num: int, frames: int, projection: Projection | None = None):
+  """``num`` generated sequences of ``frames`` frames ``[num, frames, D]`` from standard-normal noise."""
+  k_z, k_frames = jax.random.split(key)
+  z = jax.random.normal(k_z, (num, generator.latent_size))
+  x = generator(z, frames, jax.random.normal(k_frames, (num, frames, generator.frame_noise)))
+  return x if projection is None else projection(x)
+
+
+@functools.partial(jax.jit, static_argnames=("graphdef", "num", "num_frames", "projection"))
+def generate_sequences(graphdef, params, key, *, num: int, num_frames: int, projection=None, bounds=None):
+  """Sampling: ``[num, num_frames, D]`` normalized frames from a trained :class:`GanModel`; ``bounds``: each
+  feature clipped to ``(low, high)`` before the projection (``sample.clamp``)."""
+  model = nnx.merge(graphdef, params)
+  x = fake_sequences(model.generator, key, num, num_frames)
+  if bounds is not None:
+    x = jnp.clip(x, *bounds)
+  return x if projection is None else projection(x)
+
+
+def gan_controls(controls: dict) -> dict:
+  """Sampling ``controls`` (``SampleConfig.controls``) as a GAN applies them: the frame-by-frame MDN draw
+  controls at their neutral values (temperatures 1, the rest off); ``clamp``, ``rigid_bones`` and
+  ``foot_lock`` (decoding) as given."""
+  off = {"pi_temperature": 1.0, "sigma_temperature": 1.0, "greedy": False, "noise_smoothing": 0.0}
+  return {**controls, **off, "persistence": 0.0, "crossfade": 0.0, "pace": 0.0, "scale_cap": 0.0}
