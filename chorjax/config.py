@@ -143,11 +143,13 @@ class GanConfig:
   critic_lr: float = _field(1e-4, "critic learning rate (peak, under optim.schedule)", minimum=0.0)
   pose: str = _field(
     "directions",
-    "what the generator writes: 'directions' (needs data.representation = directions: every bone's "
-    "direction is made a unit vector after the generator, bones keep the takes' mean lengths, the "
-    "positions-only stand-in for unit quaternions + forward kinematics) or 'features' (the run's "
-    "data.representation as it is)",
-    choices=("directions", "features"),
+    "what the generator writes: 'directions' (every bone's direction, made a unit vector after the "
+    "generator: the positions-only stand-in for quaternions), 'rotations' (every joint's local rotation as "
+    "a quaternion, made unit length, through forward kinematics from the takes' mean rest directions, as "
+    "the tutorial does; chorjax reads BVH/AMC/C3D as positions, so the rotations are the generator's own, "
+    "not the files'), both with data.representation = directions (bones keep the takes' mean lengths), "
+    "or 'features' (the run's data.representation as it is)",
+    choices=("directions", "rotations", "features"),
   )
 
 

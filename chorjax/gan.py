@@ -27,7 +27,7 @@ from flax import nnx
 
 from chorjax.config import Config
 from chorjax.errors import UserError
-from chorjax.models.gan import GanModel, Projection, fake_sequences
+from chorjax.models.gan import GanModel, fake_sequences, pose_layer
 
 
 @dataclasses.dataclass(frozen=True)
@@ -39,7 +39,7 @@ class GanSpec:
     generator_def, critic_def: the two networks' static graphs.
     tx_generator, tx_critic: their optimizers; schedule: the generator's learning rate by step (logged).
     loss, gp_weight, critic_steps: ``gan.*``.
-    projection: unit bone directions after the generator (``gan.pose = "directions"``), else None.
+    projection: the generator's output -> the features (``models.gan.pose_layer`` of ``gan.pose``), or None.
   """
 
   graphdef: Any
@@ -51,7 +51,7 @@ class GanSpec:
   loss: str
   gp_weight: float
   critic_steps: int
-  projection: Projection | None
+  projection: Any
 
 
 def check_gan(cfg: Config, representation: str) -> None:
@@ -61,9 +61,9 @@ def check_gan(cfg: Config, representation: str) -> None:
     sizes = getattr(g, key)
     if not all(isinstance(v, int) and v > 0 for v in sizes):
       raise UserError(f"gan.{key}: expected a list of positive layer sizes, got {list(sizes)}")
-  if g.pose == "directions" and representation != "directions":
+  if g.pose != "features" and representation != "directions":
     raise UserError(
-      f"gan.pose = 'directions' needs data.representation = 'directions' (this config: {representation!r}); "
+      f"gan.pose = {g.pose!r} needs data.representation = 'directions' (this config: {representation!r}); "
       "or set gan.pose = 'features'"
     )
   if cfg.train.feedback != "none":
@@ -75,7 +75,7 @@ def create_gan_state(cfg: Config, features) -> tuple[dict, GanSpec]:
   from chorjax.run import create_optimizer
 
   check_gan(cfg, features.representation)
-  model = GanModel(cfg.gan, features.dim, unit_directions=cfg.gan.pose == "directions", rngs=nnx.Rngs(cfg.train.seed))
+  model = GanModel(cfg.gan, features.dim, rngs=nnx.Rngs(cfg.train.seed))
   graphdef = nnx.split(model, nnx.Param)[0]
   gen_def, gen = nnx.split(model.generator, nnx.Param)
   critic_def, critic = nnx.split(model.critic, nnx.Param)
@@ -83,7 +83,7 @@ def create_gan_state(cfg: Config, features) -> tuple[dict, GanSpec]:
   tx_g, schedule = create_optimizer(cfg, lr=cfg.gan.generator_lr)
   tx_c, _ = create_optimizer(cfg, lr=cfg.gan.critic_lr)
   opt_state = {"generator": tx_g.init(params["generator"]), "critic": tx_c.init(params["critic"])}
-  projection = Projection.of(features) if model.unit_directions else None
+  projection = pose_layer(features, cfg.gan.pose)
   g = cfg.gan
   spec = GanSpec(graphdef, gen_def, critic_def, tx_g, tx_c, schedule, g.loss, g.gp_weight, g.critic_steps, projection)
   return {"params": params, "opt_state": opt_state, "step": jnp.zeros((), jnp.int32)}, spec

@@ -119,7 +119,7 @@ def model_template(cfg: Config, dim: int, num_motions: int) -> tuple[Any, dict]:
 
   def build():
     if cfg.model.family == "gan":
-      return GanModel(cfg.gan, dim, unit_directions=cfg.gan.pose == "directions", rngs=nnx.Rngs(cfg.train.seed))
+      return GanModel(cfg.gan, dim, rngs=nnx.Rngs(cfg.train.seed))
     return create_model(cfg.model, dim, num_motions, cfg.train.seed)
 
   model = nnx.eval_shape(build)

@@ -18,7 +18,7 @@ from flax import nnx
 
 from chorjax.data.dataset import conform, read_takes
 from chorjax.errors import UserError
-from chorjax.models.gan import GanModel, Projection, gan_controls, generate_sequences
+from chorjax.models.gan import GanModel, gan_controls, generate_sequences, pose_layer
 
 _STATIC = ("graphdef", "num_frames", "greedy", "noise_smoothing", "persistence", "crossfade", "pace", "pace_lag")
 
@@ -183,7 +183,7 @@ def dance(graphdef, params, features, motion, key, num_frames: int, controls: di
     if prime_BxPxD is not None:
       raise UserError("--prime: a GAN draws whole sequences from noise; it cannot continue a phrase")
     controls = gan_controls(controls)
-    projection = Projection.of(features) if model.unit_directions else None
+    projection = pose_layer(features, model.pose)
     bounds = draw_controls(features, controls).get("bounds")
     z = generate_sequences(
       graphdef, params, key, num=int(np.shape(motion)[0]), num_frames=num_frames, projection=projection, bounds=bounds

@@ -16,7 +16,7 @@ from chorjax.config import load_config
 from chorjax.data.dataset import WindowSampler, load_dataset
 from chorjax.errors import UserError
 from chorjax.gan import create_gan_state, critic_loss, critic_step, generator_loss, generator_step
-from chorjax.models.gan import Critic, GanModel, Generator
+from chorjax.models.gan import Critic, GanModel, Generator, pose_layer
 from chorjax.models.rnn import RecurrentCore
 from chorjax.run import load_run
 from chorjax.scoring import mean_of
@@ -192,3 +192,24 @@ def test_the_shipped_gan_config_is_a_gan_on_bone_directions():
 
   cfg = load_config(Path(__file__).resolve().parents[1] / "configs" / "gan.toml")
   assert (cfg.model.family, cfg.gan.pose, cfg.data.representation) == ("gan", "directions", "directions")
+
+
+def test_rotations_go_through_forward_kinematics_down_the_chain(setup):
+  """``gan.pose = "rotations"``: identity quaternions give the rest directions; a turn of the root alone
+  turns every bone (each joint's rotation is its parent's times its own); any output gives unit bones."""
+  ds = setup[1]
+  kin = pose_layer(ds.features, "rotations")
+  sk, j = ds.features.skeleton, ds.features.skeleton.num_joints
+  rest = np.asarray(kin.rest).reshape(j, 3)
+  identity = np.zeros((1, 4 + 4 * j), np.float32)
+  identity[0, 4::4] = 1.0
+  half = np.sqrt(0.5)
+  turned = identity.copy()
+  turned[0, 4 + 4 * sk.root : 8 + 4 * sk.root] = [half, 0.0, half, 0.0]  # 90 degrees about y (up)
+  random = np.asarray(jax.random.normal(jax.random.key(0), (1, 4 + 4 * j)))
+  raw = lambda out: (np.asarray(kin(jnp.asarray(out))) * ds.features.std + ds.features.mean)[0, 3:].reshape(j, 3)
+  bones = [b for b in range(j) if b != sk.root]
+  np.testing.assert_allclose(raw(identity)[bones], rest[bones], atol=1e-5)
+  about_y = rest[bones] @ np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])  # x -> -z, z -> x
+  np.testing.assert_allclose(raw(turned)[bones], about_y, atol=1e-5)
+  np.testing.assert_allclose(np.linalg.norm(raw(random)[bones], axis=-1), 1.0, atol=1e-5)

@@ -12,7 +12,8 @@ score for ``wgan-gp``).
 
 Both use the cells of :mod:`chorjax.models.cells` (their fused layers support the second derivative the
 gradient penalty needs; ``tests/test_gan.py`` checks it against a plain scan). :class:`Projection` makes
-the generator's bone directions unit vectors, the positions-only stand-in for normalizing quaternions.
+the generator's bone directions unit vectors (the positions-only stand-in for normalized quaternions);
+:class:`Kinematics` takes unit quaternions through forward kinematics, as the tutorial does.
 """
 
 from __future__ import annotations
@@ -83,12 +84,19 @@ class Critic(nnx.Module):
 
 class GanModel(nnx.Module):
   """The generator and the critic, one parameter tree ``{generator, critic}`` (one checkpoint).
-  ``unit_directions``: the generator's bone directions are made unit vectors (:class:`Projection`)."""
+  ``pose`` (``gan.pose``): what the generator writes, turned into the features the critic sees by
+  :func:`pose_layer` (``directions``: unit bone directions; ``rotations``: unit quaternions through forward
+  kinematics, the generator writing ``4 + 4 J`` numbers; ``features``: the features themselves)."""
 
-  def __init__(self, gan, dim: int, *, unit_directions: bool, rngs: nnx.Rngs):
-    self.dim, self.latent_size, self.unit_directions = dim, gan.latent_size, unit_directions
-    self.generator = Generator(gan, dim, rngs=rngs)
+  def __init__(self, gan, dim: int, *, rngs: nnx.Rngs):
+    self.dim, self.latent_size, self.pose = dim, gan.latent_size, gan.pose
+    joints = (dim - 3) // 3  # the directions representation: 3 + 3 J features
+    self.generator = Generator(gan, 4 + 4 * joints if gan.pose == "rotations" else dim, rngs=rngs)
     self.critic = Critic(gan, dim, rngs=rngs)
+
+
+def _as_tuple(a) -> tuple:
+  return tuple(float(v) for v in np.asarray(a).ravel())
 
 
 @dataclasses.dataclass(frozen=True)
@@ -112,8 +120,7 @@ class Projection:
     triple holds its height)."""
     root = features.skeleton.root
     starts = tuple(3 + 3 * j for j in range(features.skeleton.num_joints) if j != root)
-    as_tuple = lambda a: tuple(float(v) for v in np.asarray(a))
-    return cls(starts, as_tuple(features.mean), as_tuple(features.std))
+    return cls(starts, _as_tuple(features.mean), _as_tuple(features.std))
 
   def __call__(self, x_xD):
     mean, std = jnp.asarray(self.mean, x_xD.dtype), jnp.asarray(self.std, x_xD.dtype)
@@ -124,8 +131,78 @@ class Projection:
     return (raw.at[..., idx].set(unit) - mean) / std
 
 
-def fake_sequences(generator: Generator, key, num: int, frames: int, projection: Projection | None = None):
-  """``num`` generated sequences of ``frames`` frames ``[num, frames, D]`` from standard-normal noise."""
+def quaternion_product(a, b):
+  """Hamilton product of ``[..., 4]`` quaternions ``(w, x, y, z)``."""
+  aw, av, bw, bv = a[..., :1], a[..., 1:], b[..., :1], b[..., 1:]
+  return jnp.concatenate([aw * bw - jnp.sum(av * bv, -1, keepdims=True), aw * bv + bw * av + jnp.cross(av, bv)], -1)
+
+
+def quaternion_rotate(q, v):
+  """``v [..., 3]`` rotated by the unit quaternions ``q [..., 4]``."""
+  w, u = q[..., :1], q[..., 1:]
+  t = 2.0 * jnp.cross(u, v)
+  return v + w * t + jnp.cross(u, t)
+
+
+@dataclasses.dataclass(frozen=True)
+class Kinematics:
+  """Forward kinematics for ``gan.pose = "rotations"``: the generator writes the root's step (3, normalized
+  as the features), its height (1, normalized) and per joint a local rotation as a quaternion (4 x J,
+  made unit length); each joint's rotation is its parent's times its own, and its bone points along its
+  rest direction (the takes' mean) turned by it. Out come the ``directions`` features the critic sees
+  (unit bone directions; the lengths are the takes' means when decoded). Hashable (a static jit argument).
+
+  Attributes:
+    parents: the skeleton's parent of every joint (-1: the root); order: joints parents first.
+    rest: ``[J x 3]`` every bone's rest direction, flattened; mean, std: the features' statistics.
+  """
+
+  parents: tuple
+  order: tuple
+  rest: tuple
+  mean: tuple
+  std: tuple
+
+  @classmethod
+  def of(cls, features) -> Kinematics:
+    """For a run's ``Features`` of the ``directions`` representation."""
+    sk, mean = features.skeleton, np.asarray(features.mean, np.float64)
+    rest = mean[3:].reshape(sk.num_joints, 3)
+    norm = np.linalg.norm(rest, axis=-1, keepdims=True)
+    rest = np.where(norm > 1e-6, rest / np.maximum(norm, 1e-6), [0.0, 1.0, 0.0])
+    return cls(
+      tuple(sk.parents), tuple(sk.topological_order), _as_tuple(rest), _as_tuple(mean), _as_tuple(features.std)
+    )
+
+  def __call__(self, out_xO):
+    mean, std = jnp.asarray(self.mean, out_xO.dtype), jnp.asarray(self.std, out_xO.dtype)
+    num = len(self.parents)
+    q = out_xO[..., 4:].reshape(out_xO.shape[:-1] + (num, 4))
+    q = q / jnp.sqrt(jnp.sum(q * q, -1, keepdims=True) + 1e-8)
+    rest = jnp.asarray(self.rest, out_xO.dtype).reshape(num, 3)
+    glob: dict[int, jnp.ndarray] = {}
+    dirs = [None] * num
+    root = self.parents.index(-1)
+    for j in self.order:
+      p = self.parents[j]
+      glob[j] = q[..., j, :] if p < 0 else quaternion_product(glob[p], q[..., j, :])
+      dirs[j] = quaternion_rotate(glob[j], rest[j])
+    height = out_xO[..., 3:4] * std[3 + 3 * root + 1] + mean[3 + 3 * root + 1]
+    zero = jnp.zeros_like(height)
+    dirs[root] = jnp.concatenate([zero, height, zero], -1)
+    raw = jnp.concatenate([out_xO[..., :3] * std[:3] + mean[:3], *dirs], -1)
+    return (raw - mean) / std
+
+
+def pose_layer(features, pose: str):
+  """What turns the generator's output into the features the critic sees, for ``gan.pose``: a
+  :class:`Projection`, :class:`Kinematics`, or None (``features``: the output is the features)."""
+  return {"directions": Projection, "rotations": Kinematics}[pose].of(features) if pose != "features" else None
+
+
+def fake_sequences(generator: Generator, key, num: int, frames: int, projection=None):
+  """``num`` generated sequences of ``frames`` frames ``[num, frames, D]`` from standard-normal noise, through
+  ``projection`` (:func:`pose_layer`) where given."""
   k_z, k_frames = jax.random.split(key)
   z = jax.random.normal(k_z, (num, generator.latent_size))
   x = generator(z, frames, jax.random.normal(k_frames, (num, frames, generator.frame_noise)))
@@ -134,13 +211,12 @@ def fake_sequences(generator: Generator, key, num: int, frames: int, projection:
 
 @functools.partial(jax.jit, static_argnames=("graphdef", "num", "num_frames", "projection"))
 def generate_sequences(graphdef, params, key, *, num: int, num_frames: int, projection=None, bounds=None):
-  """Sampling: ``[num, num_frames, D]`` normalized frames from a trained :class:`GanModel`; ``bounds``: each
-  feature clipped to ``(low, high)`` before the projection (``sample.clamp``)."""
+  """Sampling: ``[num, num_frames, D]`` normalized frames from a trained :class:`GanModel` (``projection``:
+  its :func:`pose_layer`); ``bounds``: each feature clipped to ``(low, high)`` (``sample.clamp``; a clipped
+  bone direction is renormalized when decoded)."""
   model = nnx.merge(graphdef, params)
-  x = fake_sequences(model.generator, key, num, num_frames)
-  if bounds is not None:
-    x = jnp.clip(x, *bounds)
-  return x if projection is None else projection(x)
+  x = fake_sequences(model.generator, key, num, num_frames, projection)
+  return x if bounds is None else jnp.clip(x, *bounds)
 
 
 def gan_controls(controls: dict) -> dict:
