@@ -121,8 +121,8 @@ class GanConfig:
   frame_noise: int = _field(
     0,
     "channels of fresh noise fed to the generator's LSTM at every frame beside the repeated vector (0 = the "
-    "tutorial's generator: one noise vector, repeated; its LSTM driven by a constant settles into a still "
-    "pose past the training length)",
+    "tutorial's generator: one noise vector, repeated; an LSTM driven by a constant input tends to settle "
+    "into one still pose, as in a trial run in experiments/families)",
     minimum=0,
   )
   generator_layers: int = _field(2, "the generator's stacked recurrent layers", minimum=1)

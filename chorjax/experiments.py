@@ -338,7 +338,8 @@ def _loss_plot(plt, runs, path: Path) -> None:
       ax.plot(*zip(*val), "--", label=f"{r['name']} val")
   ax.set_xlabel("step")
   ax.set_ylabel("loss (NLL per frame or MSE; GAN runs not drawn)")
-  ax.legend(fontsize=7)
+  if ax.get_legend_handles_labels()[0]:
+    ax.legend(fontsize=7)
   fig.tight_layout()
   save_figure(fig, path)
 

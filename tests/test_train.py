@@ -217,7 +217,7 @@ def test_missing_checkpoint_is_a_clean_error(tmp_path, capsys):
 @pytest.mark.slow
 def test_resume_after_sigkill_is_bit_identical(tmp_path):
   cfg = write_config(
-    tmp_path / "c.toml", "train.num_steps=400", "train.checkpoint_every=10", "log.tensorboard=false", "sample.frames=1"
+    tmp_path / "c.toml", "train.num_steps=200", "train.checkpoint_every=10", "log.tensorboard=false", "sample.frames=1"
   )
   cmd = [sys.executable, "-m", "chorjax.cli", "train", str(cfg), "--workdir"]
   env = {**os.environ, "PYTHONUNBUFFERED": "1"}
@@ -229,13 +229,13 @@ def test_resume_after_sigkill_is_bit_identical(tmp_path):
     time.sleep(0.005)
   proc.send_signal(signal.SIGKILL)
   proc.wait()
-  assert not (killed / "checkpoints" / "400").exists(), "the run finished before the kill"
+  assert not (killed / "checkpoints" / "200").exists(), "the run finished before the kill"
   assert subprocess.run(cmd + [str(killed)], env=env, capture_output=True).returncode == 0
   straight = tmp_path / "straight"
   assert subprocess.run(cmd + [str(straight)], env=env, capture_output=True).returncode == 0
 
   def final_params(w):
-    return load_run(w, 400).params
+    return load_run(w, 200).params
 
   a, b = final_params(killed), final_params(straight)
   for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)):

@@ -206,10 +206,10 @@ def _represent(pos, skeleton: Skeleton, representation: str):
   if representation == "canonical":
     left, right = hips(skeleton)
     return transforms.to_canonical(
-      jnp.asarray(pos), skeleton.root, left, right, skeleton.feet, leg_length(pos, skeleton)
+      jnp.asarray(pos), skeleton.root, left, right, tuple(skeleton.feet), leg_length(pos, skeleton)
     )
   if representation == "directions":
-    return transforms.to_directions(jnp.asarray(pos), skeleton.parents)
+    return transforms.to_directions(jnp.asarray(pos), tuple(skeleton.parents))
   if representation == "absolute":
     return jnp.asarray(pos)
   if representation == "bone_relative":

@@ -11,8 +11,10 @@ in float64 (Chan et al.'s parallel merge of count/mean/M2), once per dataset.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Sequence
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -211,6 +213,9 @@ def placement(pos_TxJx3, root: int, left: int, right: int):
   return jnp.stack([heading(pos_TxJx3[:1], left, right)[0], pos_TxJx3[0, root, 0], pos_TxJx3[0, root, 2]])
 
 
+# jitted: run op by op, every take length compiled each of some forty operations anew (20 s for cmu94's ten
+# takes); as one program, one compile per length.
+@functools.partial(jax.jit, static_argnames=("root", "left", "right", "feet"))
 def to_canonical(pos_TxJx3, root: int, left: int, right: int, feet: Sequence[int], leg: float):
   """HumanML3D-style features ``[T, 4 + 3(J-1) + 3J + len(feet)]`` per frame t:
 
@@ -254,6 +259,7 @@ def from_canonical(feat_xTxF, root: int, num_joints: int, place=None):
   return rotate_y(local, theta[..., None]) + floor_point[..., None, :]
 
 
+@functools.partial(jax.jit, static_argnames=("parents",))
 def to_directions(pos_TxJx3, parents: Sequence[int]):
   """``[T, 3 + 3J]``: the root's step since t-1 (0 at t = 0), then per joint the unit direction of its
   bone from the parent (the root's entry holds its height and two zeros). Lengths are left out."""

@@ -60,6 +60,7 @@ class Generator(nnx.Module):
       h = nnx.relu(layer(h))
     x_BxTxE = jnp.broadcast_to(h[:, None], (h.shape[0], num_frames, h.shape[-1]))
     if self.frame_noise:
+      assert noise_BxTxF is not None, "gan.frame_noise > 0: the generator needs per-frame noise"
       x_BxTxE = jnp.concatenate([x_BxTxE, noise_BxTxF], -1)
     h_BxTxH, _ = self.core(x_BxTxE, self.core.initial_carry(jnp.zeros((h.shape[0], 1), h.dtype)))
     return self.out(h_BxTxH)
@@ -181,7 +182,7 @@ class Kinematics:
     q = q / jnp.sqrt(jnp.sum(q * q, -1, keepdims=True) + 1e-8)
     rest = jnp.asarray(self.rest, out_xO.dtype).reshape(num, 3)
     glob: dict[int, jnp.ndarray] = {}
-    dirs = [None] * num
+    dirs: dict[int, jnp.ndarray] = {}
     root = self.parents.index(-1)
     for j in self.order:
       p = self.parents[j]
@@ -190,7 +191,7 @@ class Kinematics:
     height = out_xO[..., 3:4] * std[3 + 3 * root + 1] + mean[3 + 3 * root + 1]
     zero = jnp.zeros_like(height)
     dirs[root] = jnp.concatenate([zero, height, zero], -1)
-    raw = jnp.concatenate([out_xO[..., :3] * std[:3] + mean[:3], *dirs], -1)
+    raw = jnp.concatenate([out_xO[..., :3] * std[:3] + mean[:3], *(dirs[j] for j in range(num))], -1)
     return (raw - mean) / std
 
 
