@@ -28,6 +28,7 @@ from flax import nnx
 from chorjax.config import Config
 from chorjax.errors import UserError
 from chorjax.models.gan import GanModel, fake_sequences, pose_layer
+from chorjax.run import build_model, create_optimizer, step_key
 
 
 @dataclasses.dataclass(frozen=True)
@@ -72,10 +73,9 @@ def check_gan(cfg: Config, representation: str) -> None:
 
 def create_gan_state(cfg: Config, features) -> tuple[dict, GanSpec]:
   """``({params, opt_state, step}, spec)`` for a fresh GAN run on ``features`` (the run's ``Features``)."""
-  from chorjax.run import create_optimizer
-
   check_gan(cfg, features.representation)
-  model = GanModel(cfg.gan, features.dim, rngs=nnx.Rngs(cfg.train.seed))
+  model = build_model(cfg, features.dim, 1)
+  assert isinstance(model, GanModel)
   graphdef = nnx.split(model, nnx.Param)[0]
   gen_def, gen = nnx.split(model.generator, nnx.Param)
   critic_def, critic = nnx.split(model.critic, nnx.Param)
@@ -146,9 +146,7 @@ def _gan_train_step(state, batch, key, spec: GanSpec):
   """``critic_steps`` critic updates (one per slice of the batch), then one generator update. ``metrics``:
   ``loss`` (= ``gen_loss``, what the loop checks and logs as train_loss), ``gen_loss``, ``critic_loss``
   (the last critic update's) and the loss's own terms."""
-  if not jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
-    key = jax.random.wrap_key_data(key)
-  key = jax.random.fold_in(key, state["step"])
+  key = step_key(key, state["step"])
   real = batch["inputs"]
   n = spec.critic_steps
   real_NxBxTxD = real.reshape(n, real.shape[0] // n, *real.shape[1:])

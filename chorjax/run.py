@@ -17,6 +17,7 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
@@ -26,7 +27,7 @@ from chorjax import checkpoint as ckpt
 from chorjax.config import Config, config_from_dict
 from chorjax.data.features import Features
 from chorjax.errors import UserError
-from chorjax.models import create_model
+from chorjax.models import ChorModel, create_model
 from chorjax.models.gan import GanModel, gan_controls
 
 
@@ -104,8 +105,23 @@ def create_optimizer(cfg: Config, lr: float | None = None) -> tuple[optax.Gradie
   return optax.chain(*chain, opt), schedule
 
 
+def build_model(cfg: Config, dim: int, num_motions: int) -> ChorModel | GanModel:
+  """``cfg``'s model, of either family (``model.family``), its parameters drawn from ``train.seed``."""
+  if cfg.model.family == "gan":
+    return GanModel(cfg.gan, dim, rngs=nnx.Rngs(cfg.train.seed))
+  return create_model(cfg.model, dim, num_motions, cfg.train.seed)
+
+
+def step_key(key, step):
+  """The train step's PRNG key: ``key`` (a typed key, or raw uint32 key data replicated across processes)
+  folded with ``step``, so a resumed run draws what the uninterrupted one drew."""
+  if not jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
+    key = jax.random.wrap_key_data(key)
+  return jax.random.fold_in(key, step)
+
+
 def create_train_state(cfg: Config, dim: int, num_motions: int) -> tuple[dict, StepSpec]:
-  """``({params, opt_state, step}, spec)`` for a fresh run of ``cfg`` on ``dim`` features."""
+  """``({params, opt_state, step}, spec)`` for a fresh run of ``cfg`` (the rnn family) on ``dim`` features."""
   model = create_model(cfg.model, dim, num_motions, cfg.train.seed)
   graphdef, params = nnx.split(model, nnx.Param)
   params = nnx.to_pure_dict(params)
@@ -116,13 +132,7 @@ def create_train_state(cfg: Config, dim: int, num_motions: int) -> tuple[dict, S
 
 def model_template(cfg: Config, dim: int, num_motions: int) -> tuple[Any, dict]:
   """``(graphdef, abstract params)`` of ``cfg``'s model (either family), without computing any parameter."""
-
-  def build():
-    if cfg.model.family == "gan":
-      return GanModel(cfg.gan, dim, rngs=nnx.Rngs(cfg.train.seed))
-    return create_model(cfg.model, dim, num_motions, cfg.train.seed)
-
-  model = nnx.eval_shape(build)
+  model = nnx.eval_shape(lambda: build_model(cfg, dim, num_motions))
   graphdef, params = nnx.split(model, nnx.Param)
   return graphdef, nnx.to_pure_dict(params)
 

@@ -39,7 +39,7 @@ from chorjax.data.dataset import Dataset, WindowSampler, dataset_notes, eval_win
 from chorjax.errors import Interrupted, UserError, atomic_write
 from chorjax.gan import check_gan, create_gan_state, gan_train_step
 from chorjax.models import motion_weight_vector
-from chorjax.run import Feedback, StepSpec, create_train_state, run_meta, with_ceiling
+from chorjax.run import Feedback, StepSpec, create_train_state, run_meta, step_key, with_ceiling
 from chorjax.sample import dance
 
 
@@ -120,9 +120,7 @@ def _train_step(state, batch, key, spec: StepSpec, lr_scale=None, noise=None):
   """One optimizer step. ``lr_scale`` and ``noise`` (traced; vectorized training, see
   ``chorjax.vectorized``): the update scaled by ``lr_scale``, the input noise ``noise`` instead of
   ``spec.input_noise``."""
-  if not jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
-    key = jax.random.wrap_key_data(key)  # raw uint32 key data (replicated across processes)
-  key = jax.random.fold_in(key, state["step"])
+  key = step_key(key, state["step"])
   if spec.feedback is None:  # teacher forcing: the fused layers over whole windows
     grad_fn = jax.value_and_grad(_loss_fn, has_aux=True)
     (loss, aux), grads = grad_fn(state["params"], batch, key, spec, noise)
