@@ -247,7 +247,7 @@ def _sample(args) -> int:
   paths = _sample_paths(out, args.num)
   _refuse_existing(paths, args.force)  # the files really written (OUT_k.csv for several dancers)
   character = _character(args.skeleton, out)
-  run = load_run(args.workdir, args.checkpoint)
+  run = load_run(args.workdir, args.checkpoint).generating("sample")
   if character is not None and run.features.skeleton.name != "mpii16":
     raise UserError(f"--skeleton: {args.workdir} dances on its own skeleton, not the 16 joints it retargets from")
   sampling = run.sampling(**_controls(args))
@@ -270,6 +270,59 @@ def _sample(args) -> int:
     **sampling,
   }
   written = _write_sample(out, paths, pos, run.fps, features.skeleton, features.up_axis, settings, character)
+  print("wrote " + ", ".join(map(str, written)))
+  return 0
+
+
+def _inbetween(args) -> int:
+  import jax
+
+  from chorjax.inbetween import read_pose, write_transitions
+  from chorjax.run import load_run
+  from chorjax.sample import read_phrase
+
+  frames = list(args.frames)
+  if len(frames) == 1:
+    frames *= len(args.to)
+  if len(frames) != len(args.to):
+    raise UserError(
+      f"--frames: give one count for every --to, or one for all ({len(args.to)} --to, {len(frames)} --frames)"
+    )
+  for n in frames:
+    if n < 1:
+      raise UserError(f"--frames {n}: must be at least 1")
+  _counts(args, num=1)
+  out, _ = _output(args.output, (".csv", ".npz", ".bvh", ".html"))
+  paths = _sample_paths(out, args.num)
+  _refuse_existing(paths, args.force)
+  run = load_run(args.workdir, args.checkpoint)
+  if not run.is_inbetween:
+    raise UserError(
+      f"{args.workdir}: not an in-betweening run (train one with model.family = 'inbetween': configs/inbetween.toml)"
+    )
+  data_cfg = run.config.data
+  context = read_phrase(args.from_, run.features, data_cfg, flag="--from")
+  targets = [read_pose(t, run.features, data_cfg) for t in args.to]
+  pieces = write_transitions(
+    run.graphdef,
+    run.params,
+    run.features,
+    run.config.inbetween,
+    context,
+    targets,
+    frames,
+    jax.random.key(args.seed),
+    args.num,
+  )
+  settings = {
+    "workdir": str(args.workdir),
+    "checkpoint_step": run.step,
+    "from": args.from_,
+    "to": list(args.to),
+    "frames": frames,
+    "seed": args.seed,
+  }
+  written = _write_sample(out, paths, pieces, run.fps, run.features.skeleton, run.features.up_axis, settings)
   print("wrote " + ", ".join(map(str, written)))
   return 0
 
@@ -730,8 +783,58 @@ def _add_run_commands(sub) -> None:
   _add_sampling_args(sample)
   sample.set_defaults(func=_sample)
 
+  _add_inbetween_command(sub)
   _add_render_command(sub)
   _add_live_command(sub)
+
+
+def _add_inbetween_command(sub) -> None:
+  """`chorjax inbetween`."""
+  p = sub.add_parser(
+    "inbetween",
+    help="write the movement between a phrase and key poses (an in-betweening run)",
+    description="Writes the frames between a context phrase (--from) and a target pose (--to) with a run trained "
+    "with model.family = 'inbetween' (configs/inbetween.toml). The output holds the LEN context frames, the N "
+    "written frames and the target frame (LEN + N + 1), in the data's units and axes; context and target are "
+    "copied in unchanged. Repeat --to (with one --frames per --to, or one for all) to chain key poses into one "
+    "piece: each transition continues from the piece so far. Different --seed values write different "
+    "transitions (the model's target noise; transitions of 5 frames or fewer hardly differ).",
+  )
+  p.add_argument("workdir", metavar="WORKDIR", help="an in-betweening run directory with checkpoints")
+  p.add_argument(
+    "--from",
+    dest="from_",
+    required=True,
+    metavar="FILE[:START:LEN]",
+    help="the context phrase (default: the whole take)",
+  )
+  p.add_argument(
+    "--to",
+    required=True,
+    action="append",
+    metavar="FILE[:FRAME]",
+    help="a target pose (default frame 0); repeat to chain",
+  )
+  p.add_argument(
+    "--frames", required=True, type=int, action="append", metavar="N", help="frames written before each target"
+  )
+  p.add_argument("--seed", type=int, default=0, help="seed of the transitions' noise (default 0)")
+  p.add_argument("--num", type=int, default=1, help="transitions written in parallel, each its own piece (default 1)")
+  p.add_argument(
+    "-o",
+    "--output",
+    required=True,
+    metavar="OUT",
+    help="OUT.csv (K>1 writes OUT_k.csv), OUT.bvh (K>1: OUT_k.bvh), OUT.npz (all pieces + settings) or OUT.html",
+  )
+  p.add_argument(
+    "--checkpoint",
+    default="latest",
+    metavar="STEP|best|latest",
+    help="which checkpoint: a step, the best validation loss, or the latest (default latest)",
+  )
+  p.add_argument("--force", action="store_true", help="overwrite the output if it exists")
+  p.set_defaults(func=_inbetween)
 
 
 def _add_live_command(sub) -> None:

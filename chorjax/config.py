@@ -93,8 +93,10 @@ class ModelConfig:
     "rnn",
     "model family: 'rnn' (a recurrent core predicting every next frame through model.head) or 'gan' (an "
     "LSTM-GAN: a generator turns a noise vector into a whole sequence, a critic tells real from generated; "
-    "configured under [gan])",
-    choices=("rnn", "gan"),
+    "configured under [gan]) or 'inbetween' (a transition model that writes the frames between a context "
+    "phrase and a target pose, for `chorjax inbetween`; configured under [inbetween], its recurrent core is "
+    "model.cell, num_layers, hidden_size and forget_bias)",
+    choices=("rnn", "gan", "inbetween"),
   )
   cell: str = _field("lnlstm", "recurrent cell", choices=("lstm", "lnlstm", "gru"))
   head: str = _field("mdn", "output head", choices=("mse", "mdn"))
@@ -150,6 +152,35 @@ class GanConfig:
     "not the files'), both with data.representation = directions (bones keep the takes' mean lengths), "
     "or 'features' (the run's data.representation as it is)",
     choices=("directions", "rotations", "features"),
+  )
+
+
+@dataclasses.dataclass(frozen=True)
+class InbetweenConfig:
+  """The in-betweening family (``model.family = "inbetween"``): a recurrent transition model (Harvey et al.
+  2020) that writes what lies between a context phrase and a target pose; see ``chorjax.inbetween``."""
+
+  system: str = _field(
+    "lstm",
+    "the transition model: 'lstm' (the recurrent core conditioned on the target pose and the time to arrival, "
+    "as in Harvey et al. 2020, writing each frame's deviation from linear interpolation)",
+    choices=("lstm",),
+  )
+  context: int = _field(10, "frames of the phrase the model sees before a transition", minimum=2)
+  min_frames: int = _field(5, "shortest transition trained on (frames between context and target)", minimum=1)
+  max_frames: int = _field(30, "longest transition trained on; longer ones are written beyond it", minimum=1)
+  encoder_sizes: tuple = _field(
+    (256, 256), "ELU layers of each of the three encoders (state, offset to target, target)"
+  )
+  decoder_sizes: tuple = _field((256,), "ELU layers of the decoder before its output (which starts at zero)")
+  target_noise: float = _field(
+    0.5,
+    "std of the noise added to the target and offset encodings (once per transition, fading over the last "
+    "5-30 frames before arrival, as Harvey et al.'s z_target): different seeds write different transitions",
+    minimum=0.0,
+  )
+  velocity_weight: float = _field(
+    1.0, "weight of the L1 loss on frame-to-frame steps beside the pose loss", minimum=0.0
   )
 
 
@@ -319,6 +350,7 @@ class Config:
   data: DataConfig = dataclasses.field(default_factory=DataConfig)
   model: ModelConfig = dataclasses.field(default_factory=ModelConfig)
   gan: GanConfig = dataclasses.field(default_factory=GanConfig)
+  inbetween: InbetweenConfig = dataclasses.field(default_factory=InbetweenConfig)
   optim: OptimConfig = dataclasses.field(default_factory=OptimConfig)
   train: TrainConfig = dataclasses.field(default_factory=TrainConfig)
   sample: SampleConfig = dataclasses.field(default_factory=SampleConfig)
@@ -335,6 +367,7 @@ _SECTION_CLASSES = {
   "data": DataConfig,
   "model": ModelConfig,
   "gan": GanConfig,
+  "inbetween": InbetweenConfig,
   "optim": OptimConfig,
   "train": TrainConfig,
   "sample": SampleConfig,

@@ -50,7 +50,7 @@ def evaluate(
     :func:`chorjax.scoring.score` (JSON-ready): the generated motion measured against the takes in
     ``data``, novelty against the run's training takes.
   """
-  run = load_run(workdir, checkpoint)
+  run = load_run(workdir, checkpoint).generating("eval")
   sampling = run.sampling(**controls)
   run = run.ranged(sampling)
   feats = run.features

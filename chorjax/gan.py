@@ -74,7 +74,7 @@ def check_gan(cfg: Config, representation: str) -> None:
 def create_gan_state(cfg: Config, features) -> tuple[dict, GanSpec]:
   """``({params, opt_state, step}, spec)`` for a fresh GAN run on ``features`` (the run's ``Features``)."""
   check_gan(cfg, features.representation)
-  model = build_model(cfg, features.dim, 1)
+  model = build_model(cfg, features, 1)
   assert isinstance(model, GanModel)
   graphdef = nnx.split(model, nnx.Param)[0]
   gen_def, gen = nnx.split(model.generator, nnx.Param)

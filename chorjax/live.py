@@ -450,7 +450,7 @@ def run_live(
     raise UserError(f"--alternate {alternate}: must be a number of seconds >= 0")
   if record is not None and Path(record).suffix.lower() != ".npz":
     raise UserError(f"{record}: --record writes an .npz")
-  run = load_run(workdir, checkpoint)
+  run = load_run(workdir, checkpoint).generating("live")
   if run.is_gan:
     raise UserError(f"{workdir}: a GAN run writes whole sequences from noise; live mode streams the rnn family")
   sampling = run.sampling(**(controls or {}))

@@ -279,3 +279,41 @@ def pfc(pos_TxJx3, skeleton: Skeleton, fps: float, size: float) -> float:
   feet = p[:, list(skeleton.feet[:2])]
   v = np.linalg.norm(np.diff(feet[..., [0, 2]], axis=0), axis=-1)[1:] * fps  # [T-2, 2]
   return float(np.mean(a * v[:, 0] * v[:, 1]))
+
+
+# ---------------------------------------------------------------- transitions (in-betweening)
+
+
+def l2p(pred_NxTxK, real_NxTxK, std_K) -> float:
+  """LaFAN1's L2P: the mean over frames of the L2 norm of the position error, every coordinate divided by
+  its standard deviation over the training windows (``std_K``; the mean cancels in the difference)."""
+  return float(np.linalg.norm((np.asarray(pred_NxTxK) - real_NxTxK) / std_K, axis=-1).mean())
+
+
+def position_error(pred_NxTxK, real_NxTxK) -> float:
+  """Mean joint distance between written and real frames (flat ``[..., 3J]`` poses, in their units)."""
+  diff = (np.asarray(pred_NxTxK) - real_NxTxK).reshape(*np.shape(pred_NxTxK)[:-1], -1, 3)
+  return float(np.linalg.norm(diff, axis=-1).mean())
+
+
+def npss(pred_NxTxF, real_NxTxF) -> float:
+  """Normalized power spectrum similarity (Gopalakrishnan et al. 2019): per sequence and feature, the earth
+  mover's distance between the real and written normalized power spectra over time, averaged with the
+  real sequences' power as weights. 0 = the same frequency content."""
+  power = lambda x: np.square(np.abs(np.fft.fft(np.asarray(x, np.float64), axis=1)))
+  p_real, p_pred = power(real_NxTxF), power(pred_NxTxF)
+  total_real, total_pred = p_real.sum(1), p_pred.sum(1)
+  cdf = lambda p, total: np.cumsum(p / np.maximum(total[:, None], 1e-12), axis=1)
+  emd = np.abs(cdf(p_pred, total_pred) - cdf(p_real, total_real)).sum(1)
+  return float(np.average(emd, weights=total_real + 1e-12))
+
+
+def foot_skate(frames_NxTxJx3, feet, floor_N, height: float) -> float:
+  """Mean horizontal foot speed (units per frame) weighted by nearness to the floor, as Zhang et al. 2018
+  and Tang et al. 2022 measure skating: each foot's step times ``clip(2 - 2^(h / height), 0, 1)``, ``h``
+  its height above ``floor`` (1 on the floor, 0 from ``height`` up)."""
+  f = np.asarray(frames_NxTxJx3)[:, :, list(feet)]
+  h = f[:, 1:, :, 1] - np.asarray(floor_N)[:, None, None]
+  weight = np.clip(2.0 - np.power(2.0, np.maximum(h, 0.0) / height), 0.0, 1.0)
+  step = np.linalg.norm(np.diff(f, axis=1)[..., [0, 2]], axis=-1)
+  return float((step * weight).mean())

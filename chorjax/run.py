@@ -29,6 +29,7 @@ from chorjax.data.features import Features
 from chorjax.errors import UserError
 from chorjax.models import ChorModel, create_model
 from chorjax.models.gan import GanModel, gan_controls
+from chorjax.models.inbetween import TransitionModel
 
 
 @dataclasses.dataclass(frozen=True)
@@ -105,11 +106,15 @@ def create_optimizer(cfg: Config, lr: float | None = None) -> tuple[optax.Gradie
   return optax.chain(*chain, opt), schedule
 
 
-def build_model(cfg: Config, dim: int, num_motions: int) -> ChorModel | GanModel:
-  """``cfg``'s model, of either family (``model.family``), its parameters drawn from ``train.seed``."""
+def build_model(cfg: Config, features: Features, num_motions: int) -> ChorModel | GanModel | TransitionModel:
+  """``cfg``'s model, of its family (``model.family``), for ``features``; parameters drawn from ``train.seed``.
+  The in-betweening family works on flat joint positions (``3J`` numbers), the others on the features."""
   if cfg.model.family == "gan":
-    return GanModel(cfg.gan, dim, rngs=nnx.Rngs(cfg.train.seed))
-  return create_model(cfg.model, dim, num_motions, cfg.train.seed)
+    return GanModel(cfg.gan, features.dim, rngs=nnx.Rngs(cfg.train.seed))
+  if cfg.model.family == "inbetween":
+    dim = 3 * features.skeleton.num_joints
+    return TransitionModel(cfg.model, cfg.inbetween, dim, rngs=nnx.Rngs(cfg.train.seed))
+  return create_model(cfg.model, features.dim, num_motions, cfg.train.seed)
 
 
 def step_key(key, step):
@@ -130,9 +135,9 @@ def create_train_state(cfg: Config, dim: int, num_motions: int) -> tuple[dict, S
   return state, StepSpec(graphdef, tx, schedule, cfg.train.input_noise, cfg.model.dropout, Feedback.of(cfg))
 
 
-def model_template(cfg: Config, dim: int, num_motions: int) -> tuple[Any, dict]:
-  """``(graphdef, abstract params)`` of ``cfg``'s model (either family), without computing any parameter."""
-  model = nnx.eval_shape(lambda: build_model(cfg, dim, num_motions))
+def model_template(cfg: Config, features: Features, num_motions: int) -> tuple[Any, dict]:
+  """``(graphdef, abstract params)`` of ``cfg``'s model (any family), without computing any parameter."""
+  model = nnx.eval_shape(lambda: build_model(cfg, features, num_motions))
   graphdef, params = nnx.split(model, nnx.Param)
   return graphdef, nnx.to_pure_dict(params)
 
@@ -195,6 +200,19 @@ class Run:
   @property
   def is_gan(self) -> bool:
     return self.config.model.family == "gan"
+
+  @property
+  def is_inbetween(self) -> bool:
+    return self.config.model.family == "inbetween"
+
+  def generating(self, command: str) -> Run:
+    """This run, for ``command``, which generates dance on its own: an in-betweening run cannot (UserError)."""
+    if self.is_inbetween:
+      raise UserError(
+        f"{self.workdir}: an in-betweening run writes the frames between poses, not dance of its own; "
+        f"use `chorjax inbetween` (not `chorjax {command}`)"
+      )
+    return self
 
   def sampling(self, **given) -> dict:
     """Sampling controls: the ones given (not None), else the run's ``[sample]`` config. A GAN draws whole
@@ -274,7 +292,7 @@ def _read_step(manager, step: int):
   try:
     cfg = config_from_dict(meta["config"])
     features = Features.from_dict(meta["features"])
-    graphdef, template = model_template(cfg, features.dim, len(meta["id_map"]))
+    graphdef, template = model_template(cfg, features, len(meta["id_map"]))
   except (KeyError, TypeError, ValueError) as e:  # (a UserError, e.g. a newer version's key, stays as it is)
     raise ckpt.Damaged(f"{manager.directory}/{step}/meta/metadata: damaged checkpoint ({e})", step) from None
   return meta, cfg, features, graphdef, ckpt.restore_params(manager, step, template)

@@ -34,6 +34,7 @@ import optax
 from flax import nnx
 
 from chorjax import checkpoint as ckpt
+from chorjax import inbetween
 from chorjax.config import Config, config_diff, config_from_dict, resumable_keys
 from chorjax.data.dataset import Dataset, WindowSampler, dataset_notes, eval_windows, load_dataset
 from chorjax.errors import Interrupted, UserError, atomic_write
@@ -434,12 +435,13 @@ class MetricsLog:
       self.writer.close()
 
 
-def evaluation_hook(val, graphdef):
-  """Measures the validation loss (``loop.val_loss``) and publishes it with the step's metrics."""
+def evaluation_hook(val, graphdef, loss_fn=None):
+  """Measures the validation loss (``loop.val_loss``: ``loss_fn(params, val, graphdef)``, by default
+  :func:`eval_step`) and publishes it with the step's metrics."""
 
   def evaluate(loop: Loop) -> None:
     if val:
-      loop.val_loss = float(eval_step(loop.state["params"], val, graphdef))
+      loop.val_loss = float((loss_fn or eval_step)(loop.state["params"], val, graphdef))
     loop.flush()
 
   return evaluate
@@ -486,10 +488,17 @@ def figure_hook(writer, graphdef, host_params, ds: Dataset, cfg: Config):
 
 
 def write_end_sample(workdir: Path, graphdef, params, ds: Dataset, cfg: Config) -> dict:
-  """``samples/sample.csv`` and ``samples/player.html``: the dance the run ends with."""
+  """``samples/sample.csv`` and ``samples/player.html``: the dance the run ends with (in-betweening: the
+  piece :func:`chorjax.inbetween.end_sample` writes between key poses of a real take, beside that take)."""
   from chorjax.data.csv import write_csv
   from chorjax.data.motion import Motion
   from chorjax.render.html import write_player
+
+  if cfg.model.family == "inbetween":
+    real, pieces, title = inbetween.end_sample(graphdef, params, ds, cfg)
+    motions = [real] + [Motion(p, real.fps, real.skeleton, real.up_axis, real.units, name=title) for p in pieces]
+    csv = write_csv(pieces[0], workdir / "samples" / "sample.csv")
+    return {"csv": str(csv), "html": str(write_player(motions, workdir / "samples" / "player.html", title=cfg.name))}
 
   s, controls = cfg.sample, cfg.sample.controls()
   features = with_ceiling(ds.features, graphdef, params, ds.train, cfg.data.seq_length, controls)
@@ -521,10 +530,13 @@ def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=No
   workdir = Path(workdir).absolute()
   if workdir.exists() and not workdir.is_dir():
     raise UserError(f"{workdir}: is a file, not a run directory (--workdir names a folder)")
-  if cfg.model.family == "gan":  # before anything is written
+  family = cfg.model.family
+  if family == "gan":  # before anything is written
     check_gan(cfg, cfg.data.representation)
-    if parallel is not None:
-      raise UserError("parallel.data_parallel: not available for the GAN family (model.family = 'gan')")
+  if family == "inbetween":
+    inbetween.check_inbetween(cfg)
+  if parallel is not None and family != "rnn":
+    raise UserError(f"parallel.data_parallel: not available for the {family} family (model.family = {family!r})")
   is_main = parallel is None or parallel.is_main
   with workdir_lock(workdir) if is_main else contextlib.nullcontext():
     keep_old_config = _check_saved_config(workdir, cfg, force) and is_main
@@ -550,6 +562,8 @@ def _restore_or_init(cfg: Config, workdir: Path, ds: Dataset, manager, parallel)
   silent restart from step 0)."""
   if cfg.model.family == "gan":
     state, spec = create_gan_state(cfg, ds.features)
+  elif cfg.model.family == "inbetween":
+    state, spec = inbetween.create_inbetween_state(cfg, ds.features)
   else:
     state, spec = create_train_state(cfg, ds.features.dim, ds.num_motions)
   steps = sorted(manager.all_steps(), reverse=True)
@@ -560,7 +574,7 @@ def _restore_or_init(cfg: Config, workdir: Path, ds: Dataset, manager, parallel)
       if meta["id_map"] != ds.id_map:
         raise UserError(f"{workdir}: its checkpoints were trained on other takes ({list(meta['id_map'])[:3]}...)")
       saved = config_from_dict(meta["config"])
-      changed = (saved.model, saved.gan) != (cfg.model, cfg.gan)
+      changed = (saved.model, saved.gan, saved.inbetween) != (cfg.model, cfg.gan, cfg.inbetween)
       sharding = None if parallel is None else parallel.replicated
       restored = ckpt.restore(manager, start, state, sharding, mismatch=changed)
     except ckpt.Damaged as e:
@@ -577,6 +591,22 @@ def _restore_or_init(cfg: Config, workdir: Path, ds: Dataset, manager, parallel)
   return state, spec, 0
 
 
+def _family_parts(cfg: Config, ds: Dataset) -> tuple:
+  """``(jitted train step, batch sampler, validation batch, its loss function or None)`` of the family."""
+  if cfg.model.family == "inbetween":
+    space, ib = inbetween.Space.of(ds.features), cfg.inbetween
+    sampler = inbetween.TransitionSampler(
+      inbetween.training_takes(ds, cfg.data.augment), space, ib, cfg.train.batch_size, cfg.train.seed
+    )
+    val = inbetween.validation_batch(inbetween.held_out_takes(ds), space, ib, cfg.train.val_windows)
+    return inbetween.inbetween_train_step, sampler, val, inbetween.validation_loss
+  gan = cfg.model.family == "gan"  # batches of critic_steps x batch_size windows; no likelihood to validate
+  per_step = cfg.train.batch_size * (cfg.gan.critic_steps if gan else 1)
+  sampler = WindowSampler(ds.train, cfg.data.seq_length, per_step, cfg.train.seed)
+  val = {} if gan else eval_windows(ds.val, cfg.data.seq_length, cfg.train.val_windows)
+  return gan_train_step if gan else train_step, sampler, val, None
+
+
 def _train(
   cfg: Config, workdir: Path, ds: Dataset, manager, parallel, cleanup: contextlib.ExitStack, keep_old_config=False
 ) -> dict:
@@ -588,12 +618,9 @@ def _train(
   if is_main:
     _write_config(workdir, cfg)
     _truncate_metrics(workdir / "metrics.jsonl", start)
-  gan = cfg.model.family == "gan"  # batches of critic_steps x batch_size windows; no likelihood to validate
-  per_step = cfg.train.batch_size * (cfg.gan.critic_steps if gan else 1)
-  sampler = WindowSampler(ds.train, cfg.data.seq_length, per_step, cfg.train.seed)
-  val = {} if gan else eval_windows(ds.val, cfg.data.seq_length, cfg.train.val_windows)
+  jitted, sampler, val, val_loss = _family_parts(cfg, ds)
   key: Any = jax.random.key(cfg.train.seed)
-  jitted, get_batch, host_params = gan_train_step if gan else train_step, sampler.batch, lambda p: p
+  get_batch, host_params = sampler.batch, lambda p: p
   if parallel is not None:
     state, val, key = parallel.replicate(state), parallel.replicate(val), parallel.replicate(jax.random.key_data(key))
     jitted = sharded_train_step(parallel)
@@ -607,10 +634,10 @@ def _train(
     cleanup.callback(log.close)
     loop.listeners.append(log)
   meta_of = lambda step: run_meta(cfg, ds.features, step, ds)
-  loop.add_hook(evaluation_hook(val, spec.graphdef), cfg.train.eval_every)
+  loop.add_hook(evaluation_hook(val, spec if val_loss else spec.graphdef, val_loss), cfg.train.eval_every)
   save = checkpoint_hook(manager, meta_of)
   loop.add_hook(save, cfg.train.checkpoint_every)
-  if log is not None and log.writer is not None and cfg.train.figure_every:
+  if log is not None and log.writer is not None and cfg.train.figure_every and cfg.model.family != "inbetween":
     loop.add_hook(figure_hook(log.writer, spec.graphdef, host_params, ds, cfg), cfg.train.figure_every, at_last=False)
   loop.end_hooks.append(lambda loop: ckpt.wait(manager))
 

@@ -91,8 +91,9 @@ def check_group(cfgs) -> list[str]:
     raise UserError("train.input_noise cannot differ between vectorized points with train.feedback")
   if cfgs[0].parallel.distributed:
     raise UserError("vectorized training runs in one process (parallel.distributed = false)")
-  if cfgs[0].model.family == "gan":
-    raise NotAligned("model.family = 'gan': vectorized training covers the rnn family; train GAN points apart")
+  family = cfgs[0].model.family
+  if family != "rnn":
+    raise NotAligned(f"model.family = {family!r}: vectorized training covers the rnn family; train these points apart")
   return [k for k in differ if k in VECTOR_KEYS]
 
 

@@ -1,0 +1,397 @@
+"""In-betweening (``model.family = "inbetween"``): the frames between a context phrase and a target pose.
+
+Space. A transition is modelled in its window's own local frame: y-up positions (``Features.canonical``)
+in units of the training takes' leg length, the origin under the root at the last context frame and that
+frame facing +z (``Space``). Poses are flat ``[K = 3J]`` vectors. A transition of ``n`` frames is the
+``n`` frames between the last context frame and the target (which stands ``n + 1`` frames after it).
+
+Training (:func:`inbetween_train_step`, run by ``chorjax.train``'s loop with its checkpoints, metrics and
+resume): batches of windows of ``context + max_frames + 1`` frames from the training takes (mirrored
+copies with ``data.augment = ["mirror"]``), each row its own transition length drawn from
+``min_frames..max_frames`` and its target the frame that length after the context; the model writes the
+whole transition feeding itself its own frames (``models.inbetween.rollout``) and the loss is the L1
+distance to the real frames plus ``velocity_weight`` x the L1 distance of their frame-to-frame steps (the
+step into the target included). The validation loss: the pose L1 on fixed windows of the held-out takes,
+without noise.
+
+Writing (:func:`write_transitions`): context and target go in as data-space positions and come out
+unchanged, the generated frames between them. Baselines for the evaluation: :func:`zero_velocity` and
+:func:`linear`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+from flax import nnx
+
+from chorjax.config import Config
+from chorjax.data.features import Features, hips
+from chorjax.data.motion import chain_length
+from chorjax.errors import UserError
+from chorjax.metrics import foot_skate, l2p, npss, position_error
+from chorjax.models.inbetween import rollout
+from chorjax.run import build_model, create_optimizer, step_key
+
+VAL_LENGTHS = (5, 15, 30)  # transition lengths of the validation windows (cycled; at most max_frames)
+BENCHMARK_LENGTHS = (5, 15, 30, 45)  # the LaFAN1 protocol's transition lengths
+BENCHMARK_HOP = 40  # its windows start every 40 frames
+FOOT_HEIGHT = 0.1  # leg lengths above the floor from which a foot counts as off the ground (skating)
+
+
+# ---------------------------------------------------------------- the local space
+
+
+@dataclasses.dataclass(frozen=True)
+class Space:
+  """A window's local frame: y-up canonical positions -> flat poses in leg lengths about an anchor frame."""
+
+  root: int
+  left: int
+  right: int
+  size: float
+
+  @classmethod
+  def of(cls, features: Features) -> Space:
+    sk = features.skeleton
+    if features.lengths is None:
+      raise UserError("in-betweening needs the run's bone lengths (a run trained before they were recorded)")
+    lengths = {j: float(features.lengths[j]) for j in range(sk.num_joints)}
+    left, right = hips(sk)
+    return cls(sk.root, left, right, float(chain_length(lengths, sk, sk.feet[0])))
+
+  def anchor(self, canon_xJx3) -> tuple[np.ndarray, np.ndarray]:
+    """``(heading [...], floor point [..., 3])`` of frames ``[..., J, 3]``."""
+    across = canon_xJx3[..., self.left, :] - canon_xJx3[..., self.right, :]
+    theta = np.arctan2(-across[..., 2], across[..., 0])
+    return theta, canon_xJx3[..., self.root, :] * np.array([1.0, 0.0, 1.0], np.float32)
+
+  def to_local(self, canon_xTxJx3, anchor) -> np.ndarray:
+    """Canonical frames ``[..., T, J, 3]`` -> flat local poses ``[..., T, 3J]`` about ``anchor``."""
+    theta, floor = anchor
+    moved = canon_xTxJx3 - np.asarray(floor)[..., None, None, :]
+    out = _rotate_y(moved, -np.asarray(theta)[..., None, None]) / self.size
+    return out.reshape(*out.shape[:-2], -1).astype(np.float32)
+
+  def from_local(self, flat_xTxK, anchor) -> np.ndarray:
+    theta, floor = anchor
+    pos = np.asarray(flat_xTxK).reshape(*np.shape(flat_xTxK)[:-1], -1, 3) * self.size
+    return (_rotate_y(pos, np.asarray(theta)[..., None, None]) + np.asarray(floor)[..., None, None, :]).astype(
+      np.float32
+    )
+
+
+def _rotate_y(v, angle):
+  c, s = np.cos(angle), np.sin(angle)
+  x, y, z = v[..., 0], v[..., 1], v[..., 2]
+  return np.stack([c * x + s * z, y, -s * x + c * z], -1)
+
+
+def training_takes(ds, augment) -> list[np.ndarray]:
+  """The training takes as canonical positions ``[T, J, 3]``, with their mirror images and/or the takes
+  played backwards as ``augment`` (``data.augment``) asks."""
+  from chorjax.data import transforms
+
+  f = ds.features
+  by_name = {m.name: m for m in ds.motions}
+  out = []
+  for name in ds.train_names:
+    canon = np.asarray(f.canonical(by_name[name].positions), np.float32)
+    versions = [canon]
+    if "mirror" in augment:
+      versions.append(np.asarray(transforms.mirror(canon, f.skeleton.twins, lateral_axis=0), np.float32))
+    if "reverse" in augment:
+      versions += [v[::-1].copy() for v in versions]
+    out += versions
+  return out
+
+
+def held_out_takes(ds) -> list[np.ndarray]:
+  by_name = {m.name: m for m in ds.motions}
+  return [np.asarray(ds.features.canonical(by_name[n].positions), np.float32) for n in ds.val_names]
+
+
+def local_windows(space: Space, windows_NxWxJx3, context: int) -> np.ndarray:
+  """Windows of canonical frames -> flat local poses, each about its own last context frame."""
+  return space.to_local(windows_NxWxJx3, space.anchor(windows_NxWxJx3[:, context - 1]))
+
+
+class TransitionSampler:
+  """Deterministic training batches: batch ``step`` depends only on (seed, step), like ``WindowSampler``.
+
+  ``batch(step)``: ``{"window": [B, C + N + 1, K], "length": [B]}``, each row a random window of a
+  training take (chosen by length) and a transition length from ``min_frames..max_frames``."""
+
+  def __init__(self, takes, space: Space, ib, batch_size: int, seed: int):
+    self.span = ib.context + ib.max_frames + 1
+    self.takes = [t for t in takes if len(t) >= self.span]
+    if not self.takes:
+      raise UserError(f"no training take holds a window of {self.span} frames (inbetween.context + max_frames + 1)")
+    self.space, self.ib, self.batch_size, self.seed = space, ib, batch_size, seed
+    lengths = np.array([len(t) for t in self.takes], np.float64)
+    self.probs = lengths / lengths.sum()
+
+  def batch(self, step: int) -> dict[str, np.ndarray]:
+    rng = np.random.default_rng((self.seed, step))
+    which = rng.choice(len(self.takes), size=self.batch_size, p=self.probs)
+    starts = [int(rng.integers(0, len(self.takes[i]) - self.span + 1)) for i in which]
+    lengths = rng.integers(self.ib.min_frames, self.ib.max_frames + 1, size=self.batch_size)
+    wins = np.stack([self.takes[i][s : s + self.span] for i, s in zip(which, starts)])
+    return {"window": local_windows(self.space, wins, self.ib.context), "length": lengths.astype(np.int32)}
+
+
+def validation_batch(takes, space: Space, ib, max_windows: int, hop: int = 40) -> dict:
+  """Fixed held-out windows (every ``hop`` frames, at most ``max_windows``), lengths cycling ``VAL_LENGTHS``."""
+  span = ib.context + ib.max_frames + 1
+  wins = [t[s : s + span] for t in takes for s in range(0, len(t) - span + 1, hop)]
+  if not wins:
+    return {}
+  keep = np.unique(np.linspace(0, len(wins) - 1, min(max_windows, len(wins))).astype(int))
+  lengths = [min(VAL_LENGTHS[i % len(VAL_LENGTHS)], ib.max_frames) for i in range(len(keep))]
+  window = local_windows(space, np.stack([wins[k] for k in keep]), ib.context)
+  return {"window": window, "length": np.array(lengths, np.int32)}
+
+
+# ---------------------------------------------------------------- training
+
+
+@dataclasses.dataclass(frozen=True)
+class InbetweenSpec:
+  """What the in-betweening train step needs besides its arrays (hashable: a static jit argument)."""
+
+  graphdef: Any
+  tx: optax.GradientTransformation
+  schedule: optax.Schedule
+  context: int
+  max_frames: int
+  target_noise: float
+  velocity_weight: float
+  width: int  # the encoders' output size (the z_target noise's)
+
+
+def check_inbetween(cfg: Config) -> None:
+  """Raises UserError, naming the key, for an in-betweening config that cannot train."""
+  ib = cfg.inbetween
+  if ib.min_frames > ib.max_frames:
+    raise UserError(f"inbetween.min_frames ({ib.min_frames}) is above inbetween.max_frames ({ib.max_frames})")
+  for key in ("encoder_sizes", "decoder_sizes"):
+    sizes = getattr(ib, key)
+    if not all(isinstance(v, int) and v > 0 for v in sizes) or (key == "encoder_sizes" and not sizes):
+      raise UserError(f"inbetween.{key}: expected a list of positive layer sizes, got {list(sizes)}")
+  if cfg.train.feedback != "none":
+    raise UserError("train.feedback: the in-betweening family always feeds itself; set train.feedback = 'none'")
+  if cfg.model.dropout > 0:
+    raise UserError("model.dropout: the in-betweening family runs its core frame by frame, without dropout; set 0")
+
+
+def create_inbetween_state(cfg: Config, features: Features) -> tuple[dict, InbetweenSpec]:
+  """``({params, opt_state, step}, spec)`` for a fresh in-betweening run."""
+  check_inbetween(cfg)
+  graphdef, params = nnx.split(build_model(cfg, features, 1), nnx.Param)
+  params = nnx.to_pure_dict(params)
+  tx, schedule = create_optimizer(cfg)
+  ib = cfg.inbetween
+  spec = InbetweenSpec(
+    graphdef, tx, schedule, ib.context, ib.max_frames, ib.target_noise, ib.velocity_weight, ib.encoder_sizes[-1]
+  )
+  return {"params": params, "opt_state": tx.init(params), "step": jnp.zeros((), jnp.int32)}, spec
+
+
+def _predict(params, batch, z_BxE, spec: InbetweenSpec):
+  """The model's transitions of ``batch``: ``(written frames [B, N, K], real ones [B, N + 1, K] with the
+  target, mask [B, N + 1] of the frames up to and including each row's target)``."""
+  model = nnx.merge(spec.graphdef, params)
+  c, n = spec.context, spec.max_frames
+  window, length = batch["window"], batch["length"]
+  target = jnp.take_along_axis(window, (c + length)[:, None, None], axis=1)[:, 0]
+  written = rollout(model, window[:, :c], target, length, n, z_BxE)
+  real = window[:, c : c + n + 1]
+  mask = (jnp.arange(n + 1)[None] <= length[:, None]).astype(jnp.float32)
+  return written, real, mask
+
+
+def transition_loss(params, batch, key, spec: InbetweenSpec):
+  """``(loss, {pose_l1, step_l1})``: the L1 distances of the written frames and of their frame-to-frame
+  steps (the step into the target included) to the real ones, over each row's own transition.
+
+  Each row's distances are its mean over its frames divided by ``length + 1``: interpolation's error grows
+  about linearly with the length, so every length weighs alike (a plain mean over frames would weigh a
+  30-frame row some 36 times a 5-frame one, and the model would not learn short transitions)."""
+  z = spec.target_noise * jax.random.normal(key, (batch["window"].shape[0], spec.width))
+  written, real, mask = _predict(params, batch, z, spec)
+  last = batch["window"][:, spec.context - 1 : spec.context]
+  length = batch["length"][:, None]
+  idx = jnp.arange(spec.max_frames + 1)[None]
+  # the written frames up to each row's target, the real ones from it on (the target itself, then masked out)
+  ext = jnp.where((idx < length)[..., None], jnp.concatenate([written, real[:, -1:]], 1), real)
+  pose_mask = (idx < length).astype(jnp.float32)
+  weight = 1.0 / (length[:, 0] + 1.0)
+  row_mean = lambda err, m: (err * m).sum(1) / m.sum(1)
+  balanced = lambda err, m: (row_mean(err, m) * weight).sum() / weight.sum() * (spec.max_frames + 1) / 2
+  pose = balanced(jnp.abs(ext - real).mean(-1), pose_mask)
+  steps = lambda x: jnp.diff(jnp.concatenate([last, x], 1), axis=1)
+  step = balanced(jnp.abs(steps(ext) - steps(real)).mean(-1), mask)
+  return pose + spec.velocity_weight * step, {"pose_l1": pose, "step_l1": step}
+
+
+def _inbetween_train_step(state, batch, key, spec: InbetweenSpec):
+  key = step_key(key, state["step"])
+  (loss, aux), grads = jax.value_and_grad(transition_loss, has_aux=True)(state["params"], batch, key, spec)
+  updates, opt_state = spec.tx.update(grads, state["opt_state"], state["params"])
+  params = optax.apply_updates(state["params"], updates)
+  metrics = {"loss": loss, **aux, "grad_norm": optax.tree.norm(grads), "lr": spec.schedule(state["step"])}
+  return {"params": params, "opt_state": opt_state, "step": state["step"] + 1}, metrics
+
+
+inbetween_train_step = functools.partial(jax.jit, static_argnums=3, donate_argnums=0)(_inbetween_train_step)
+inbetween_train_step.__doc__ = """``inbetween_train_step(state, batch, key, spec) -> (state, metrics)``; ``state`` is
+donated, ``spec`` (an :class:`InbetweenSpec`) is static."""
+
+
+@functools.partial(jax.jit, static_argnums=2)
+def validation_loss(params, batch, spec: InbetweenSpec):
+  """The pose L1 of the held-out transitions in ``batch`` (no noise)."""
+  written, real, _ = _predict(params, batch, jnp.zeros((batch["window"].shape[0], spec.width)), spec)
+  mask = (jnp.arange(spec.max_frames)[None] < batch["length"][:, None]).astype(jnp.float32)
+  return (jnp.abs(written - real[:, :-1]).mean(-1) * mask).sum() / mask.sum()
+
+
+# ---------------------------------------------------------------- writing transitions
+
+
+def zero_velocity(context_BxCxK, target_BxK, frames: int) -> np.ndarray:
+  """The zero-velocity baseline: the last context frame held until the target."""
+  return np.repeat(np.asarray(context_BxCxK)[:, -1:], frames, 1)
+
+
+def linear(context_BxCxK, target_BxK, frames: int) -> np.ndarray:
+  """The linear-interpolation baseline: every joint on the straight line from the last context frame."""
+  alpha = (np.arange(1, frames + 1, dtype=np.float32) / (frames + 1))[None, :, None]
+  last = np.asarray(context_BxCxK)[:, -1:]
+  return last + alpha * (np.asarray(target_BxK)[:, None] - last)
+
+
+@functools.partial(jax.jit, static_argnums=(0, 5))
+def _transitions(graphdef, params, context_BxCxK, target_BxK, z_BxE, frames: int):
+  length = jnp.full((context_BxCxK.shape[0],), frames, jnp.int32)
+  return rollout(nnx.merge(graphdef, params), context_BxCxK, target_BxK, length, frames, z_BxE)
+
+
+def model_transitions(graphdef, params, ib, context_BxCxK, target_BxK, frames: int, key) -> np.ndarray:
+  """A trained model's ``frames``-frame transitions ``[B, frames, K]`` (local flat poses; ``key`` draws
+  each row's ``z_target`` at ``ib.target_noise``; the last ``ib.context`` context frames are used)."""
+  ctx = jnp.asarray(context_BxCxK)[:, -ib.context :]
+  z = ib.target_noise * jax.random.normal(key, (ctx.shape[0], ib.encoder_sizes[-1]))
+  return np.asarray(_transitions(graphdef, params, ctx, jnp.asarray(target_BxK), z, frames))
+
+
+def write_transitions(graphdef, params, f: Features, ib, context_CxJx3, targets, frames, key, num: int = 1):
+  """``num`` pieces ``[num, C + sum(frames) + len(targets), J, 3]`` (data space): the context phrase, then
+  for each target pose (``[J, 3]``) its transition of ``frames[i]`` frames and the target itself. Context
+  and targets are copied in unchanged; each segment's context is the piece so far. ``f``, ``ib``: the
+  run's features and ``[inbetween]`` config."""
+  space = Space.of(f)
+  piece = np.repeat(np.asarray(context_CxJx3, np.float32)[None], num, 0)
+  for i, (target, n) in enumerate(zip(targets, frames)):
+    canon = np.asarray(f.canonical(piece[:, -ib.context :]), np.float32)
+    goal = np.asarray(f.canonical(np.asarray(target, np.float32)[None]), np.float32)
+    anchor = space.anchor(canon[:, -1])
+    ctx, tgt = space.to_local(canon, anchor), space.to_local(np.repeat(goal[None], num, 0), anchor)[:, 0]
+    local = model_transitions(graphdef, params, ib, ctx, tgt, n, jax.random.fold_in(key, i))
+    between = np.asarray(f.uncanonical(space.from_local(local, anchor)), np.float32)
+    piece = np.concatenate([piece, between, np.repeat(np.asarray(target, np.float32)[None, None], num, 0)], 1)
+  return piece
+
+
+def read_pose(spec: str, features, data_cfg, flag: str = "--to") -> np.ndarray:
+  """``FILE[:FRAME]`` (frame 0 unless given) -> that frame's positions ``[J, 3]`` in the run's data space."""
+  from chorjax.sample import read_phrase
+
+  path, colon, frame = spec.rpartition(":")
+  if not colon or not frame.isdigit():
+    path, frame = spec, "0"
+  take = read_phrase(path, features, data_cfg, flag=flag)
+  if int(frame) >= len(take):
+    raise UserError(f"{flag} {spec}: frame {frame} is not inside the take's {len(take)} frames")
+  return take[int(frame)]
+
+
+def end_sample(graphdef, params, ds, cfg: Config) -> tuple:
+  """What a run ends with: ``(the real take, pieces [sample.num, T, J, 3], their title)``: the held-out
+  take's first ``context`` frames (the take of ``sample.motion`` without one) and a key pose of it every
+  ``min(max_frames, 30) + 1`` frames up to ``sample.frames``, the model writing every frame between."""
+  ib, s = cfg.inbetween, cfg.sample
+  name = ds.val_names[0] if ds.val_names else {v: k for k, v in ds.id_map.items()}[s.motion]
+  take = next(m for m in ds.motions if m.name == name)
+  seg = min(ib.max_frames, 30)
+  keys = list(range(ib.context - 1 + seg + 1, min(take.num_frames, ib.context + s.frames), seg + 1))
+  pos = take.positions
+  pieces = write_transitions(
+    graphdef,
+    params,
+    ds.features,
+    ib,
+    pos[: ib.context],
+    [pos[k] for k in keys],
+    [seg] * len(keys),
+    jax.random.key(s.seed),
+    s.num,
+  )
+  real = take.replace(positions=pos[: pieces.shape[1]], name=f"original: {name}")
+  return real, pieces, f"in-between, key poses of {name} every {seg + 1} frames"
+
+
+# ---------------------------------------------------------------- the evaluation (LaFAN1's protocol, adapted)
+
+
+def benchmark_windows(takes, context: int, longest: int, hop: int = BENCHMARK_HOP) -> tuple[np.ndarray, np.ndarray]:
+  """Windows of ``context + longest + 1`` canonical frames every ``hop`` frames of each take, and the
+  index of the take each comes from."""
+  span = context + longest + 1
+  wins = [(i, t[s : s + span]) for i, t in enumerate(takes) for s in range(0, len(t) - span + 1, hop)]
+  if not wins:
+    raise UserError(f"no take holds a window of {span} frames")
+  return np.stack([w for _, w in wins]), np.array([i for i, _ in wins])
+
+
+def window_std(takes, space: Space, context: int, longest: int = max(BENCHMARK_LENGTHS)) -> np.ndarray:
+  """``[K]`` the standard deviation of every local coordinate over the windows of ``takes`` (the training
+  takes): L2P's normalization."""
+  wins, _ = benchmark_windows(takes, context, longest)
+  local = local_windows(space, wins, context)[:, context:]
+  return np.maximum(local.reshape(-1, local.shape[-1]).std(0), 1e-6).astype(np.float32)
+
+
+def benchmark(methods: dict, takes, space: Space, feet, context: int, std_K, lengths=BENCHMARK_LENGTHS) -> dict:
+  """``{method: {length: {l2p, position_error, npss, foot_skate, foot_skate_real, arrival_step}}}`` over the
+  windows of ``takes`` (canonical positions) every 40 frames: each method (``fn(context [B, C, K], target
+  [B, K], frames) -> [B, frames, K]``, local poses) writes every window's transition of each length.
+  ``position_error`` is in leg lengths; ``arrival_step`` is the mean joint step from the last written frame
+  into the target over the takes' own mean frame-to-frame step (1 = as far as the dancer moves in a frame)."""
+  wins, which = benchmark_windows(takes, context, max(lengths))
+  local = local_windows(space, wins, context)
+  floor = np.array([np.percentile(t[:, list(feet), 1], 5) for t in takes], np.float32)[which] / space.size
+  data_step = np.mean([np.linalg.norm(np.diff(t, axis=0), axis=-1).mean() for t in takes]) / space.size
+  joints = lambda x: x.reshape(*x.shape[:-1], -1, 3)
+  out: dict = {}
+  for name, fn in methods.items():
+    out[name] = {}
+    for n in lengths:
+      ctx, target, real = local[:, :context], local[:, context + n], local[:, context : context + n]
+      pred = np.asarray(fn(ctx, target, n), np.float32)
+      arrival = np.linalg.norm(joints(target[:, None] - pred[:, -1:]), axis=-1).mean()
+      out[name][n] = {
+        "l2p": l2p(pred, real, std_K),
+        "position_error": position_error(pred, real),
+        "npss": npss(pred, real),
+        "foot_skate": foot_skate(joints(np.concatenate([ctx[:, -1:], pred], 1)), feet, floor, FOOT_HEIGHT),
+        "foot_skate_real": foot_skate(joints(local[:, context - 1 : context + n]), feet, floor, FOOT_HEIGHT),
+        "arrival_step": float(arrival / data_step),
+      }
+  return out
