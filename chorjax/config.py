@@ -163,8 +163,10 @@ class InbetweenConfig:
   system: str = _field(
     "lstm",
     "the transition model: 'lstm' (the recurrent core conditioned on the target pose and the time to arrival, "
-    "as in Harvey et al. 2020, writing each frame's deviation from linear interpolation)",
-    choices=("lstm",),
+    "as in Harvey et al. 2020, writing each frame's deviation from linear interpolation) or 'cvae' (Tang et "
+    "al. 2022: a conditional VAE motion manifold with a mixture-of-experts decoder, trained first, then a "
+    "recurrent transition sampler that writes its latents with the decoder frozen)",
+    choices=("lstm", "cvae"),
   )
   context: int = _field(10, "frames of the phrase the model sees before a transition", minimum=2)
   min_frames: int = _field(5, "shortest transition trained on (frames between context and target)", minimum=1)
@@ -181,6 +183,35 @@ class InbetweenConfig:
   )
   velocity_weight: float = _field(
     1.0, "weight of the L1 loss on frame-to-frame steps beside the pose loss", minimum=0.0
+  )
+  latent_size: int = _field(32, "cvae: size of the manifold's latent z", minimum=1)
+  manifold_encoder_sizes: tuple = _field((256, 256), "cvae: ELU layers of the manifold's encoder")
+  experts: int = _field(6, "cvae: expert networks of the manifold's decoder", minimum=1)
+  expert_sizes: tuple = _field((256, 256, 256), "cvae: ELU layers of each expert (z and the root's step fed to each)")
+  gate_sizes: tuple = _field((256, 256), "cvae: ELU layers of the gating network (then a softmax over the experts)")
+  manifold_steps: int = _field(
+    2000, "cvae: steps of stage 1 (the manifold); the rest of train.num_steps train the sampler", minimum=1
+  )
+  manifold_frames: int = _field(8, "cvae: frames each stage-1 window rolls out", minimum=1)
+  sampling_ramp: int = _field(
+    1000,
+    "cvae: stage-1 steps over which scheduled sampling's p (the chance that the previous frame is the model's "
+    "own) rises linearly from 0 to 1",
+    minimum=1,
+  )
+  kl_weight: float = _field(
+    1e-5,
+    "cvae: weight of the KL term of stage 1, beside a reconstruction that is a mean L1 per coordinate in leg "
+    "lengths (about 0.003-0.01): on cmu94, 0.1 and 5e-4 collapsed the posterior (KL under 1 nat, the decoder "
+    "ignoring z); 1e-5 keeps it some 70 nats",
+    minimum=0.0,
+  )
+  physics_start: int = _field(
+    1000,
+    "cvae: the stage-1 step from which the foot-skating and bone-length losses join (their weight ramping from 0 "
+    "to 1 over the rest of stage 1, while the learning rate, decayed to optim.final_lr_ratio, is warmed again "
+    "from 0)",
+    minimum=0,
   )
 
 

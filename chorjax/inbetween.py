@@ -31,6 +31,7 @@ import numpy as np
 import optax
 from flax import nnx
 
+from chorjax import cvae
 from chorjax.config import Config
 from chorjax.data.features import Features, hips
 from chorjax.data.motion import chain_length
@@ -188,11 +189,25 @@ def check_inbetween(cfg: Config) -> None:
     raise UserError("train.feedback: the in-betweening family always feeds itself; set train.feedback = 'none'")
   if cfg.model.dropout > 0:
     raise UserError("model.dropout: the in-betweening family runs its core frame by frame, without dropout; set 0")
+  if ib.system == "cvae":
+    for key in ("manifold_encoder_sizes", "expert_sizes", "gate_sizes"):
+      sizes = getattr(ib, key)
+      if not sizes or not all(isinstance(v, int) and v > 0 for v in sizes):
+        raise UserError(f"inbetween.{key}: expected a list of positive layer sizes, got {list(sizes)}")
+    if cfg.train.num_steps <= ib.manifold_steps:
+      raise UserError(
+        f"train.num_steps ({cfg.train.num_steps}) must be above inbetween.manifold_steps ({ib.manifold_steps}): "
+        "the transition sampler trains in the steps after the manifold"
+      )
+    if ib.manifold_frames > ib.max_frames + 1:
+      raise UserError(f"inbetween.manifold_frames ({ib.manifold_frames}) must be at most max_frames + 1")
 
 
-def create_inbetween_state(cfg: Config, features: Features) -> tuple[dict, InbetweenSpec]:
-  """``({params, opt_state, step}, spec)`` for a fresh in-betweening run."""
+def create_inbetween_state(cfg: Config, features: Features) -> tuple[dict, InbetweenSpec | cvae.CvaeSpec]:
+  """``({params, opt_state, step}, spec)`` for a fresh in-betweening run (either system)."""
   check_inbetween(cfg)
+  if cfg.inbetween.system == "cvae":
+    return cvae.create_cvae_state(cfg, features, Space.of(features))
   graphdef, params = nnx.split(build_model(cfg, features, 1), nnx.Param)
   params = nnx.to_pure_dict(params)
   tx, schedule = create_optimizer(cfg)
@@ -240,8 +255,10 @@ def transition_loss(params, batch, key, spec: InbetweenSpec):
   return pose + spec.velocity_weight * step, {"pose_l1": pose, "step_l1": step}
 
 
-def _inbetween_train_step(state, batch, key, spec: InbetweenSpec):
+def _inbetween_train_step(state, batch, key, spec: InbetweenSpec | cvae.CvaeSpec):
   key = step_key(key, state["step"])
+  if isinstance(spec, cvae.CvaeSpec):
+    return cvae.cvae_step(state, batch, key, spec)
   (loss, aux), grads = jax.value_and_grad(transition_loss, has_aux=True)(state["params"], batch, key, spec)
   updates, opt_state = spec.tx.update(grads, state["opt_state"], state["params"])
   params = optax.apply_updates(state["params"], updates)
@@ -251,12 +268,14 @@ def _inbetween_train_step(state, batch, key, spec: InbetweenSpec):
 
 inbetween_train_step = functools.partial(jax.jit, static_argnums=3, donate_argnums=0)(_inbetween_train_step)
 inbetween_train_step.__doc__ = """``inbetween_train_step(state, batch, key, spec) -> (state, metrics)``; ``state`` is
-donated, ``spec`` (an :class:`InbetweenSpec`) is static."""
+donated, ``spec`` (an :class:`InbetweenSpec`, or a ``cvae.CvaeSpec`` for the cvae system) is static."""
 
 
 @functools.partial(jax.jit, static_argnums=2)
-def validation_loss(params, batch, spec: InbetweenSpec):
+def validation_loss(params, batch, spec: InbetweenSpec | cvae.CvaeSpec):
   """The pose L1 of the held-out transitions in ``batch`` (no noise)."""
+  if isinstance(spec, cvae.CvaeSpec):
+    return cvae.cvae_validation(params, batch, spec)
   written, real, _ = _predict(params, batch, jnp.zeros((batch["window"].shape[0], spec.width)), spec)
   mask = (jnp.arange(spec.max_frames)[None] < batch["length"][:, None]).astype(jnp.float32)
   return (jnp.abs(written - real[:, :-1]).mean(-1) * mask).sum() / mask.sum()
@@ -283,10 +302,17 @@ def _transitions(graphdef, params, context_BxCxK, target_BxK, z_BxE, frames: int
   return rollout(nnx.merge(graphdef, params), context_BxCxK, target_BxK, length, frames, z_BxE)
 
 
+_cvae_transitions = jax.jit(cvae.cvae_transitions, static_argnums=(0, 4, 6))
+
+
 def model_transitions(graphdef, params, ib, context_BxCxK, target_BxK, frames: int, key) -> np.ndarray:
-  """A trained model's ``frames``-frame transitions ``[B, frames, K]`` (local flat poses; ``key`` draws
-  each row's ``z_target`` at ``ib.target_noise``; the last ``ib.context`` context frames are used)."""
+  """A trained model's ``frames``-frame transitions ``[B, frames, K]`` (local flat poses; the last
+  ``ib.context`` context frames are used). ``key`` draws each row's noise: the LSTM system's ``z_target``
+  at ``ib.target_noise``; the cvae system's latents, ``mu + target_noise x sigma x eps``."""
   ctx = jnp.asarray(context_BxCxK)[:, -ib.context :]
+  if ib.system == "cvae":
+    out = _cvae_transitions(graphdef, params, ctx, jnp.asarray(target_BxK), frames, key, ib.target_noise)
+    return np.asarray(out)
   z = ib.target_noise * jax.random.normal(key, (ctx.shape[0], ib.encoder_sizes[-1]))
   return np.asarray(_transitions(graphdef, params, ctx, jnp.asarray(target_BxK), z, frames))
 
@@ -325,12 +351,14 @@ def read_pose(spec: str, features, data_cfg, flag: str = "--to") -> np.ndarray:
 def end_sample(graphdef, params, ds, cfg: Config) -> tuple:
   """What a run ends with: ``(the real take, pieces [sample.num, T, J, 3], their title)``: the held-out
   take's first ``context`` frames (the take of ``sample.motion`` without one) and a key pose of it every
-  ``min(max_frames, 30) + 1`` frames up to ``sample.frames``, the model writing every frame between."""
+  ``min(max_frames, 30) + 1`` frames up to ``sample.frames`` (at least one), the model writing every frame
+  between."""
   ib, s = cfg.inbetween, cfg.sample
   name = ds.val_names[0] if ds.val_names else {v: k for k, v in ds.id_map.items()}[s.motion]
   take = next(m for m in ds.motions if m.name == name)
   seg = min(ib.max_frames, 30)
-  keys = list(range(ib.context - 1 + seg + 1, min(take.num_frames, ib.context + s.frames), seg + 1))
+  upto = min(take.num_frames, ib.context + max(s.frames, seg + 1))  # at least one transition
+  keys = list(range(ib.context - 1 + seg + 1, upto, seg + 1))
   pos = take.positions
   pieces = write_transitions(
     graphdef,

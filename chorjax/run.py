@@ -28,6 +28,7 @@ from chorjax.config import Config, config_from_dict
 from chorjax.data.features import Features
 from chorjax.errors import UserError
 from chorjax.models import ChorModel, create_model
+from chorjax.models.cvae import TransitionCVAE
 from chorjax.models.gan import GanModel, gan_controls
 from chorjax.models.inbetween import TransitionModel
 
@@ -106,14 +107,18 @@ def create_optimizer(cfg: Config, lr: float | None = None) -> tuple[optax.Gradie
   return optax.chain(*chain, opt), schedule
 
 
-def build_model(cfg: Config, features: Features, num_motions: int) -> ChorModel | GanModel | TransitionModel:
+def build_model(
+  cfg: Config, features: Features, num_motions: int
+) -> ChorModel | GanModel | TransitionModel | TransitionCVAE:
   """``cfg``'s model, of its family (``model.family``), for ``features``; parameters drawn from ``train.seed``.
   The in-betweening family works on flat joint positions (``3J`` numbers), the others on the features."""
   if cfg.model.family == "gan":
     return GanModel(cfg.gan, features.dim, rngs=nnx.Rngs(cfg.train.seed))
   if cfg.model.family == "inbetween":
-    dim = 3 * features.skeleton.num_joints
-    return TransitionModel(cfg.model, cfg.inbetween, dim, rngs=nnx.Rngs(cfg.train.seed))
+    dim, rngs = 3 * features.skeleton.num_joints, nnx.Rngs(cfg.train.seed)
+    if cfg.inbetween.system == "cvae":
+      return TransitionCVAE(cfg.model, cfg.inbetween, dim, features.skeleton.root, rngs=rngs)
+    return TransitionModel(cfg.model, cfg.inbetween, dim, rngs=rngs)
   return create_model(cfg.model, features.dim, num_motions, cfg.train.seed)
 
 

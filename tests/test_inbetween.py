@@ -203,3 +203,101 @@ def test_bad_inbetween_input_is_refused(trained, tmp_path, capsys):
   bad.write_text('[model]\nfamily = "inbetween"\n[inbetween]\nmin_frames = 40\nmax_frames = 30\n')
   assert cli.main(["train", str(bad), "--workdir", str(tmp_path / "never")]) == 2
   assert "inbetween.min_frames" in capsys.readouterr().err and not (tmp_path / "never").exists()
+
+
+# ---------------------------------------------------------------- the cvae system (Tang et al. 2022)
+
+CVAE = [
+  "inbetween.system=cvae",
+  "inbetween.manifold_encoder_sizes=[32]",
+  "inbetween.expert_sizes=[32,32]",
+  "inbetween.gate_sizes=[32]",
+  "inbetween.experts=3",
+  "inbetween.latent_size=8",
+  "inbetween.manifold_frames=6",
+  "inbetween.manifold_steps=40",
+  "inbetween.sampling_ramp=20",
+  "inbetween.physics_start=20",
+  "train.num_steps=80",
+  "optim.name=amsgrad",
+  "optim.b1=0.5",
+  "optim.b2=0.9",
+]
+
+
+@pytest.fixture(scope="module")
+def cvae_setup(setup):
+  from chorjax import cvae
+
+  _, ds, space = setup
+  cfg = tiny_config(*IB, *CVAE)
+  state, spec = ib.create_inbetween_state(cfg, ds.features)
+  sampler = ib.TransitionSampler(ib.training_takes(ds, ()), space, cfg.inbetween, 8, seed=0)
+  batch = {k: jnp.asarray(v) for k, v in sampler.batch(0).items()}
+  assert isinstance(spec, cvae.CvaeSpec)
+  return cfg, state, spec, batch
+
+
+def test_cvae_schedules_sampling_chance_loss_ramp_and_learning_rate(cvae_setup):
+  from chorjax import cvae
+
+  _, _, spec, _ = cvae_setup  # manifold_steps 40, sampling_ramp 20, physics_start 20
+  p = [float(cvae.own_frame_chance(s, spec)) for s in (0, 10, 20, 30)]
+  assert p == [0.0, 0.5, 1.0, 1.0]
+  ramp = [float(cvae.physics_ramp(s, spec)) for s in (0, 19, 20, 30, 40, 60)]
+  assert ramp == [0.0, 0.0, 0.0, 0.5, 1.0, 1.0]
+  lr = cvae.stage1_schedule(1e-3, 0.1, 20, 40)
+  assert np.isclose(lr(0), 1e-3) and np.isclose(lr(19), 1e-4, rtol=0.1)  # decayed to 1e-4 ...
+  assert float(lr(20)) < 1e-5 and np.isclose(lr(30), 5e-4) and np.isclose(lr(40), 1e-3)  # ... re-warmed from 0
+
+
+def _run_steps(state, batch, spec, steps):
+  for _ in range(steps):
+    state, metrics = ib.inbetween_train_step(state, batch, jax.random.key(1), spec)
+  return state, metrics
+
+
+def test_cvae_decoder_uses_z_and_stage_two_leaves_it_bit_identical(cvae_setup):
+  from chorjax.models.cvae import split
+
+  _cfg, state, spec, batch = cvae_setup
+  state = jax.tree.map(jnp.copy, state)  # the fixture's arrays stay (train steps donate theirs)
+  state, m1 = _run_steps(state, batch, spec, 40)  # all of stage 1
+  assert float(m1["recon"]) > 0 and float(m1["pose_l1"]) == 0
+  manifold = nnx.merge(spec.manifold_def, state["params"]["manifold"])
+  prev = batch["window"][:, 3]
+  rel, _ = split(prev, spec.root)
+  step = prev - batch["window"][:, 2]
+  root = jnp.zeros((8, 3))
+  z1, z2 = jnp.zeros((8, 8)), jnp.ones((8, 8))
+  change = jnp.abs(manifold.decode(z1, rel, step, root)[0] - manifold.decode(z2, rel, step, root)[0]).mean()
+  moved = jnp.abs(manifold.decode(z1, rel, step, root)[0] - rel).mean()
+  assert float(change) > 0.05 * float(moved)  # a decoder that ignored z (posterior collapse) fails here
+  before = jax.tree.map(np.asarray, state["params"]["manifold"])
+  sampler_before = jax.tree.map(np.asarray, state["params"]["sampler"])
+  state, m2 = _run_steps(state, batch, spec, 5)  # stage 2
+  assert float(m2["pose_l1"]) > 0 and float(m2["recon"]) == 0
+  after = jax.tree.map(np.asarray, state["params"]["manifold"])
+  assert all(np.array_equal(a, b) for a, b in zip(jax.tree.leaves(before), jax.tree.leaves(after)))
+  moved = [
+    not np.array_equal(a, b)
+    for a, b in zip(jax.tree.leaves(sampler_before), jax.tree.leaves(state["params"]["sampler"]))
+  ]
+  assert any(moved)
+
+
+def test_cvae_run_trains_both_stages_and_writes_transitions(setup, tmp_path):
+  workdir = tmp_path / "cvae"
+  cfg = tiny_config(*IB, *CVAE, "train.eval_every=40", "sample.frames=20")
+  summary = train_and_evaluate(cfg, workdir)
+  assert summary["final_step"] == 80 and np.isfinite(summary["final_val_loss"])
+  run = load_run(workdir)
+  from chorjax.sample import read_phrase
+
+  real = read_phrase(str(TAKE), run.features, run.config.data)
+  write = lambda seed: ib.write_transitions(
+    run.graphdef, run.params, run.features, run.config.inbetween, real[:6], [real[30]], [12], jax.random.key(seed)
+  )[0]
+  a, b = write(0), write(1)
+  assert a.shape == (6 + 12 + 1, 16, 3) and np.array_equal(a[:6], real[:6]) and np.array_equal(a[-1], real[30])
+  assert not np.allclose(a[6:18], b[6:18])  # the latents are drawn: another seed, another transition

@@ -3,7 +3,8 @@
 Transitions of 5, 15, 30 and 45 frames after 10 context frames, in windows every 40 frames of held-out
 takes: cmu94's validation take (94_10) and the CMU dance takes in ../shared/data (subject 5, modern dance,
 and subject 131, Michael-Jackson-style; ASF/AMC at 120 fps), converted as the runs read their data (mapped
-onto the 16 joints, cmu94's axes, 30 fps) and scaled to cmu94's body (the same leg length). Methods: the
+onto the 16 joints, cmu94's axes, 30 fps), scaled to cmu94's body (the same leg length) and set on its
+floor (cmu94's floor lies 4 leg lengths below its y origin, the ASF takes' at it; the models read heights). Methods: the
 zero-velocity and linear-interpolation baselines and every trained run given (several training seeds of
 one config make one row: mean +- sd). Run from the repository root after training, e.g.:
 
@@ -14,6 +15,7 @@ Writes experiments/inbetween/report.md, results.json and strip_30.png (a 30-fram
 
 import argparse
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -43,13 +45,18 @@ def held_out(run) -> dict[str, list[np.ndarray]]:
   ds = load_dataset(run.config.data)
   sets = {"cmu94 " + ", ".join(ds.val_names): ib.held_out_takes(ds)}
   size, f = ib.Space.of(run.features).size, run.features
+  feet = list(f.skeleton.feet)
+  floor = lambda takes: np.percentile(np.concatenate([t[:, feet, 1] for t in takes]), 5)
+  cmu94_floor = floor(ib.training_takes(ds, ()))
   for folder in OTHERS:
     if not Path(folder).is_dir():
       print(f"warning: {folder} not found: evaluated without it", file=sys.stderr)
       continue
     takes = [to_rate(m, ds.fps) for m in conform(read_takes([folder], run.config.data), run.config.data)]
     canon = [np.asarray(f.canonical(m.positions), np.float32) for m in takes]
-    sets[Path(folder).name] = [c * (size / leg_length(c, f.skeleton)) for c in canon]  # cmu94's body size
+    canon = [c * (size / leg_length(c, f.skeleton)) for c in canon]  # cmu94's body size
+    lift = np.array([0.0, cmu94_floor - floor(canon), 0.0], np.float32)  # on cmu94's floor (its y origin differs)
+    sets[Path(folder).name] = [c + lift for c in canon]
   return sets
 
 
@@ -96,7 +103,8 @@ def groups_of(runs) -> dict[str, list[str]]:
   """Row label -> the methods pooled in it (the trained runs of one config: its training seeds)."""
   groups = {m: [m] for m in BASELINES}
   for r in runs:
-    groups.setdefault(f"{r.config.name} ({r.config.inbetween.system})", []).append(str(r.workdir))
+    config = re.sub(r"-seed=\d+$", "", r.config.name)  # a sweep names each point CONFIG-seed=N
+    groups.setdefault(f"{config} ({r.config.inbetween.system})", []).append(str(r.workdir))
   return groups
 
 
@@ -142,9 +150,9 @@ def set_table(per_set: dict, groups: dict) -> list[str]:
   return lines
 
 
-def strip(run, take, path: Path, context: int = 10, frames: int = 30, start: int = 200) -> None:
-  """A 30-frame transition after frame ``start`` of ``take`` from each method, every 3rd frame, beside the real
-  one (the first run's, seed 0)."""
+def strip(runs, take, path: Path, context: int = 10, frames: int = 30, start: int = 200) -> None:
+  """A 30-frame transition after frame ``start`` of ``take`` from each method (each config's first run),
+  every 3rd frame, beside the real one."""
   import matplotlib
 
   matplotlib.use("Agg")
@@ -152,7 +160,8 @@ def strip(run, take, path: Path, context: int = 10, frames: int = 30, start: int
 
   from chorjax.render.plot import draw_strip
 
-  space = ib.Space.of(run.features)
+  first = runs[0]
+  space = ib.Space.of(first.features)
   start = min(start, len(take) - (context + frames + 1))
   local = ib.local_windows(space, take[None, start : start + context + frames + 1], context)
   ctx, target = local[:, :context], local[:, context + frames]
@@ -160,16 +169,18 @@ def strip(run, take, path: Path, context: int = 10, frames: int = 30, start: int
     "real": local[0, context - 1 : context + frames + 1],
     "zero velocity": ib.zero_velocity(ctx, target, frames)[0],
     "linear interpolation": ib.linear(ctx, target, frames)[0],
-    f"{run.config.name} ({run.config.inbetween.system})": ib.model_transitions(
-      run.graphdef, run.params, run.config.inbetween, ctx, target, frames, jax.random.key(0)
-    )[0],
   }
-  fig, axes = plt.subplots(len(rows), 1, figsize=(11, 1.8 * len(rows)), squeeze=False)
+  for name, members in groups_of(runs).items():
+    run = next((r for r in runs if str(r.workdir) == members[0]), None)
+    if run is not None:
+      ib_cfg = run.config.inbetween
+      rows[name] = ib.model_transitions(run.graphdef, run.params, ib_cfg, ctx, target, frames, jax.random.key(0))[0]
+  fig, axes = plt.subplots(len(rows), 1, figsize=(13, 1.9 * len(rows)), squeeze=False)
   for ax, (name, seq) in zip(axes[:, 0], rows.items()):
     if len(seq) == frames:  # the written frames: add the last context frame and the target around them
       seq = np.concatenate([local[0, context - 1 : context], seq, target], 0)
     pos = space.from_local(seq, (0.0, np.zeros(3, np.float32)))
-    draw_strip(ax, pos, run.features.skeleton, list(range(0, frames + 2, 3)) + [frames + 1], spacing=0.9)
+    draw_strip(ax, pos, first.features.skeleton, list(range(0, frames + 2, 3)) + [frames + 1], spacing=1.1 * space.size)
     ax.set_title(
       f"{name}: last context frame (0), every 3rd written frame, the target ({frames + 1})", fontsize=8, loc="left"
     )
@@ -197,7 +208,7 @@ def main() -> None:
   per_set = {name: ib.benchmark(methods, ts, space, feet, context, std, lengths=(5, 30)) for name, ts in sets.items()}
   out = Path(args.out)
   (out / "results.json").write_text(json.dumps({"all": results, "by_set": per_set}, indent=1, default=float))
-  strip(first, takes[0], out / "strip_30.png", context)
+  strip(runs, takes[0], out / "strip_30.png", context)
   windows = len(ib.benchmark_windows(takes, context, max(ib.BENCHMARK_LENGTHS))[0])
   lines = [
     "# In-betweening: held-out transitions",
