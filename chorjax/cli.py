@@ -580,6 +580,17 @@ def _add_motion_args(p) -> None:
   )
 
 
+def _add_checkpoint_args(p) -> None:
+  """``--checkpoint`` and ``--force`` (commands that read a run and write a file)."""
+  p.add_argument(
+    "--checkpoint",
+    default="latest",
+    metavar="STEP|best|latest",
+    help="which checkpoint: a step, the best validation loss, or the latest (default latest)",
+  )
+  p.add_argument("--force", action="store_true", help="overwrite the output if it exists")
+
+
 def _add_sampling_args(p) -> None:
   """Sampling controls shared by `sample` and `eval`; unset ones come from the run's [sample] config."""
   p.add_argument(
@@ -639,13 +650,7 @@ def _add_sampling_args(p) -> None:
     help="clip every generated frame to the training features' range (default: the run's sample.clamp)",
   )
   p.add_argument("--seed", type=int, default=0, help="sampling seed: the same seed draws the same dance (default 0)")
-  p.add_argument(
-    "--checkpoint",
-    default="latest",
-    metavar="STEP|best|latest",
-    help="which checkpoint: a step, the best validation loss, or the latest (default latest)",
-  )
-  p.add_argument("--force", action="store_true", help="overwrite the output if it exists")
+  _add_checkpoint_args(p)
 
 
 def _add_convert_command(dsub) -> None:
@@ -827,13 +832,7 @@ def _add_inbetween_command(sub) -> None:
     metavar="OUT",
     help="OUT.csv (K>1 writes OUT_k.csv), OUT.bvh (K>1: OUT_k.bvh), OUT.npz (all pieces + settings) or OUT.html",
   )
-  p.add_argument(
-    "--checkpoint",
-    default="latest",
-    metavar="STEP|best|latest",
-    help="which checkpoint: a step, the best validation loss, or the latest (default latest)",
-  )
-  p.add_argument("--force", action="store_true", help="overwrite the output if it exists")
+  _add_checkpoint_args(p)
   p.set_defaults(func=_inbetween)
 
 

@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 from flax import nnx
 
-from chorjax.models.inbetween import MLP, tta_embedding
+from chorjax.models.inbetween import MLP, add_encoders_and_core, encode_step
 from chorjax.models.rnn import RecurrentCore
 
 POSE_GAIN, STEP_GAIN, OFFSET_GAIN, OUT_SCALE = 2.0, 50.0, 4.0, 0.02  # inputs / output at about unit size
@@ -87,33 +87,19 @@ class Manifold(nnx.Module):
 class Sampler(nnx.Module):
   """Stage 2: ``step(carry, rel, step, offset, target_rel, tta) -> (carry, mu, logvar, root step)``."""
 
+  core: RecurrentCore  # with width and the three encoders: add_encoders_and_core
+
   def __init__(self, model_cfg, ib, dim: int, *, rngs: nnx.Rngs):
-    enc = tuple(ib.encoder_sizes)
-    self.width, self.latent = enc[-1], ib.latent_size
-    self.state_encoder = MLP((2 * dim, *enc), rngs=rngs)
-    self.offset_encoder = MLP((dim, *enc), rngs=rngs)
-    self.target_encoder = MLP((dim, *enc), rngs=rngs)
-    self.core = RecurrentCore(
-      model_cfg.cell,
-      3 * self.width,
-      model_cfg.hidden_size,
-      model_cfg.num_layers,
-      1,
-      forget_bias=model_cfg.forget_bias,
-      initial_state="zero",
-      rngs=rngs,
-    )
+    self.latent = ib.latent_size
+    add_encoders_and_core(self, model_cfg, ib.encoder_sizes, dim, rngs)
     self.prior = MLP((model_cfg.hidden_size, *ib.decoder_sizes, 2 * self.latent + 3), last_act=False, rngs=rngs)
 
   def initial_carry(self, batch: int):
     return self.core.initial_carry(jnp.zeros((batch, 1), jnp.float32))
 
   def step(self, carry, rel, prev_step, offset, target_rel, tta_B):
-    z_tta = tta_embedding(tta_B, self.width)
-    h_state = self.state_encoder(jnp.concatenate([POSE_GAIN * rel, STEP_GAIN * prev_step], -1)) + z_tta
-    h_offset = self.offset_encoder(OFFSET_GAIN * offset) + z_tta
-    h_target = self.target_encoder(POSE_GAIN * target_rel) + z_tta
-    carry, h = self.core.step(carry, jnp.concatenate([h_state, h_offset, h_target], -1))
+    state = jnp.concatenate([POSE_GAIN * rel, STEP_GAIN * prev_step], -1)
+    carry, h = encode_step(self, carry, state, OFFSET_GAIN * offset, POSE_GAIN * target_rel, tta_B)
     out = self.prior(h)
     mu, logvar, root = out[:, : self.latent], out[:, self.latent : 2 * self.latent], out[:, 2 * self.latent :]
     return carry, mu, jnp.clip(logvar, -10.0, 5.0), root / STEP_GAIN

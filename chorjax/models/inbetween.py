@@ -63,25 +63,45 @@ class MLP(nnx.Module):
     return x
 
 
+def add_encoders_and_core(module, model_cfg, encoder_sizes, dim: int, rngs: nnx.Rngs) -> None:
+  """Gives ``module`` the three encoders (state ``[2 dim]``, offset and target ``[dim]``: ELU layers of
+  ``encoder_sizes``) and the recurrent core over their concatenation: the part the Harvey model and the
+  cvae system's sampler share (see :func:`encode_step`)."""
+  enc = tuple(encoder_sizes)
+  module.width = enc[-1]
+  module.state_encoder = MLP((2 * dim, *enc), rngs=rngs)
+  module.offset_encoder = MLP((dim, *enc), rngs=rngs)
+  module.target_encoder = MLP((dim, *enc), rngs=rngs)
+  module.core = RecurrentCore(
+    model_cfg.cell,
+    3 * module.width,
+    model_cfg.hidden_size,
+    model_cfg.num_layers,
+    1,
+    forget_bias=model_cfg.forget_bias,
+    initial_state="zero",
+    rngs=rngs,
+  )
+
+
+def encode_step(module, carry, state_BxS, offset_BxK, target_BxK, tta_B, z_BxE=0.0):
+  """One frame through the encoders (the time-to-arrival embedding added to each, ``z_BxE`` to the offset
+  and target encodings) and the core: ``(carry, h)``."""
+  z_tta = tta_embedding(tta_B, module.width)
+  h_state = module.state_encoder(state_BxS) + z_tta
+  h_offset = module.offset_encoder(offset_BxK) + z_tta + z_BxE
+  h_target = module.target_encoder(target_BxK) + z_tta + z_BxE
+  return module.core.step(carry, jnp.concatenate([h_state, h_offset, h_target], -1))
+
+
 class TransitionModel(nnx.Module):
   """Harvey-style recurrent transition model over flat local poses of ``dim`` (= 3J) numbers."""
 
+  core: RecurrentCore  # with width and the three encoders: add_encoders_and_core
+
   def __init__(self, model_cfg, ib_cfg, dim: int, *, rngs: nnx.Rngs):
-    enc = tuple(ib_cfg.encoder_sizes)
-    self.dim, self.width = dim, enc[-1]
-    self.state_encoder = MLP((2 * dim, *enc), rngs=rngs)
-    self.offset_encoder = MLP((dim, *enc), rngs=rngs)
-    self.target_encoder = MLP((dim, *enc), rngs=rngs)
-    self.core = RecurrentCore(
-      model_cfg.cell,
-      3 * self.width,
-      model_cfg.hidden_size,
-      model_cfg.num_layers,
-      1,
-      forget_bias=model_cfg.forget_bias,
-      initial_state="zero",
-      rngs=rngs,
-    )
+    self.dim = dim
+    add_encoders_and_core(self, model_cfg, ib_cfg.encoder_sizes, dim, rngs)
     self.decoder = MLP((model_cfg.hidden_size, *ib_cfg.decoder_sizes, dim), last_act=False, zero_last=True, rngs=rngs)
 
   def initial_carry(self, batch: int):
@@ -89,13 +109,9 @@ class TransitionModel(nnx.Module):
 
   def step(self, carry, deviation_BxK, velocity_BxK, offset_BxK, target_BxK, tta_B, z_target_BxE):
     """One frame: ``(carry, the next frame's deviation from linear interpolation [B, K])``."""
-    z_tta = tta_embedding(tta_B, self.width)
     z = z_target_BxE * noise_strength(tta_B)[:, None]
     state = jnp.concatenate([DEVIATION_GAIN * deviation_BxK, VELOCITY_GAIN * velocity_BxK], -1)
-    h_state = self.state_encoder(state) + z_tta
-    h_offset = self.offset_encoder(OFFSET_GAIN * offset_BxK) + z_tta + z
-    h_target = self.target_encoder(target_BxK) + z_tta + z
-    carry, h = self.core.step(carry, jnp.concatenate([h_state, h_offset, h_target], -1))
+    carry, h = encode_step(self, carry, state, OFFSET_GAIN * offset_BxK, target_BxK, tta_B, z)
     return carry, OUTPUT_SCALE * self.decoder(h)
 
 
