@@ -177,8 +177,9 @@ class InbetweenConfig:
   decoder_sizes: tuple = _field((256,), "ELU layers of the decoder before its output (which starts at zero)")
   target_noise: float = _field(
     0.5,
-    "std of the noise added to the target and offset encodings (once per transition, fading over the last "
-    "5-30 frames before arrival, as Harvey et al.'s z_target): different seeds write different transitions",
+    "lstm: std of the noise added to the target and offset encodings (once per transition, fading over the "
+    "last 5-30 frames before arrival, as Harvey et al.'s z_target); cvae: the sampler's latents are drawn as "
+    "mu + target_noise x sigma x eps. Either way, different seeds write different transitions",
     minimum=0.0,
   )
   velocity_weight: float = _field(
