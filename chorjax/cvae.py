@@ -29,6 +29,7 @@ from flax import nnx
 
 from chorjax.config import Config
 from chorjax.models.cvae import TransitionCVAE, manifold_rollout, sampler_rollout
+from chorjax.models.inbetween import balanced, transition_l1, up_to_target, window_target
 from chorjax.run import build_model, create_optimizer
 
 LEGS, BONES, FEET = 0.5, 0.5, 0.5  # stage-2 loss weights beside the pose (1) and the steps (velocity_weight)
@@ -86,7 +87,7 @@ def create_cvae_state(cfg: Config, features, space) -> tuple[dict, CvaeSpec]:
   params = nnx.to_pure_dict(params)
   o = cfg.optim
   schedule = stage1_schedule(o.lr, o.final_lr_ratio, ib.physics_start, ib.manifold_steps)
-  tx_manifold = optax.chain(*([optax.clip_by_global_norm(o.clip_norm)] if o.clip_norm > 0 else []), _opt(cfg, schedule))
+  tx_manifold, _ = create_optimizer(cfg, schedule=schedule)
   sampler_cfg = dataclasses.replace(
     cfg, train=dataclasses.replace(cfg.train, num_steps=cfg.train.num_steps - ib.manifold_steps)
   )
@@ -100,15 +101,6 @@ def create_cvae_state(cfg: Config, features, space) -> tuple[dict, CvaeSpec]:
   )  # fmt: skip
   opt_state = {"manifold": tx_manifold.init(params["manifold"]), "sampler": tx_sampler.init(params["sampler"])}
   return {"params": params, "opt_state": opt_state, "step": jnp.zeros((), jnp.int32)}, spec
-
-
-def _opt(cfg: Config, schedule):
-  o = cfg.optim
-  if o.name == "amsgrad":
-    return optax.amsgrad(schedule, b1=o.b1, b2=o.b2)
-  if o.name == "adamw":
-    return optax.adamw(schedule, b1=o.b1, b2=o.b2, weight_decay=o.weight_decay)
-  return optax.adam(schedule, b1=o.b1, b2=o.b2)
 
 
 def _chain(parents, joint: int) -> list[int]:
@@ -160,26 +152,22 @@ def sampler_loss(sampler_params, manifold_params, batch, key, spec: CvaeSpec, no
   model = nnx.merge(spec.graphdef, {"manifold": jax.lax.stop_gradient(manifold_params), "sampler": sampler_params})
   c, n = spec.context, spec.max_frames
   window, length = batch["window"], batch["length"]
-  target = jnp.take_along_axis(window, (c + length)[:, None, None], axis=1)[:, 0]
-  written, _, _ = sampler_rollout(model, window[:, :c], target, length, n, key, noise)
+  written, _, _ = sampler_rollout(model, window[:, :c], window_target(window, c, length), length, n, key, noise)
   real = window[:, c : c + n + 1]
-  idx = jnp.arange(n + 1)[None]
-  ext = jnp.where((idx < length[:, None])[..., None], jnp.concatenate([written, real[:, -1:]], 1), real)
-  inside, upto = (idx < length[:, None]).astype(jnp.float32), (idx <= length[:, None]).astype(jnp.float32)
-  weight = 1.0 / (length + 1.0)
-  balanced = lambda err, m: ((err * m).sum(1) / m.sum(1) * weight).sum() / weight.sum() * (n + 1) / 2
+  ext, inside, upto = up_to_target(written, real, length)
+  weigh = lambda err, m: balanced(err, m, length, n)
   with_last = jnp.concatenate([window[:, c - 1 : c], ext], 1)
   steps = lambda x: jnp.diff(x, axis=1)
   legs = jnp.asarray(spec.legs)
   floor = _joints(window)[:, :, jnp.asarray(spec.feet), 1].min(axis=(1, 2))
   terms = {
-    "pose_l1": balanced(jnp.abs(ext - real).mean(-1), inside),
-    "step_l1": balanced(
+    "pose_l1": weigh(jnp.abs(ext - real).mean(-1), inside),
+    "step_l1": weigh(
       jnp.abs(steps(with_last) - steps(jnp.concatenate([window[:, c - 1 : c], real], 1))).mean(-1), upto
     ),
-    "legs_l1": balanced(jnp.abs(_joints(ext)[:, :, legs] - _joints(real)[:, :, legs]).mean((-1, -2)), inside),
-    "bones": balanced(bone_loss(ext, spec.bones), inside),
-    "feet": balanced(skate_loss(with_last, spec.feet, floor), upto),
+    "legs_l1": weigh(jnp.abs(_joints(ext)[:, :, legs] - _joints(real)[:, :, legs]).mean((-1, -2)), inside),
+    "bones": weigh(bone_loss(ext, spec.bones), inside),
+    "feet": weigh(skate_loss(with_last, spec.feet, floor), upto),
   }
   loss = terms["pose_l1"] + spec.velocity_weight * terms["step_l1"] + LEGS * terms["legs_l1"]
   return loss + BONES * terms["bones"] + FEET * terms["feet"], terms
@@ -227,10 +215,9 @@ def cvae_validation(params, batch, spec: CvaeSpec):
   model = nnx.merge(spec.graphdef, params)
   c, n = spec.context, spec.max_frames
   window, length = batch["window"], batch["length"]
-  target = jnp.take_along_axis(window, (c + length)[:, None, None], axis=1)[:, 0]
+  target = window_target(window, c, length)
   written, _, _ = sampler_rollout(model, window[:, :c], target, length, n, jax.random.key(0), 0.0)
-  mask = (jnp.arange(n)[None] < length[:, None]).astype(jnp.float32)
-  return (jnp.abs(written - window[:, c : c + n]).mean(-1) * mask).sum() / mask.sum()
+  return transition_l1(written, window[:, c : c + n], length)
 
 
 def cvae_transitions(graphdef, params, context_BxCxK, target_BxK, frames: int, key, noise: float):

@@ -37,7 +37,7 @@ from chorjax.data.features import Features, hips
 from chorjax.data.motion import chain_length
 from chorjax.errors import UserError
 from chorjax.metrics import foot_skate, l2p, npss, position_error
-from chorjax.models.inbetween import rollout
+from chorjax.models.inbetween import balanced, rollout, transition_l1, up_to_target, window_target
 from chorjax.run import build_model, create_optimizer, step_key
 
 VAL_LENGTHS = (5, 15, 30)  # transition lengths of the validation windows (cycled; at most max_frames)
@@ -220,38 +220,25 @@ def create_inbetween_state(cfg: Config, features: Features) -> tuple[dict, Inbet
 
 def _predict(params, batch, z_BxE, spec: InbetweenSpec):
   """The model's transitions of ``batch``: ``(written frames [B, N, K], real ones [B, N + 1, K] with the
-  target, mask [B, N + 1] of the frames up to and including each row's target)``."""
+  target)``."""
   model = nnx.merge(spec.graphdef, params)
   c, n = spec.context, spec.max_frames
   window, length = batch["window"], batch["length"]
-  target = jnp.take_along_axis(window, (c + length)[:, None, None], axis=1)[:, 0]
-  written = rollout(model, window[:, :c], target, length, n, z_BxE)
-  real = window[:, c : c + n + 1]
-  mask = (jnp.arange(n + 1)[None] <= length[:, None]).astype(jnp.float32)
-  return written, real, mask
+  written = rollout(model, window[:, :c], window_target(window, c, length), length, n, z_BxE)
+  return written, window[:, c : c + n + 1]
 
 
 def transition_loss(params, batch, key, spec: InbetweenSpec):
   """``(loss, {pose_l1, step_l1})``: the L1 distances of the written frames and of their frame-to-frame
-  steps (the step into the target included) to the real ones, over each row's own transition.
-
-  Each row's distances are its mean over its frames divided by ``length + 1``: interpolation's error grows
-  about linearly with the length, so every length weighs alike (a plain mean over frames would weigh a
-  30-frame row some 36 times a 5-frame one, and the model would not learn short transitions)."""
+  steps (the step into the target included) to the real ones, over each row's own transition, every
+  length weighed alike (``models.inbetween.balanced``)."""
   z = spec.target_noise * jax.random.normal(key, (batch["window"].shape[0], spec.width))
-  written, real, mask = _predict(params, batch, z, spec)
-  last = batch["window"][:, spec.context - 1 : spec.context]
-  length = batch["length"][:, None]
-  idx = jnp.arange(spec.max_frames + 1)[None]
-  # the written frames up to each row's target, the real ones from it on (the target itself, then masked out)
-  ext = jnp.where((idx < length)[..., None], jnp.concatenate([written, real[:, -1:]], 1), real)
-  pose_mask = (idx < length).astype(jnp.float32)
-  weight = 1.0 / (length[:, 0] + 1.0)
-  row_mean = lambda err, m: (err * m).sum(1) / m.sum(1)
-  balanced = lambda err, m: (row_mean(err, m) * weight).sum() / weight.sum() * (spec.max_frames + 1) / 2
-  pose = balanced(jnp.abs(ext - real).mean(-1), pose_mask)
+  written, real = _predict(params, batch, z, spec)
+  last, length = batch["window"][:, spec.context - 1 : spec.context], batch["length"]
+  ext, before, upto = up_to_target(written, real, length)
+  pose = balanced(jnp.abs(ext - real).mean(-1), before, length, spec.max_frames)
   steps = lambda x: jnp.diff(jnp.concatenate([last, x], 1), axis=1)
-  step = balanced(jnp.abs(steps(ext) - steps(real)).mean(-1), mask)
+  step = balanced(jnp.abs(steps(ext) - steps(real)).mean(-1), upto, length, spec.max_frames)
   return pose + spec.velocity_weight * step, {"pose_l1": pose, "step_l1": step}
 
 
@@ -276,9 +263,8 @@ def validation_loss(params, batch, spec: InbetweenSpec | cvae.CvaeSpec):
   """The pose L1 of the held-out transitions in ``batch`` (no noise)."""
   if isinstance(spec, cvae.CvaeSpec):
     return cvae.cvae_validation(params, batch, spec)
-  written, real, _ = _predict(params, batch, jnp.zeros((batch["window"].shape[0], spec.width)), spec)
-  mask = (jnp.arange(spec.max_frames)[None] < batch["length"][:, None]).astype(jnp.float32)
-  return (jnp.abs(written - real[:, :-1]).mean(-1) * mask).sum() / mask.sum()
+  written, real = _predict(params, batch, jnp.zeros((batch["window"].shape[0], spec.width)), spec)
+  return transition_l1(written, real[:, :-1], batch["length"])
 
 
 # ---------------------------------------------------------------- writing transitions

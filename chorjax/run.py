@@ -86,16 +86,19 @@ class StepSpec:
   feedback: Feedback | None = None
 
 
-def create_optimizer(cfg: Config, lr: float | None = None) -> tuple[optax.GradientTransformation, optax.Schedule]:
+def create_optimizer(
+  cfg: Config, lr: float | None = None, schedule: optax.Schedule | None = None
+) -> tuple[optax.GradientTransformation, optax.Schedule]:
   """The optax chain of ``cfg.optim``: optional global-norm clipping, then the optimizer; ``lr``: the peak
-  learning rate instead of ``optim.lr`` (the GAN family's two networks)."""
+  learning rate instead of ``optim.lr`` (the GAN family's two networks); ``schedule``: a learning-rate
+  schedule instead of ``optim.schedule``'s (the cvae system's stage 1)."""
   o = cfg.optim
   peak = o.lr if lr is None else lr
-  if o.schedule == "warmup_cosine":
+  if schedule is None and o.schedule == "warmup_cosine":
     schedule = optax.warmup_cosine_decay_schedule(
       0.0, peak, o.warmup_steps, max(cfg.train.num_steps, o.warmup_steps + 1), end_value=peak * o.final_lr_ratio
     )
-  else:
+  elif schedule is None:
     schedule = optax.constant_schedule(peak)
   if o.name == "adam":
     opt = optax.adam(schedule, b1=o.b1, b2=o.b2)

@@ -143,3 +143,36 @@ def rollout(model: TransitionModel, context_BxCxK, target_BxK, length_B, frames:
   steps = jnp.arange(1, c + frames)
   _, frames_TxBxK = jax.lax.scan(body, (model.initial_carry(b), first, first), steps)
   return jnp.swapaxes(frames_TxBxK[c - 1 :], 0, 1)
+
+
+# ---------------------------------------------------------------- what both systems' losses share
+
+
+def window_target(window_BxWxK, context: int, length_B):
+  """Each row's target: frame ``context + length`` of its window ``[B, K]``."""
+  return jnp.take_along_axis(window_BxWxK, (context + length_B)[:, None, None], axis=1)[:, 0]
+
+
+def up_to_target(written_BxNxK, real_BxN1xK, length_B):
+  """``(frames [B, N + 1, K], before [B, N + 1], up to [B, N + 1])``: the written frames before each row's
+  target, the real ones from it on (the target itself, then frames masked out); the masks of the frames
+  before the target and of those up to and including it."""
+  idx, length = jnp.arange(real_BxN1xK.shape[1])[None], length_B[:, None]
+  before = idx < length
+  frames = jnp.where(before[..., None], jnp.concatenate([written_BxNxK, real_BxN1xK[:, -1:]], 1), real_BxN1xK)
+  return frames, before.astype(jnp.float32), (idx <= length).astype(jnp.float32)
+
+
+def balanced(err_BxT, mask_BxT, length_B, max_frames: int):
+  """Each row's mean over its masked frames divided by ``length + 1``, then over the rows: interpolation's
+  error grows about linearly with the length, so every length weighs alike (a plain mean over frames would
+  weigh a 30-frame row some 36 times a 5-frame one, and a model would not learn short transitions)."""
+  weight = 1.0 / (length_B + 1.0)
+  rows = (err_BxT * mask_BxT).sum(1) / mask_BxT.sum(1)
+  return (rows * weight).sum() / weight.sum() * (max_frames + 1) / 2
+
+
+def transition_l1(written_BxNxK, real_BxNxK, length_B):
+  """The validation loss: the pose L1 of the written frames before each row's target."""
+  mask = (jnp.arange(written_BxNxK.shape[1])[None] < length_B[:, None]).astype(jnp.float32)
+  return (jnp.abs(written_BxNxK - real_BxNxK).mean(-1) * mask).sum() / mask.sum()
