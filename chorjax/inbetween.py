@@ -147,10 +147,14 @@ class TransitionSampler:
     return {"window": local_windows(self.space, wins, self.ib.context), "length": lengths.astype(np.int32)}
 
 
+def _windows(takes, span: int, hop: int) -> list[tuple[int, np.ndarray]]:
+  """``(take index, frames)`` of every window of ``span`` frames, every ``hop`` frames of each take."""
+  return [(i, t[s : s + span]) for i, t in enumerate(takes) for s in range(0, len(t) - span + 1, hop)]
+
+
 def validation_batch(takes, space: Space, ib, max_windows: int, hop: int = 40) -> dict:
   """Fixed held-out windows (every ``hop`` frames, at most ``max_windows``), lengths cycling ``VAL_LENGTHS``."""
-  span = ib.context + ib.max_frames + 1
-  wins = [t[s : s + span] for t in takes for s in range(0, len(t) - span + 1, hop)]
+  wins = [w for _, w in _windows(takes, ib.context + ib.max_frames + 1, hop)]
   if not wins:
     return {}
   keep = np.unique(np.linspace(0, len(wins) - 1, min(max_windows, len(wins))).astype(int))
@@ -367,10 +371,9 @@ def end_sample(graphdef, params, ds, cfg: Config) -> tuple:
 def benchmark_windows(takes, context: int, longest: int, hop: int = BENCHMARK_HOP) -> tuple[np.ndarray, np.ndarray]:
   """Windows of ``context + longest + 1`` canonical frames every ``hop`` frames of each take, and the
   index of the take each comes from."""
-  span = context + longest + 1
-  wins = [(i, t[s : s + span]) for i, t in enumerate(takes) for s in range(0, len(t) - span + 1, hop)]
+  wins = _windows(takes, context + longest + 1, hop)
   if not wins:
-    raise UserError(f"no take holds a window of {span} frames")
+    raise UserError(f"no take holds a window of {context + longest + 1} frames")
   return np.stack([w for _, w in wins]), np.array([i for i, _ in wins])
 
 

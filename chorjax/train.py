@@ -435,13 +435,13 @@ class MetricsLog:
       self.writer.close()
 
 
-def evaluation_hook(val, graphdef, loss_fn=None):
-  """Measures the validation loss (``loop.val_loss``: ``loss_fn(params, val, graphdef)``, by default
-  :func:`eval_step`) and publishes it with the step's metrics."""
+def evaluation_hook(val, loss_fn: Callable):
+  """Measures the validation loss (``loop.val_loss``: ``loss_fn(params, val)``) and publishes it with the
+  step's metrics."""
 
   def evaluate(loop: Loop) -> None:
     if val:
-      loop.val_loss = float((loss_fn or eval_step)(loop.state["params"], val, graphdef))
+      loop.val_loss = float(loss_fn(loop.state["params"], val))
     loop.flush()
 
   return evaluate
@@ -592,7 +592,7 @@ def _restore_or_init(cfg: Config, workdir: Path, ds: Dataset, manager, parallel)
 
 
 def _family_parts(cfg: Config, ds: Dataset) -> tuple:
-  """``(jitted train step, batch sampler, validation batch, its loss function or None)`` of the family."""
+  """``(jitted train step, batch sampler, validation batch, its loss: fn(params, val, spec))`` of the family."""
   if cfg.model.family == "inbetween":
     space, ib = inbetween.Space.of(ds.features), cfg.inbetween
     sampler = inbetween.TransitionSampler(
@@ -604,7 +604,8 @@ def _family_parts(cfg: Config, ds: Dataset) -> tuple:
   per_step = cfg.train.batch_size * (cfg.gan.critic_steps if gan else 1)
   sampler = WindowSampler(ds.train, cfg.data.seq_length, per_step, cfg.train.seed)
   val = {} if gan else eval_windows(ds.val, cfg.data.seq_length, cfg.train.val_windows)
-  return gan_train_step if gan else train_step, sampler, val, None
+  val_loss = lambda params, val, spec: eval_step(params, val, spec.graphdef)
+  return gan_train_step if gan else train_step, sampler, val, val_loss
 
 
 def _train(
@@ -634,7 +635,7 @@ def _train(
     cleanup.callback(log.close)
     loop.listeners.append(log)
   meta_of = lambda step: run_meta(cfg, ds.features, step, ds)
-  loop.add_hook(evaluation_hook(val, spec if val_loss else spec.graphdef, val_loss), cfg.train.eval_every)
+  loop.add_hook(evaluation_hook(val, lambda params, val: val_loss(params, val, spec)), cfg.train.eval_every)
   save = checkpoint_hook(manager, meta_of)
   loop.add_hook(save, cfg.train.checkpoint_every)
   if log is not None and log.writer is not None and cfg.train.figure_every and cfg.model.family != "inbetween":
