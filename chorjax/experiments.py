@@ -32,7 +32,7 @@ several seeds on a CPU whose cores one small model leaves idle.
 Every point is an ordinary run directory (``<root>/<name>-<key>=<value>...``) with its evaluation in
 ``eval/metrics.json`` (and its first sample in ``eval/sample.npz``); re-running a sweep skips finished
 points and resumes unfinished ones. ``chorjax compare`` groups points that differ only in
-``train.seed``.
+``train.seed`` (and ``seed=N`` in their names).
 """
 
 from __future__ import annotations
@@ -280,7 +280,8 @@ def _stats(values) -> tuple[float, float]:
 
 
 def group_runs(runs) -> list[dict]:
-  """Runs whose configs differ only in ``train.seed`` form one group (their name without ``seed=N``).
+  """Runs whose configs differ only in ``train.seed`` and whose names agree but for ``seed=N`` form one group
+  (named so): the same config under another name (another code version, say) is a row of its own.
 
   What a run was sampled with is what its evaluation records (``eval.sampling``), not its config's
   ``[sample]`` (``chorjax eval`` may override it): groups compare that, and ignore ``[sample]`` and ``[log]``.
@@ -290,8 +291,8 @@ def group_runs(runs) -> list[dict]:
     cfg = {k: v for k, v in r["config"].items() if k not in ("name", "sample", "log")}
     cfg["train"] = {k: v for k, v in cfg["train"].items() if k != "seed"}
     drawn = {k: v for k, v in r["eval"].get("sampling", {}).items() if k not in ("seed", "seeds")}
-    ident = json.dumps([cfg, r["eval"].get("data"), drawn], sort_keys=True)
     name = re.sub(r"-?\bseed=-?\d+", "", r["name"]).strip("-") or r["name"]
+    ident = json.dumps([name, cfg, r["eval"].get("data"), drawn], sort_keys=True)
     groups.setdefault(ident, {"name": name, "runs": []})["runs"].append(r)
   out = list(groups.values())
   for g in out:
@@ -394,7 +395,8 @@ def _table(groups) -> list[str]:
   lines = [
     *said,
     "",
-    "Cells: mean ± sd over the training seeds of a row (runs whose configs differ only in train.seed).",
+    "Cells: mean ± sd over the training seeds of a row (runs whose configs differ only in train.seed and whose names "
+    "only in seed=N).",
     "",
     "| config | runs | cell | head | " + " | ".join(c[1] for c in COLUMNS) + " |",
     "|---" * (4 + len(COLUMNS)) + "|",

@@ -304,3 +304,6 @@ def test_older_metrics_files_state_the_controls_added_since_as_off():
   assert len(group_runs(runs)) == 1
   runs[1]["eval"]["sampling"]["pace"] = 0.5  # a control really on is another group
   assert len(group_runs(runs)) == 2
+  runs[1]["eval"]["sampling"]["pace"] = 0.0
+  runs[1]["name"] = "y-seed=1"  # the same config under another name is another row
+  assert [g["name"] for g in group_runs(runs)] == ["x-seed=0", "y-seed=1"]
