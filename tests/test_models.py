@@ -286,3 +286,24 @@ def test_model_gradients_through_the_fused_layer_equal_the_plain_scan(real_batch
   plain = grad()(params)
   _close(fused[0][0], plain[0][0])
   _close(nnx.to_pure_dict(fused[1]), nnx.to_pure_dict(plain[1]))
+
+
+def test_dense_equals_the_plain_matmul_in_outputs_and_gradients(real_batch):
+  from chorjax.models.fused import dense
+
+  batch, _ = real_batch
+  x = jnp.asarray(batch["inputs"])  # [B, T, 48] real frames
+  k = jax.random.split(jax.random.key(5), 3)
+  w = jax.random.normal(k[0], (4, x.shape[-1], 24)) / 7  # a stack of 4: vmapped as a vectorized sweep does
+  probe = jax.random.normal(k[1], x.shape[:-1] + (24,))
+
+  def grads(matmul):
+    f = lambda x, w: jnp.sum(jnp.tanh(matmul(x, w)) * probe)
+    first = jax.vmap(jax.value_and_grad(f, argnums=(0, 1)), in_axes=(None, 0))(x, w)
+    # a gradient of a gradient, as the GAN critic's gradient penalty takes
+    penalty = lambda w: jnp.sum(jnp.square(jax.grad(f)(x, w)))
+    return first, jax.grad(penalty)(w[0])
+
+  got, want = grads(dense), grads(lambda x, w: x @ w)
+  _close(got, want)
+  assert float(jnp.abs(got[1]).max()) > 0

@@ -23,6 +23,7 @@ import jax.numpy as jnp
 from flax import nnx
 
 from chorjax.models.fused import (
+  dense,
   gru_scan,
   gru_step,
   layer_norm,
@@ -65,7 +66,7 @@ class LSTMCell(_Cell):
     self.b = nnx.Param(jnp.zeros((4 * hidden,)).at[hidden : 2 * hidden].set(forget_bias))
 
   def project(self, x):
-    return x @ self.w_x[...] + self.b[...]
+    return dense(x, self.w_x[...]) + self.b[...]
 
   @staticmethod
   def recurrent_update(loop_params, xp_Bx4H, r_Bx4H, carry):
@@ -95,7 +96,7 @@ class LNLSTMCell(_Cell):
     self.bias_c = nnx.Param(jnp.zeros((hidden,)))
 
   def project(self, x):
-    z = (x @ self.w_x[...]).reshape(x.shape[:-1] + (4, self.hidden))
+    z = dense(x, self.w_x[...]).reshape(x.shape[:-1] + (4, self.hidden))
     return layer_norm(z, self.gain_x[...], self.b[...]).reshape(x.shape[:-1] + (4 * self.hidden,))
 
   def loop_params(self):
@@ -127,7 +128,7 @@ class GRUCell(_Cell):
     self.b_h = nnx.Param(jnp.zeros((3 * hidden,)))
 
   def project(self, x):
-    return x @ self.w_x[...] + self.b_x[...]
+    return dense(x, self.w_x[...]) + self.b_x[...]
 
   def loop_params(self):
     return {"b_h": self.b_h[...]}

@@ -9,6 +9,7 @@ the reverse loop (``dz @ w_h.T``), and computes the recurrent weight gradient af
 large matmul. :func:`lnlstm_scan` does the same for the layer-normalized LSTM, whose layer-norm gains
 also get their gradients after the loop, and :func:`gru_scan` for the GRU. Tests check them against
 the straightforward scan (outputs and gradients to 1e-5); BENCHMARKS.md has the timings.
+:func:`dense` is the input projections' and the heads' matmul with the same kind of backward pass.
 
 Being ``jax.custom_vjp`` functions they support reverse-mode differentiation (``jax.grad``,
 ``jax.vjp``, ``jax.jacrev``) and ``vmap``, not forward mode (``jax.jvp``, ``jax.jacfwd``); a
@@ -28,6 +29,26 @@ def normalize(x):
   mean = x.mean(-1, keepdims=True)
   rstd = jax.lax.rsqrt(jnp.square(x - mean).mean(-1, keepdims=True) + LN_EPS)
   return (x - mean) * rstd, rstd
+
+
+@jax.custom_vjp
+def dense(x, w):
+  """``x @ w`` over any leading axes of ``x``. Its weight gradient is one ``x^T d`` matmul over the
+  flattened leading axes: under JAX's own rule XLA:CPU copies the (large) output gradient into a
+  transposed layout first and transposes the result back (3-13% of a train step, BENCHMARKS.md)."""
+  return x @ w
+
+
+def _dense_fwd(x, w):
+  return x @ w, (x, w)
+
+
+def _dense_bwd(res, d):
+  x, w = res
+  return d @ w.T, x.reshape(-1, x.shape[-1]).T @ d.reshape(-1, d.shape[-1])
+
+
+dense.defvjp(_dense_fwd, _dense_bwd)
 
 
 def layer_norm(x, gain, bias=None):

@@ -15,6 +15,8 @@ import jax
 import jax.numpy as jnp
 from flax import nnx
 
+from chorjax.models.fused import dense
+
 
 class MSEHead(nnx.Module):
   """Dense layer to the frame; loss = mean squared error over every coordinate."""
@@ -24,7 +26,7 @@ class MSEHead(nnx.Module):
     self.out = nnx.Linear(hidden, dim, rngs=rngs)
 
   def __call__(self, h):
-    return self.out(h)
+    return dense(h, self.out.kernel[...]) + self.out.bias[...]
 
   def loss(self, out_xD, target_xD):
     mse = jnp.mean(jnp.square(out_xD - target_xD))
@@ -120,7 +122,7 @@ class MDNHead(nnx.Module):
     return k + k * self.dim + k * (1 if self.isotropic else self.dim)
 
   def __call__(self, h):
-    return self.out(h)
+    return dense(h, self.out.kernel[...]) + self.out.bias[...]
 
   def params(self, out):
     return mdn_params(out, self.num_mixtures, self.dim, self.isotropic, self.min_scale)
