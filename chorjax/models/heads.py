@@ -18,6 +18,12 @@ from flax import nnx
 from chorjax.models.fused import dense
 
 
+def _linear(layer: nnx.Linear, h):
+  """``layer(h)`` through :func:`~chorjax.models.fused.dense` (its faster weight gradient)."""
+  assert layer.bias is not None  # the heads' layers have biases
+  return dense(h, layer.kernel[...]) + layer.bias[...]
+
+
 class MSEHead(nnx.Module):
   """Dense layer to the frame; loss = mean squared error over every coordinate."""
 
@@ -26,7 +32,7 @@ class MSEHead(nnx.Module):
     self.out = nnx.Linear(hidden, dim, rngs=rngs)
 
   def __call__(self, h):
-    return dense(h, self.out.kernel[...]) + self.out.bias[...]
+    return _linear(self.out, h)
 
   def loss(self, out_xD, target_xD):
     mse = jnp.mean(jnp.square(out_xD - target_xD))
@@ -122,7 +128,7 @@ class MDNHead(nnx.Module):
     return k + k * self.dim + k * (1 if self.isotropic else self.dim)
 
   def __call__(self, h):
-    return dense(h, self.out.kernel[...]) + self.out.bias[...]
+    return _linear(self.out, h)
 
   def params(self, out):
     return mdn_params(out, self.num_mixtures, self.dim, self.isotropic, self.min_scale)
