@@ -45,6 +45,7 @@ import numpy as np
 from chorjax.errors import UserError
 
 AHEAD = 2  # chunks generated ahead of the clock
+CLOSE_TIMEOUT = 0.5  # seconds a client gets to answer the closing handshake when the server stops
 
 
 class Stream:
@@ -357,7 +358,9 @@ async def serve(live: Live, host: str, port: int, *, osc_in=None, on_ready=print
   for _ in range(AHEAD):  # compiled (the first chunk and the continuing ones) before "serving"
     live.ahead.extend(await live.call(live.stream.next_chunk))
   await live.call(live.stream.warm_up)
-  async with ws_serve(client, host, port, process_request=route, ping_interval=None) as server:
+  async with ws_serve(
+    client, host, port, process_request=route, ping_interval=None, close_timeout=CLOSE_TIMEOUT
+  ) as server:
     bound = server.sockets[0].getsockname()[1] if server.sockets else port
     tasks = [asyncio.create_task(live.generate()), asyncio.create_task(live.pace())]
     on_ready(f"serving http://{host}:{bound}")

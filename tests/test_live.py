@@ -143,6 +143,7 @@ def test_live_server_end_to_end(live_run, tmp_path):
   record = tmp_path / "rec.npz"
   proc, url = _start_live(live_run, "--fps", str(FPS), "--osc", f"127.0.0.1:{osc_port}", "--record", str(record))
   received = {}
+  silent = _silent_client(url)  # a watcher that never answers must not hold up the stop (below)
   try:
     with urllib.request.urlopen(url + "/") as page:  # the live page, offline
       html = page.read().decode()
@@ -199,12 +200,25 @@ def test_live_server_end_to_end(live_run, tmp_path):
     code = proc.wait(timeout=10)
     took = time.monotonic() - t0
     osc_stop.set()
+    silent.close()
   assert code == 0 and took < 2.0, (code, took, proc.stderr.read() if proc.stderr else "")
   assert any(addr == "/chorjax/frame" and len(v) == 48 for addr, v in osc_frames)
   rec = read_npz(record)[0].positions
   assert len(rec) >= max(received) + 1  # every frame sent is in the recording
   for n, pos in received.items():
     np.testing.assert_allclose(rec[n], pos, atol=1e-3)
+
+
+def _silent_client(url: str) -> socket.socket:
+  """A WebSocket client that completes the handshake, then never reads or answers (a hung tab, a lost
+  network): the server's stop must not wait out its whole closing handshake."""
+  host, port = url.removeprefix("http://").split(":")
+  sock = socket.create_connection((host, int(port)))
+  key = base64.b64encode(os.urandom(16)).decode()
+  upgrade = f"Upgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13"
+  sock.sendall(f"GET /ws HTTP/1.1\r\nHost: {host}:{port}\r\n{upgrade}\r\n\r\n".encode())
+  assert sock.recv(12) == b"HTTP/1.1 101"
+  return sock
 
 
 def _screenshots_of_live_page(url: str, tmp_path) -> dict:
@@ -225,6 +239,7 @@ def _screenshots_of_live_page(url: str, tmp_path) -> dict:
     stdout=subprocess.DEVNULL,
     stderr=subprocess.PIPE,
     text=True,
+    start_new_session=True,  # its renderer and network processes go with it (below)
   )
   try:
     assert browser.stderr is not None
@@ -265,7 +280,7 @@ def _screenshots_of_live_page(url: str, tmp_path) -> dict:
       second = grab()
       s = state()
   finally:
-    browser.kill()
+    os.killpg(browser.pid, signal.SIGKILL)
     browser.wait()
   changed = int((np.abs(first.astype(int) - second.astype(int)).sum(-1) > 30).sum())
   return {"state": s, "changed_pixels": changed}
