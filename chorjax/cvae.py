@@ -30,7 +30,7 @@ from flax import nnx
 from chorjax.config import Config
 from chorjax.models.cvae import TransitionCVAE, manifold_rollout, sampler_rollout
 from chorjax.models.inbetween import balanced, transition_l1, up_to_target, window_target
-from chorjax.run import build_model, create_optimizer
+from chorjax.run import build_model, create_optimizer, update_part
 
 LEGS, BONES, FEET = 0.5, 0.5, 0.5  # stage-2 loss weights beside the pose (1) and the steps (velocity_weight)
 SKATE_HEIGHT = 0.1  # leg lengths above a window's lowest foot at which skating stops counting
@@ -178,24 +178,16 @@ STAGE2_KEYS = ("pose_l1", "step_l1", "legs_l1", "bones", "feet")
 
 
 def _stage1(state, batch, key, spec: CvaeSpec):
-  params, opt, step = state["params"], state["opt_state"], state["step"]
-  grad_fn = jax.value_and_grad(manifold_loss, has_aux=True)
-  (loss, aux), grads = grad_fn(params["manifold"], batch, key, step, spec)
-  updates, man_opt = spec.tx_manifold.update(grads, opt["manifold"], params["manifold"])
-  manifold = optax.apply_updates(params["manifold"], updates)
-  state = {**state, "params": {**params, "manifold": manifold}, "opt_state": {**opt, "manifold": man_opt}}
+  step = state["step"]
+  state, loss, aux, _ = update_part(state, "manifold", spec.tx_manifold, manifold_loss, batch, key, step, spec)
   lr = jnp.asarray(spec.schedule(step), jnp.float32)
   metrics = {"loss": loss, **aux, **{k: jnp.zeros(()) for k in STAGE2_KEYS}, "lr": lr}
   return state, {**metrics, "p_own": own_frame_chance(step, spec), "physics_weight": physics_ramp(step, spec)}
 
 
 def _stage2(state, batch, key, spec: CvaeSpec):
-  params, opt = state["params"], state["opt_state"]
-  grad_fn = jax.value_and_grad(sampler_loss, has_aux=True)
-  (loss, aux), grads = grad_fn(params["sampler"], params["manifold"], batch, key, spec)
-  updates, sam_opt = spec.tx_sampler.update(grads, opt["sampler"], params["sampler"])
-  sampler = optax.apply_updates(params["sampler"], updates)
-  state = {**state, "params": {**params, "sampler": sampler}, "opt_state": {**opt, "sampler": sam_opt}}
+  manifold = state["params"]["manifold"]
+  state, loss, aux, _ = update_part(state, "sampler", spec.tx_sampler, sampler_loss, manifold, batch, key, spec)
   lr = spec.sampler_schedule(state["step"] - spec.manifold_steps)
   metrics = {"loss": loss, **{k: jnp.zeros(()) for k in STAGE1_KEYS}, **aux, "lr": jnp.asarray(lr, jnp.float32)}
   return state, {**metrics, "p_own": jnp.ones(()), "physics_weight": jnp.ones(())}

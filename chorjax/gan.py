@@ -28,7 +28,7 @@ from flax import nnx
 from chorjax.config import Config
 from chorjax.errors import UserError
 from chorjax.models.gan import GanModel, fake_sequences, pose_layer
-from chorjax.run import build_model, create_optimizer, step_key
+from chorjax.run import build_model, create_optimizer, step_key, update_part
 
 
 @dataclasses.dataclass(frozen=True)
@@ -123,22 +123,16 @@ def generator_loss(gen_params, critic_params, key, num: int, frames: int, spec: 
 
 def critic_step(state, real_BxTxD, key, spec: GanSpec):
   """One critic update: ``(state, metrics)``; the generator's parameters and optimizer state pass through."""
-  params, opt = state["params"], state["opt_state"]
-  grad_fn = jax.value_and_grad(critic_loss, has_aux=True)
-  (loss, aux), grads = grad_fn(params["critic"], params["generator"], real_BxTxD, key, spec)
-  updates, critic_opt = spec.tx_critic.update(grads, opt["critic"], params["critic"])
-  critic = optax.apply_updates(params["critic"], updates)
-  state = {**state, "params": {**params, "critic": critic}, "opt_state": {**opt, "critic": critic_opt}}
+  gen = state["params"]["generator"]
+  state, loss, aux, grads = update_part(state, "critic", spec.tx_critic, critic_loss, gen, real_BxTxD, key, spec)
   return state, {"critic_loss": loss, **aux, "critic_grad_norm": optax.tree.norm(grads)}
 
 
 def generator_step(state, key, num: int, frames: int, spec: GanSpec):
   """One generator update against the frozen critic: ``(state, metrics)``; the critic passes through."""
-  params, opt = state["params"], state["opt_state"]
-  loss, grads = jax.value_and_grad(generator_loss)(params["generator"], params["critic"], key, num, frames, spec)
-  updates, gen_opt = spec.tx_generator.update(grads, opt["generator"], params["generator"])
-  gen = optax.apply_updates(params["generator"], updates)
-  state = {**state, "params": {**params, "generator": gen}, "opt_state": {**opt, "generator": gen_opt}}
+  with_aux = lambda *args: (generator_loss(*args), None)
+  critic = state["params"]["critic"]
+  state, loss, _, grads = update_part(state, "generator", spec.tx_generator, with_aux, critic, key, num, frames, spec)
   return state, {"gen_loss": loss, "gen_grad_norm": optax.tree.norm(grads)}
 
 

@@ -125,6 +125,17 @@ def build_model(
   return create_model(cfg.model, features.dim, num_motions, cfg.train.seed)
 
 
+def update_part(state, part: str, tx, loss_fn, *args):
+  """One optimizer step on ``state["params"][part]`` alone (a GAN's critic, a CVAE's sampler, ...):
+  ``loss_fn(part_params, *args) -> (loss, aux)`` is differentiated and ``tx`` updates that part and its
+  optimizer state; the other parts pass through. ``(state, loss, aux, grads)``; the step count is the caller's."""
+  params, opt = state["params"], state["opt_state"]
+  (loss, aux), grads = jax.value_and_grad(loss_fn, has_aux=True)(params[part], *args)
+  updates, part_opt = tx.update(grads, opt[part], params[part])
+  new = optax.apply_updates(params[part], updates)
+  return {**state, "params": {**params, part: new}, "opt_state": {**opt, part: part_opt}}, loss, aux, grads
+
+
 def step_key(key, step):
   """The train step's PRNG key: ``key`` (a typed key, or raw uint32 key data replicated across processes)
   folded with ``step``, so a resumed run draws what the uninterrupted one drew."""
