@@ -1,0 +1,116 @@
+"""Where batch-64 sampling's time goes, against what the same matmuls alone can do (issue 21's 75% target).
+
+    python -m benchmarks.sampling_ceiling      # about a minute on 2 cores
+
+The model of ``benchmarks.run``'s sampling rows (LSTM 3 x 256, 8-component MDN, 48 features), 1,000 frames
+at batch 64, each program one jitted ``lax.scan``, median of 5 runs after a compile:
+
+- ``chorjax``: ``chorjax.sample.generate`` (the LSTM step and the MDN draw), as the benchmark times it;
+- ``chorjax, no draw``: the same model's step, its output fed back without the MDN draw;
+- ``plain LSTM``: the same matmuls and LSTM gates written as a user would (``jnp.split``, sigmoid, tanh);
+- ``matmuls only``: the same matmuls with one tanh on a quarter of each layer's output (no gates): the
+  ceiling any LSTM step with these shapes can reach here.
+
+Prints each as seconds and as a fraction of the machine's matmul peak (``benchmarks.run.matmul_peak``,
+measured after them).
+"""
+
+from __future__ import annotations
+
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from benchmarks.run import D, H, K, L, matmul_peak
+
+B, FRAMES = 64, 1000
+FLOPS_PER_FRAME = 2 * B * ((D + H) * 4 * H + (L - 1) * 2 * H * 4 * H + H * (K + 2 * K * D))
+
+
+def _median_seconds(fn, *args, reps: int = 5) -> float:
+  jax.block_until_ready(fn(*args, jax.random.key(0)))
+  times = []
+  for i in range(reps):
+    t = time.perf_counter()
+    jax.block_until_ready(fn(*args, jax.random.key(i + 1)))
+    times.append(time.perf_counter() - t)
+  return float(np.median(times))
+
+
+def chorjax_programs():
+  from flax import nnx
+
+  from chorjax.config import load_config
+  from chorjax.models import create_model
+  from chorjax.sample import _primed, generate
+
+  overrides = ["model.cell=lstm", "model.head=mdn", f"model.num_layers={L}", f"model.hidden_size={H}"]
+  cfg = load_config(None, [*overrides, f"model.num_mixtures={K}"])
+  graphdef, params = nnx.split(create_model(cfg.model, D, 10, 0), nnx.Param)
+  motion = jax.nn.one_hot(jnp.zeros(B, jnp.int32), 10)
+
+  def no_draw(p, key):
+    model = nnx.merge(graphdef, p)
+    carry, x0 = _primed(model, motion, None)
+
+    def body(c, _):
+      carry, out = model.step(*c)
+      return (carry, 0.1 * out[:, :D]), None
+
+    return jax.lax.scan(body, (carry, x0), jax.random.split(key, FRAMES))[0][1]
+
+  full = jax.jit(lambda p, key: generate(graphdef, p, motion, key, num_frames=FRAMES))
+  return {"chorjax": (full, params), "chorjax, no draw": (jax.jit(no_draw), params)}
+
+
+def plain_programs():
+  ks = jax.random.split(jax.random.key(0), 2 * L + 1)
+  w_x = [0.05 * jax.random.normal(ks[i], (D if i == 0 else H, 4 * H)) for i in range(L)]
+  w_h = [0.05 * jax.random.normal(ks[L + i], (H, 4 * H)) for i in range(L)]
+  w_out = 0.05 * jax.random.normal(ks[-1], (H, K + 2 * K * D))
+  weights = (w_x, w_h, w_out)
+
+  def scan(layer, weights, key):
+    w_x, w_h, w_out = weights
+
+    def body(c, _):
+      hs, cs, x = c
+      new_h, new_c = [], []
+      for l in range(L):
+        h, cell = layer(x @ w_x[l] + hs[l] @ w_h[l], cs[l])
+        new_h.append(h)
+        new_c.append(cell)
+        x = h
+      return (new_h, new_c, (x @ w_out)[:, :D]), None
+
+    zeros = [jnp.zeros((B, H))] * L
+    return jax.lax.scan(body, (zeros, zeros, jnp.zeros((B, D))), None, length=FRAMES)[0][2]
+
+  def lstm(z, c):
+    i, f, g, o = jnp.split(z, 4, -1)
+    c = jax.nn.sigmoid(f + 1.0) * c + jax.nn.sigmoid(i) * jnp.tanh(g)
+    return jax.nn.sigmoid(o) * jnp.tanh(c), c
+
+  def matmuls_only(z, c):
+    return jnp.tanh(z[:, :H]), c
+
+  return {
+    "plain LSTM": (jax.jit(lambda w, key: scan(lstm, w, key)), weights),
+    "matmuls only": (jax.jit(lambda w, key: scan(matmuls_only, w, key)), weights),
+  }
+
+
+def main() -> None:
+  timed = {name: _median_seconds(fn, args) for name, (fn, args) in {**chorjax_programs(), **plain_programs()}.items()}
+  peak = matmul_peak()
+  print(f"matmul peak {peak / 1e9:.0f} GFLOP/s; {FLOPS_PER_FRAME / 1e6:.0f} MFLOP of matmuls per frame at batch {B}")
+  for name, seconds in timed.items():
+    rate = FLOPS_PER_FRAME * FRAMES / seconds
+    share = f"{rate / 1e9:6.1f} GFLOP/s  {100 * rate / peak:3.0f}% of peak"
+    print(f"{name:18s} {seconds:.3f} s per {FRAMES} frames  {share}")
+
+
+if __name__ == "__main__":
+  main()
