@@ -112,6 +112,14 @@ class ModelConfig:
   initial_state: str = _field(
     "motion", "initial (c, h): projected motion-id weights, or zeros", choices=("motion", "zero")
   )
+  lstm_kernel: str = _field(
+    "fused",
+    "how model.cell = 'lstm' runs over a training window: 'fused' (chorjax's own scan, every backend) or "
+    "'cudnn' (NVIDIA cuDNN through jax.experimental.rnn where JAX runs on a CUDA GPU, the fused scan "
+    "elsewhere: the same parameters, so a run trained on a GPU samples anywhere; not yet timed on a GPU, "
+    "see BENCHMARKS.md)",
+    choices=("fused", "cudnn"),
+  )
 
 
 @dataclasses.dataclass(frozen=True)

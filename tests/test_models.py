@@ -307,3 +307,56 @@ def test_dense_equals_the_plain_matmul_in_outputs_and_gradients(real_batch):
   got, want = grads(dense), grads(lambda x, w: x @ w)
   _close(got, want)
   assert float(jnp.abs(got[1]).max()) > 0
+
+
+def _cudnn_by_reference(x, h0, c0, weights, lengths, *, input_size, hidden_size, num_layers, dropout, bidirectional):
+  """``jax.experimental.rnn.lstm``'s cuDNN call, computed by the reference LSTM JAX's own tests hold cuDNN to."""
+  from jax.experimental import rnn
+
+  unpacked = rnn.unpack_lstm_weights(weights, input_size, hidden_size, num_layers, bidirectional)
+  return rnn.lstm_ref(x, h0, c0, *unpacked, lengths, input_size, hidden_size, num_layers, dropout, bidirectional)
+
+
+def test_the_cudnn_kernel_computes_what_the_fused_lstm_does(real_batch, monkeypatch):
+  """``model.lstm_kernel = "cudnn"`` hands cuDNN the LSTM's weights in its layout; with the call computed by
+  JAX's reference LSTM (cuDNN itself needs an NVIDIA GPU), the model's outputs and gradients on real
+  windows equal the fused kernel's, dropout included. On this CPU the option leaves the fused kernel on."""
+  from flax import nnx
+  from jax.experimental import rnn
+
+  from chorjax.errors import UserError
+  from chorjax.models import rnn as core
+
+  batch, num_motions = real_batch
+  x, y, ids = (jnp.asarray(batch[k]) for k in ("inputs", "targets", "motion_ids"))
+  fused, cudnn = (
+    create_model(
+      tiny_config("model.cell=lstm", "model.dropout=0.3", f"model.lstm_kernel={k}").model, 48, num_motions, 3
+    )
+    for k in ("fused", "cudnn")
+  )
+  assert not core.on_cuda()
+  calls = []
+  monkeypatch.setattr(rnn, "lstm", lambda *a, **kw: calls.append(1) or _cudnn_by_reference(*a, **kw))
+  key = jax.random.key(1)
+
+  def loss_and_grads(model):
+    graphdef, params = nnx.split(model, nnx.Param)
+    return jax.value_and_grad(lambda p: nnx.merge(graphdef, p).loss(nnx.merge(graphdef, p)(x, ids, key), y)[0])(params)
+
+  on_cpu = loss_and_grads(cudnn)
+  assert calls == []  # not on CUDA: the fused kernel
+  monkeypatch.setattr(core, "on_cuda", lambda: True)
+  want, got = loss_and_grads(fused), loss_and_grads(cudnn)
+  assert len(calls) == cudnn.core.num_layers
+  _close(got, want)
+  _close(on_cpu, want, tol=0)
+  assert float(jnp.abs(got[1]["core"]["cells"][0]["w_h"][...]).max()) > 0
+  # the weights in cuDNN's layout are the cell's, gate by gate: a swapped gate pair would not match
+  cell = cudnn.core.cells[0]
+  w_ih, w_hh, b_ih, _ = rnn.unpack_lstm_weights(cell.cudnn_weights(), 48, cell.hidden, 1, False)
+  np.testing.assert_array_equal(w_ih[0], cell.w_x[...].T)
+  np.testing.assert_array_equal(w_hh[0], cell.w_h[...].T)
+  np.testing.assert_array_equal(b_ih[0], cell.b[...])
+  with pytest.raises(UserError, match="lstm_kernel = 'cudnn' runs the plain LSTM only"):
+    create_model(tiny_config("model.cell=lnlstm", "model.lstm_kernel=cudnn").model, 48, num_motions, seed=3)

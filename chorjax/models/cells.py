@@ -19,6 +19,8 @@ for the GRU.
 
 from __future__ import annotations
 
+from typing import cast
+
 import jax.numpy as jnp
 from flax import nnx
 
@@ -75,6 +77,24 @@ class LSTMCell(_Cell):
 
   def scan(self, carry, xp_TxBx4H):
     return lstm_scan(self.w_h[...], xp_TxBx4H, *carry)
+
+  def cudnn_weights(self):
+    """The cell's parameters in cuDNN's flat layout for one layer (``jax.experimental.rnn``): ``W_ih [4H, D]``,
+    ``W_hh [4H, H]``, ``b_ih``, ``b_hh`` (zero: the cell has one bias); the gates in the same order."""
+    b = self.b[...]
+    return jnp.concatenate([self.w_x[...].T.ravel(), self.w_h[...].T.ravel(), b, jnp.zeros_like(b)])
+
+  def cudnn_scan(self, carry, x_TxBxD):
+    """``scan(carry, project(x))`` as one cuDNN call (CUDA only; the numerics are ``scan``'s, see the tests)."""
+    from jax.experimental import rnn
+
+    c0, h0 = carry
+    x = jnp.swapaxes(x_TxBxD, 0, 1)
+    lengths = jnp.full((x.shape[0],), x.shape[1], jnp.int32)
+    sizes = {"input_size": x.shape[-1], "hidden_size": self.hidden, "num_layers": 1}
+    out = rnn.lstm(x, h0[None], c0[None], self.cudnn_weights(), lengths, **sizes, dropout=0.0, bidirectional=False)
+    y, h_n, c_n = cast(tuple, out)
+    return (c_n[0], h_n[0]), jnp.swapaxes(y, 0, 1)
 
 
 class LNLSTMCell(_Cell):

@@ -30,6 +30,7 @@ class ChorModel(nnx.Module):
       forget_bias=cfg.forget_bias,
       dropout=cfg.dropout,
       initial_state=cfg.initial_state,
+      lstm_kernel=cfg.lstm_kernel,
       rngs=rngs,
     )
     self.head: MDNHead | MSEHead

@@ -11,7 +11,13 @@ import jax
 import jax.numpy as jnp
 from flax import nnx
 
+from chorjax.errors import UserError
 from chorjax.models.cells import CELLS
+
+
+def on_cuda() -> bool:
+  """Whether JAX computes on an NVIDIA GPU (where ``model.lstm_kernel = "cudnn"`` takes effect)."""
+  return jax.default_backend() == "gpu" and "NVIDIA" in jax.devices()[0].device_kind
 
 
 def dropout_mask(key, shape_BxH, rate: float):
@@ -34,9 +40,13 @@ class RecurrentCore(nnx.Module):
     forget_bias: float = 1.0,
     dropout: float = 0.0,
     initial_state: str = "motion",
+    lstm_kernel: str = "fused",
     rngs: nnx.Rngs,
   ):
+    if lstm_kernel == "cudnn" and cell != "lstm":
+      raise UserError(f"model.lstm_kernel = 'cudnn' runs the plain LSTM only; model.cell is {cell!r}")
     cls = CELLS[cell]
+    self.lstm_kernel = lstm_kernel
     self.hidden, self.num_layers, self.dropout = hidden, num_layers, dropout
     self.num_carries = cls.num_carries
     self.cells = nnx.List(
@@ -65,8 +75,12 @@ class RecurrentCore(nnx.Module):
     """
     new_carry = []
     inp = jnp.swapaxes(x_BxTxD, 0, 1)
+    cudnn = self.lstm_kernel == "cudnn" and on_cuda()
     for l, cell in enumerate(self.cells):
-      c, inp = cell.scan(carry[l], cell.project(inp))  # one big matmul, outside the time loop
+      if cudnn:
+        c, inp = cell.cudnn_scan(carry[l], inp)
+      else:
+        c, inp = cell.scan(carry[l], cell.project(inp))  # one big matmul, outside the time loop
       new_carry.append(c)
       if dropout_key is not None and self.dropout > 0:
         mask = dropout_mask(jax.random.fold_in(dropout_key, l), (inp.shape[1], self.hidden), self.dropout)
