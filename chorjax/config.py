@@ -121,6 +121,13 @@ class ModelConfig:
     choices=("fused", "cudnn"),
   )
 
+  def __post_init__(self):
+    if self.lstm_kernel == "cudnn" and (self.family, self.cell) != ("rnn", "lstm"):
+      raise UserError(
+        f"key 'model.lstm_kernel': 'cudnn' runs the rnn family's plain LSTM only (model.family = 'rnn', "
+        f"model.cell = 'lstm'); here model.family is {self.family!r} and model.cell {self.cell!r}"
+      )
+
 
 @dataclasses.dataclass(frozen=True)
 class GanConfig:

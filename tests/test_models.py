@@ -358,5 +358,5 @@ def test_the_cudnn_kernel_computes_what_the_fused_lstm_does(real_batch, monkeypa
   np.testing.assert_array_equal(w_ih[0], cell.w_x[...].T)
   np.testing.assert_array_equal(w_hh[0], cell.w_h[...].T)
   np.testing.assert_array_equal(b_ih[0], cell.b[...])
-  with pytest.raises(UserError, match="lstm_kernel = 'cudnn' runs the plain LSTM only"):
-    create_model(tiny_config("model.cell=lnlstm", "model.lstm_kernel=cudnn").model, 48, num_motions, seed=3)
+  with pytest.raises(UserError, match=r"key 'model\.lstm_kernel': 'cudnn' runs the rnn family's plain LSTM only"):
+    tiny_config("model.cell=lnlstm", "model.lstm_kernel=cudnn")

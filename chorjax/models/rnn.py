@@ -11,7 +11,6 @@ import jax
 import jax.numpy as jnp
 from flax import nnx
 
-from chorjax.errors import UserError
 from chorjax.models.cells import CELLS
 
 
@@ -43,8 +42,6 @@ class RecurrentCore(nnx.Module):
     lstm_kernel: str = "fused",
     rngs: nnx.Rngs,
   ):
-    if lstm_kernel == "cudnn" and cell != "lstm":
-      raise UserError(f"model.lstm_kernel = 'cudnn' runs the plain LSTM only; model.cell is {cell!r}")
     cls = CELLS[cell]
     self.lstm_kernel = lstm_kernel
     self.hidden, self.num_layers, self.dropout = hidden, num_layers, dropout
