@@ -13,12 +13,13 @@ from __future__ import annotations
 
 import argparse
 import functools
-import time
 
 import jax
 import numpy as np
 
-REFERENCE = ["model.num_layers=3", "model.hidden_size=256", "train.batch_size=50", "data.seq_length=100"]
+from benchmarks.run import B, D, H, L, T, alternate, random_batch
+
+REFERENCE = [f"model.num_layers={L}", f"model.hidden_size={H}", f"train.batch_size={B}", f"data.seq_length={T}"]
 
 
 def _step(path, overrides, use_dense: bool, batch):
@@ -53,27 +54,15 @@ def main(argv=None):
   keep_freed_memory()  # as the chorjax command does
   quick_dim = load_dataset(load_config("configs/quickstart.toml", []).data).features.dim
   setups = {
-    "reference LSTM+MDN": (None, ["model.cell=lstm", "model.head=mdn", *REFERENCE], 48, 50, 100),
-    "reference LN-LSTM+MSE": (None, ["model.cell=lnlstm", "model.head=mse", *REFERENCE], 48, 50, 100),
+    "reference LSTM+MDN": (None, ["model.cell=lstm", "model.head=mdn", *REFERENCE], D, B, T),
+    "reference LN-LSTM+MSE": (None, ["model.cell=lnlstm", "model.head=mse", *REFERENCE], D, B, T),
     "quickstart": ("configs/quickstart.toml", [], quick_dim, 32, 64),
   }
   rng = np.random.default_rng(0)
   for name, (path, overrides, dim, b, t) in setups.items():
-    batch = {
-      "inputs": rng.normal(size=(b, t, dim)).astype(np.float32),
-      "targets": rng.normal(size=(b, t, dim)).astype(np.float32),
-      "motion_ids": rng.integers(0, 10, b).astype(np.int32),
-    }
+    batch = random_batch(rng, b, t, dim)
     runs = {"plain": _step(path, overrides, False, batch), "dense": _step(path, overrides, True, batch)}
-    for fn in runs.values():
-      jax.block_until_ready(fn())
-    times: dict[str, list[float]] = {k: [] for k in runs}
-    for _ in range(args.reps):
-      for k, fn in runs.items():
-        t0 = time.perf_counter()
-        jax.block_until_ready(fn())
-        times[k].append(time.perf_counter() - t0)
-    med = {k: float(np.median(v)) for k, v in times.items()}
+    med = alternate([(k, fn, jax.block_until_ready) for k, fn in runs.items()], args.reps)
     print(
       f"{name}: plain {med['plain'] * 1e3:.1f} ms, dense {med['dense'] * 1e3:.1f} ms, "
       f"dense / plain {med['dense'] / med['plain']:.3f}",

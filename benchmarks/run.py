@@ -46,6 +46,15 @@ def alternate(pairs, reps):
   return {k: float(np.median(v)) for k, v in times.items()}
 
 
+def random_batch(rng, b: int, t: int, d: int) -> dict:
+  """A training batch of ``b`` windows of ``t`` random frames of ``d`` features (10 motion ids)."""
+  return {
+    "inputs": rng.normal(size=(b, t, d)).astype(np.float32),
+    "targets": rng.normal(size=(b, t, d)).astype(np.float32),
+    "motion_ids": rng.integers(0, 10, b).astype(np.int32),
+  }
+
+
 def jax_train_step(cell, head):
   from chorjax.config import load_config
   from chorjax.run import create_train_state
@@ -64,12 +73,7 @@ def jax_train_step(cell, head):
     ],
   )
   state, spec = create_train_state(cfg, D, 10)
-  rng = np.random.default_rng(0)
-  batch = {
-    "inputs": rng.normal(size=(B, T, D)).astype(np.float32),
-    "targets": rng.normal(size=(B, T, D)).astype(np.float32),
-    "motion_ids": rng.integers(0, 10, B).astype(np.int32),
-  }
+  batch = random_batch(np.random.default_rng(0), B, T, D)
   key = jax.random.key(0)
   box = {"state": state}
   t = time.perf_counter()
@@ -126,18 +130,24 @@ def matmul_peak():
   return 2 * 2048**3 / float(np.median(ts))
 
 
-def jax_sampler(batch):
+def sampler_model():
+  """``(graphdef, params)`` of the sampling rows' model: LSTM L x H with a K-component MDN over D features."""
   from flax import nnx
 
   from chorjax.config import load_config
   from chorjax.models import create_model
-  from chorjax.sample import generate
 
   cfg = load_config(
     None,
     ["model.cell=lstm", "model.head=mdn", f"model.num_layers={L}", f"model.hidden_size={H}", f"model.num_mixtures={K}"],
   )
-  graphdef, params = nnx.split(create_model(cfg.model, D, 10, 0), nnx.Param)
+  return nnx.split(create_model(cfg.model, D, 10, 0), nnx.Param)
+
+
+def jax_sampler(batch):
+  from chorjax.sample import generate
+
+  graphdef, params = sampler_model()
   w = jax.nn.one_hot(jnp.zeros(batch, jnp.int32), 10)
   run = lambda: generate(graphdef, params, w, jax.random.key(0), num_frames=1000)
   run().block_until_ready()

@@ -17,13 +17,11 @@ measured after them).
 
 from __future__ import annotations
 
-import time
-
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from benchmarks.run import D, H, K, L, matmul_peak
+from benchmarks.run import D, H, K, L, matmul_peak, sampler_model, timed
 
 B, FRAMES = 64, 1000
 FLOPS_PER_FRAME = 2 * B * ((D + H) * 4 * H + (L - 1) * 2 * H * 4 * H + H * (K + 2 * K * D))
@@ -31,24 +29,16 @@ FLOPS_PER_FRAME = 2 * B * ((D + H) * 4 * H + (L - 1) * 2 * H * 4 * H + H * (K + 
 
 def _median_seconds(fn, *args, reps: int = 5) -> float:
   jax.block_until_ready(fn(*args, jax.random.key(0)))
-  times = []
-  for i in range(reps):
-    t = time.perf_counter()
-    jax.block_until_ready(fn(*args, jax.random.key(i + 1)))
-    times.append(time.perf_counter() - t)
+  times = [timed(lambda i=i: fn(*args, jax.random.key(i + 1)), jax.block_until_ready) for i in range(reps)]
   return float(np.median(times))
 
 
 def chorjax_programs():
   from flax import nnx
 
-  from chorjax.config import load_config
-  from chorjax.models import create_model
   from chorjax.sample import _primed, generate
 
-  overrides = ["model.cell=lstm", "model.head=mdn", f"model.num_layers={L}", f"model.hidden_size={H}"]
-  cfg = load_config(None, [*overrides, f"model.num_mixtures={K}"])
-  graphdef, params = nnx.split(create_model(cfg.model, D, 10, 0), nnx.Param)
+  graphdef, params = sampler_model()
   motion = jax.nn.one_hot(jnp.zeros(B, jnp.int32), 10)
 
   def no_draw(p, key):
