@@ -1,6 +1,7 @@
 """Where batch-64 sampling's time goes, against what the same matmuls alone can do (issue 21's 75% target).
 
-    python -m benchmarks.sampling_ceiling      # about a minute on 2 cores
+    python -m benchmarks.sampling_ceiling            # about a minute on 2 cores
+    python -m benchmarks.sampling_ceiling --unroll   # generate's unrolled loop against one frame per iteration
 
 The model of ``benchmarks.run``'s sampling rows (LSTM 3 x 256, 8-component MDN, 48 features), 1,000 frames
 at batch 64, each program one jitted ``lax.scan``, median of 5 runs after a compile:
@@ -17,11 +18,13 @@ measured after them).
 
 from __future__ import annotations
 
+import sys
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from benchmarks.run import D, H, K, L, matmul_peak, sampler_model, timed
+from benchmarks.run import D, H, K, L, alternate, matmul_peak, sampler_model, timed
 
 B, FRAMES = 64, 1000
 FLOPS_PER_FRAME = 2 * B * ((D + H) * 4 * H + (L - 1) * 2 * H * 4 * H + H * (K + 2 * K * D))
@@ -36,7 +39,7 @@ def _median_seconds(fn, *args, reps: int = 5) -> float:
 def chorjax_programs():
   from flax import nnx
 
-  from chorjax.sample import _primed, generate
+  from chorjax.sample import UNROLL, _primed, generate
 
   graphdef, params = sampler_model()
   motion = jax.nn.one_hot(jnp.zeros(B, jnp.int32), 10)
@@ -49,13 +52,15 @@ def chorjax_programs():
       carry, out = model.step(*c)
       return (carry, 0.1 * out[:, :D]), None
 
-    return jax.lax.scan(body, (carry, x0), jax.random.split(key, FRAMES))[0][1]
+    return jax.lax.scan(body, (carry, x0), jax.random.split(key, FRAMES), unroll=UNROLL)[0][1]
 
   full = jax.jit(lambda p, key: generate(graphdef, p, motion, key, num_frames=FRAMES))
   return {"chorjax": (full, params), "chorjax, no draw": (jax.jit(no_draw), params)}
 
 
 def plain_programs():
+  from chorjax.sample import UNROLL
+
   ks = jax.random.split(jax.random.key(0), 2 * L + 1)
   w_x = [0.05 * jax.random.normal(ks[i], (D if i == 0 else H, 4 * H)) for i in range(L)]
   w_h = [0.05 * jax.random.normal(ks[L + i], (H, 4 * H)) for i in range(L)]
@@ -76,7 +81,7 @@ def plain_programs():
       return (new_h, new_c, (x @ w_out)[:, :D]), None
 
     zeros = [jnp.zeros((B, H))] * L
-    return jax.lax.scan(body, (zeros, zeros, jnp.zeros((B, D))), None, length=FRAMES)[0][2]
+    return jax.lax.scan(body, (zeros, zeros, jnp.zeros((B, D))), None, length=FRAMES, unroll=UNROLL)[0][2]
 
   def lstm(z, c):
     i, f, g, o = jnp.split(z, 4, -1)
@@ -92,7 +97,30 @@ def plain_programs():
   }
 
 
+def unroll_ab(reps: int = 5) -> dict:
+  """``chorjax.sample.generate`` with its loop unrolled by ``UNROLL`` against one frame per iteration,
+  alternating: unroll -> median seconds per 1,000 frames at batch 64."""
+  import chorjax.sample
+
+  graphdef, params = sampler_model()
+  motion = jax.nn.one_hot(jnp.zeros(B, jnp.int32), 10)
+  pairs, unroll = [], chorjax.sample.UNROLL
+  for n in (1, unroll):
+    chorjax.sample.UNROLL = n  # read when the program is traced, just below
+    fn = jax.jit(
+      lambda p: chorjax.sample.generate.__wrapped__(graphdef, p, motion, jax.random.key(0), num_frames=FRAMES)
+    )
+    fn.lower(params).compile()
+    pairs.append((n, lambda fn=fn: fn(params), jax.block_until_ready))
+  chorjax.sample.UNROLL = unroll
+  return alternate(pairs, reps)
+
+
 def main() -> None:
+  if sys.argv[1:] == ["--unroll"]:
+    for n, seconds in unroll_ab().items():
+      print(f"unroll {n}: {seconds:.3f} s per {FRAMES} frames at batch {B}")
+    return
   timed = {name: _median_seconds(fn, args) for name, (fn, args) in {**chorjax_programs(), **plain_programs()}.items()}
   peak = matmul_peak()
   print(f"matmul peak {peak / 1e9:.0f} GFLOP/s; {FLOPS_PER_FRAME / 1e6:.0f} MFLOP of matmuls per frame at batch {B}")

@@ -14,7 +14,7 @@ import pytest
 from flax import nnx
 from helpers import tiny_config
 
-from chorjax import cli
+from chorjax import cli, sample
 from chorjax.data.csv import read_csv
 from chorjax.data.dataset import bundled_path, load_dataset
 from chorjax.data.npz import read_npz
@@ -50,6 +50,19 @@ def test_shapes_seeds_and_greedy(loaded):
   assert not np.allclose(a[0], a[1])  # the K dancers are independent draws
   g1, g2 = gen(0, greedy=True), gen(7, greedy=True)
   np.testing.assert_array_equal(g1, g2)
+
+
+def test_the_unrolled_loop_draws_what_one_frame_per_iteration_draws(loaded, monkeypatch):
+  w = jnp.tile(as_weights(jnp.array([3]), 10), (4, 1))
+  draw = lambda: np.asarray(
+    jax.jit(generate.__wrapped__, static_argnames=("graphdef", "num_frames"))(
+      loaded.graphdef, loaded.params, w, jax.random.key(0), num_frames=102
+    )
+  )
+  unrolled = draw()
+  monkeypatch.setattr(sample, "UNROLL", 1)
+  np.testing.assert_allclose(unrolled, draw(), rtol=0, atol=1e-5)  # 102 frames: not a multiple of 4
+  assert not np.allclose(unrolled[:, :50], unrolled[:, 50:100])  # a dance, not a still pose
 
 
 def test_long_generation_works(loaded):
