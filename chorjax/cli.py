@@ -388,7 +388,10 @@ def _print_metrics(result: dict, keys) -> None:
     if result.get(k) is None:
       print(f"{k:22s} {'-':>10s}   (none: a GAN has no likelihood)" if k == "heldout_loss" else f"{k:22s} -")
       continue
-    print(f"{k:22s} {mean_of(result[k]):10.4g}" + (f"   (real: {mean_of(real):.4g})" if real is not None else ""))
+    note = f"   (real: {mean_of(real):.4g})" if real is not None else ""
+    if k == "heldout_loss" and result.get("loss_takes") == "all":
+      note = "   (on the run's own training takes: --data holds no other)"
+    print(f"{k:22s} {mean_of(result[k]):10.4g}{note}")
 
 
 def _output(path, allowed) -> tuple[Path, str]:

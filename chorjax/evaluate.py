@@ -46,7 +46,8 @@ def evaluate(
       persistence, rigid bones); unset or None: the run's ``[sample]``.
 
   Returns:
-    The held-out loss (None for a GAN, which has no likelihood) and every key of
+    The loss on the takes of ``data`` the run did not train on (``loss_takes = "held-out"``; on all of them,
+    ``"all"``, when it trained on every one; None for a GAN, which has no likelihood) and every key of
     :func:`chorjax.scoring.score` (JSON-ready): the generated motion measured against the takes in
     ``data``, novelty against the run's training takes.
   """
@@ -59,7 +60,8 @@ def evaluate(
   if frames < 2 * window:
     raise UserError(f"--frames {frames}: need at least {2 * window} frames")
 
-  loss = None if run.is_gan else heldout_loss(run, real)  # a GAN has no likelihood
+  scored_takes, loss_takes = held_out(real, run.train_takes)
+  loss = None if run.is_gan else heldout_loss(run, scored_takes)  # a GAN has no likelihood
   seeds = list(seeds) if seeds else [seed]
   decoded = [generate_positions(run, train, num, frames, s, sampling) for s in seeds]
   y_up = lambda pos: np.asarray(to_y_up(pos, feats.up_axis))  # data space -> y-up: what the metrics measure
@@ -69,8 +71,7 @@ def evaluate(
 
   if sum(len(p) // max(window // 4, 1) for p in real_c) < 4:
     raise UserError(f"--data: the takes are too short for {window}-frame windows")
-  trained = set(run.train_takes)
-  unseen = [y_up(m.positions) for m in real if m.name not in trained] or None
+  unseen = [y_up(m.positions) for m in scored_takes] if loss_takes == "held-out" else None
   scored = scoring.score(gen, real_c, sk, fps, train=train_c, unseen=unseen, window=window, splits=splits, seed=seed)
   return {
     "run": str(workdir),
@@ -83,6 +84,7 @@ def evaluate(
     "first_sample": Motion(decoded[0][0], fps, sk, feats.up_axis, name=f"{Path(workdir).name} seed {seeds[0]}"),
     "loss_kind": "none" if run.is_gan else "nll" if run.config.model.head == "mdn" else "mse",
     "heldout_loss": loss,
+    "loss_takes": loss_takes,
     **scored,
   }
 
@@ -102,6 +104,14 @@ def read_reference(run: Run, data: Sequence[str]) -> tuple[list, list]:
     raise UserError(f"--data {' '.join(data)}: no takes")
   train = conform(read_takes([data_cfg.dataset], data_cfg), data_cfg)
   return real, [m for m in train if m.name in set(run.train_takes)] or train
+
+
+def held_out(real, train_takes) -> tuple[list, str]:
+  """``(the takes the loss is measured on, which they are)``: the takes of ``real`` that the run did not train
+  on, ``"held-out"``; when it trained on every one of them, all of them, ``"all"`` (then the loss says how
+  well the run fits its own training motion, not how it generalizes)."""
+  unseen = [m for m in real if m.name not in set(train_takes)]
+  return (unseen, "held-out") if unseen else (list(real), "all")
 
 
 def heldout_loss(run: Run, takes) -> float:

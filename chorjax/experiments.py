@@ -307,6 +307,8 @@ def _winner(groups, key, rule):
   rows = [g for g in groups if all(r["eval"].get(k) is not None for r in g["runs"] for k in needs)]
   if key == "heldout_loss" and len({r["eval"]["loss_kind"] for g in rows for r in g["runs"]}) > 1:
     return None, "not comparable (NLL vs MSE)"
+  if key == "heldout_loss" and len({r["eval"].get("loss_takes", "all") for g in rows for r in g["runs"]}) > 1:
+    return None, "not comparable (some on held-out takes, some on the runs' training takes)"
   if not rows:
     return None, ""
   scored = sorted(
@@ -404,6 +406,8 @@ def _table(groups) -> list[str]:
   for g in groups:
     c = g["runs"][0]["config"]
     cells = [_cell(g, k, rule) for k, _, rule in COLUMNS]
+    if any(r["eval"].get("loss_takes", "all") == "all" for r in g["runs"]) and cells[0] != "-":
+      cells[0] += " (incl. training takes)"  # measured on every --data take, none held out
     cell, head = c["model"]["cell"], c["model"]["head"]
     if c["model"].get("family") == "gan":  # the generator's cell; the adversarial loss in the head column
       cell, head = c["gan"]["cell"], f"gan ({c['gan']['loss']})"
@@ -453,6 +457,8 @@ def compare(workdirs, output) -> Path:
     "",
     *_table(groups),
     "",
+    "The held-out loss is measured on the evaluation takes a run did not train on (on all of them, marked "
+    "'incl. training takes', where none was held out or the run was evaluated before this rule). "
     "Lower is better for held-out loss (NLL and MSE are not comparable) and bone CV; movement and jitter "
     "should be near 1 (movement 0 = trembling in place or frozen); FID / real near 1 or below (the real "
     "data's own halves differ by 1); foot sliding, PFC, Div_k and novelty near the real data's (novelty "

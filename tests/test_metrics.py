@@ -10,11 +10,13 @@ from helpers import TINY
 from chorjax import cli
 from chorjax import metrics as M
 from chorjax.cli import METRIC_KEYS
+from chorjax.config import load_config
 from chorjax.data import transforms as tf
 from chorjax.data.csv import read_csv
-from chorjax.data.dataset import bundled_path
+from chorjax.data.dataset import bundled_path, load_dataset, read_takes
 from chorjax.data.motion import bone_length_cv
 from chorjax.data.skeletons import MPII16
+from chorjax.evaluate import held_out
 from chorjax.scoring import mean_of, score
 
 TAKE = read_csv(bundled_path("cmu94") / "94_05_skeleton_3d.csv")
@@ -133,6 +135,7 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
   assert np.mean(each["movement_min"]) == pytest.approx(m["movement_min"]["mean"])
   assert np.mean(each["root_step_max"]) == pytest.approx(m["root_step_max"]["mean"])
   assert m["sampling"]["seeds"] == [0, 1] and (runs[0] / "eval" / "sample.npz").exists()
+  assert m["loss_takes"] == "held-out"  # 94_10: the take the runs' split held out
   assert m["loss_kind"] == "nll" and json.loads((runs[2] / "eval" / "metrics.json").read_text())["loss_kind"] == "mse"
   capsys.readouterr()
   assert cli.main(["sweep", str(sweep)]) == 0  # finished points are skipped
@@ -141,7 +144,7 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
   assert cli.main(["compare", *map(str, runs), "-o", str(report)]) == 0
   text = report.read_text()
   assert "| t-head=mdn | 2 | lnlstm | mdn |" in text and "| t-head=mse | 2 | lnlstm | mse |" in text  # seeds grouped
-  assert "## Who wins" in text and "not comparable" in text and " ± " in text
+  assert "## Who wins" in text and "not comparable" in text and " ± " in text and "(incl. training takes)" not in text
   assert m["segment_frames"] == 240 and "Evaluation of every run: 1 x 240 frames" in text  # what was measured
   assert "segments of 240 frames" in text and "movement first segment" in text
   assert (tmp_path / "report_strip0.png").exists() and "![t-head=mse](report_strip1.png)" in text
@@ -307,3 +310,13 @@ def test_older_metrics_files_state_the_controls_added_since_as_off():
   runs[1]["eval"]["sampling"]["pace"] = 0.0
   runs[1]["name"] = "y-seed=1"  # the same config under another name is another row
   assert [g["name"] for g in group_runs(runs)] == ["x-seed=0", "y-seed=1"]
+
+
+def test_the_held_out_loss_is_measured_on_the_takes_the_run_did_not_train_on():
+  split = load_dataset(load_config(None, ["data.seq_length=20"]).data)
+  takes = read_takes(["cmu94"])
+  scored, kind = held_out(takes, split.train_names)
+  assert kind == "held-out" and [m.name for m in scored] == list(split.val_names) == ["94_10_skeleton_3d"]
+  own = [m for m in takes if m.name in split.train_names]
+  scored, kind = held_out(own, split.train_names)  # nothing held out: the loss on the run's own takes, said so
+  assert kind == "all" and [m.name for m in scored] == [m.name for m in own] and len(own) == 9
