@@ -110,8 +110,8 @@ def unroll_ab(reps: int = 5) -> dict:
     fn = jax.jit(
       lambda p: chorjax.sample.generate.__wrapped__(graphdef, p, motion, jax.random.key(0), num_frames=FRAMES)
     )
-    fn.lower(params).compile()
-    pairs.append((n, lambda fn=fn: fn(params), jax.block_until_ready))
+    compiled = fn.lower(params).compile()  # this program, whatever UNROLL says later
+    pairs.append((n, lambda compiled=compiled: compiled(params), jax.block_until_ready))
   chorjax.sample.UNROLL = unroll
   return alternate(pairs, reps)
 
@@ -121,10 +121,11 @@ def main() -> None:
     for n, seconds in unroll_ab().items():
       print(f"unroll {n}: {seconds:.3f} s per {FRAMES} frames at batch {B}")
     return
-  timed = {name: _median_seconds(fn, args) for name, (fn, args) in {**chorjax_programs(), **plain_programs()}.items()}
+  programs = {**chorjax_programs(), **plain_programs()}
+  medians = {name: _median_seconds(fn, args) for name, (fn, args) in programs.items()}
   peak = matmul_peak()
   print(f"matmul peak {peak / 1e9:.0f} GFLOP/s; {FLOPS_PER_FRAME / 1e6:.0f} MFLOP of matmuls per frame at batch {B}")
-  for name, seconds in timed.items():
+  for name, seconds in medians.items():
     rate = FLOPS_PER_FRAME * FRAMES / seconds
     share = f"{rate / 1e9:6.1f} GFLOP/s  {100 * rate / peak:3.0f}% of peak"
     print(f"{name:18s} {seconds:.3f} s per {FRAMES} frames  {share}")

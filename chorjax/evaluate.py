@@ -110,7 +110,8 @@ def held_out(real, train_takes) -> tuple[list, str]:
   """``(the takes the loss is measured on, which they are)``: the takes of ``real`` that the run did not train
   on, ``"held-out"``; when it trained on every one of them, all of them, ``"all"`` (then the loss says how
   well the run fits its own training motion, not how it generalizes)."""
-  unseen = [m for m in real if m.name not in set(train_takes)]
+  trained = set(train_takes)
+  unseen = [m for m in real if m.name not in trained]
   return (unseen, "held-out") if unseen else (list(real), "all")
 
 

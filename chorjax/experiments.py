@@ -301,13 +301,19 @@ def group_runs(runs) -> list[dict]:
   return out
 
 
+def _loss_takes(e: dict) -> str:
+  """Which takes an evaluation's held-out loss was measured on (``evaluate.held_out``); evaluations from
+  before the key measured it on every ``--data`` take: ``"all"``."""
+  return e.get("loss_takes", "all")
+
+
 def _winner(groups, key, rule):
   """``(group or None, reason)``: the best group, named only where it beats the next beyond the spread."""
   needs = [key, rule.split(":")[1]] if rule.startswith("data:") else [key]
   rows = [g for g in groups if all(r["eval"].get(k) is not None for r in g["runs"] for k in needs)]
   if key == "heldout_loss" and len({r["eval"]["loss_kind"] for g in rows for r in g["runs"]}) > 1:
     return None, "not comparable (NLL vs MSE)"
-  if key == "heldout_loss" and len({r["eval"].get("loss_takes", "all") for g in rows for r in g["runs"]}) > 1:
+  if key == "heldout_loss" and len({_loss_takes(r["eval"]) for g in rows for r in g["runs"]}) > 1:
     return None, "not comparable (some on held-out takes, some on the runs' training takes)"
   if not rows:
     return None, ""
@@ -406,8 +412,9 @@ def _table(groups) -> list[str]:
   for g in groups:
     c = g["runs"][0]["config"]
     cells = [_cell(g, k, rule) for k, _, rule in COLUMNS]
-    if any(r["eval"].get("loss_takes", "all") == "all" for r in g["runs"]) and cells[0] != "-":
-      cells[0] += " (incl. training takes)"  # measured on every --data take, none held out
+    loss = [k for k, _, _ in COLUMNS].index("heldout_loss")
+    if any(_loss_takes(r["eval"]) == "all" for r in g["runs"]) and cells[loss] != "-":
+      cells[loss] += " (incl. training takes)"  # measured on every --data take, none held out
     cell, head = c["model"]["cell"], c["model"]["head"]
     if c["model"].get("family") == "gan":  # the generator's cell; the adversarial loss in the head column
       cell, head = c["gan"]["cell"], f"gan ({c['gan']['loss']})"

@@ -179,6 +179,12 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
   assert cli.main(["compare", *map(str, runs), "-o", str(tmp_path / "r3.md")]) == 0
   text = (tmp_path / "r3.md").read_text()
   assert "Evaluation settings differ between runs:" in text and "- t-head=mdn-seed=1: 1 x 300 frames" in text
+  # an evaluation from before loss_takes measured the loss on every --data take: marked, and not ranked
+  legacy = runs[2] / "eval" / "metrics.json"
+  legacy.write_text(json.dumps({k: v for k, v in json.loads(legacy.read_text()).items() if k != "loss_takes"}))
+  assert cli.main(["compare", *map(str, runs[2:]), "-o", str(tmp_path / "r4.md")]) == 0
+  text = (tmp_path / "r4.md").read_text()
+  assert "(incl. training takes) |" in text and "not comparable (some on held-out takes" in text
 
 
 # ---------------------------------------------------------------- movement, jitter, bones, FID on constructed cases
