@@ -123,6 +123,14 @@ def _data_convert(args) -> int:
   ]
   if args.drop_first_frame:
     motions = [m.replace(positions=m.positions[1:]) for m in motions]
+  elif not args.keep_rest_frames:
+    from chorjax.data.check import drop_leading_rest, drop_rest_note
+
+    kept = [drop_leading_rest(m) for m in motions]
+    motions = [m for m, _ in kept]
+    note = drop_rest_note({m.name: n for m, n in kept if n})
+    if note:
+      print(note.replace("data.keep_rest_frames = true", "--keep-rest-frames"))
   if args.joints == "mpii16":
     motions, used = map_takes(motions, args.joint_map)
     for how in dict.fromkeys(m.describe() for m in used.values()):
@@ -690,7 +698,15 @@ def _add_convert_command(dsub) -> None:
   conv.add_argument("--asf", metavar="PATH", help="the skeleton of AMC inputs (default: found in the AMC's folder)")
   conv.add_argument("--amc-fps", type=_positive, default=120.0, help="frame rate of AMC inputs (default 120)")
   conv.add_argument("--fps", type=_positive, default=30.0, help="frame rate of CSV inputs (default 30)")
-  conv.add_argument("--drop-first-frame", action="store_true", help="drop frame 0 (a converter's T-pose frame)")
+  conv.add_argument(
+    "--drop-first-frame", action="store_true", help="drop frame 0 whatever it holds (instead of the rest-pose check)"
+  )
+  conv.add_argument(
+    "--keep-rest-frames",
+    action="store_true",
+    help="keep a leading rest pose (by default a converter's arms-out frame 0 and the blend out of it are "
+    "found by the jump they make and dropped, with a note)",
+  )
   conv.add_argument(
     "--rigid",
     action="store_true",

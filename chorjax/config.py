@@ -82,6 +82,11 @@ class DataConfig:
   )
   seq_length: int = _field(100, "frames per training window (inputs; targets are shifted by one)", minimum=1)
   val_takes: tuple = _field(("auto",), "held-out take names; 'auto' = the last take by name; [] = none")
+  keep_rest_frames: bool = _field(
+    False,
+    "keep a take's leading rest pose (a converter's arms-out frame 0 and the blend out of it, found by the "
+    "jump it makes: see `chorjax data check`); by default training drops it and says so",
+  )
   augment: tuple = _field(
     (), "training augmentations: 'reverse' (time) and/or 'mirror' (left/right)", choices=("reverse", "mirror")
   )

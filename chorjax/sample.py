@@ -282,7 +282,7 @@ def read_phrase(spec: str, features, data_cfg, flag: str = "--prime") -> np.ndar
     raise UserError(f"{flag} {spec}: START and LEN must be whole numbers (FILE:START:LEN, e.g. {parts[0]}:0:60)")
   else:
     path, start, length = Path(spec), 0, None
-  motion = conform(read_takes([str(path)], data_cfg)[:1], data_cfg)[0]
+  motion = conform(read_takes([str(path)], data_cfg)[:1], data_cfg, rest=False)[0]  # frames as in the file
   if motion.skeleton.num_joints != features.skeleton.num_joints:
     raise UserError(
       f"{path}: {motion.skeleton.num_joints} joints; the model was trained on {features.skeleton.num_joints}"

@@ -124,6 +124,8 @@ def _parse_motion(path: Path, text: str, num_channels: int):
     assert lines[start + 1].strip().lower().startswith("frames") and 0 < frame_time < 1e3
   except (IndexError, ValueError, AssertionError):
     raise UserError(f"{path}:{start + 2}: expected 'Frames: N' and 'Frame Time: T' after MOTION") from None
+  if frames < 1:
+    raise UserError(f"{path}:{start + 2}: 'Frames: {frames}': the MOTION section holds no frame (an empty clip)")
   rows = []
   for k in range(start + 3, len(lines)):
     if not lines[k].strip():
@@ -155,6 +157,8 @@ def read_bvh(
   num_channels = sum(len(j.channels) for j in joints)
   data, frame_time = _parse_motion(path, text, num_channels)
   if drop_first_frame:
+    if len(data) < 2:
+      raise UserError(f"{path}: one frame; dropping the first leaves nothing")
     data = data[1:]
   pos = forward_kinematics(joints, data) * scale
   keep = [k for k, j in enumerate(joints) if not (j.end and not np.any(j.offset))]

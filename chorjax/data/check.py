@@ -11,6 +11,12 @@ Detection, on the body rather than the headers:
 - **up axis**: the signed axis along which the head stands above the feet (for a marker set: along
   which the middle 80% of the markers spread most in a frame, its sign the one that puts most markers
   in the upper half: a body carries more markers above the hips than below);
+- **jumps**: a step (the largest joint move between two frames, the pose measured from the root, or the
+  root's own move) over ``JUMP`` times the take's 99th-percentile step and over 5% of the body's size: real
+  motion, however fast, stays within ~2x (every take in ../shared/data: 1.0-2.0x); a converter's rest pose
+  (arms out) in frame 0 jumps 4-30x. A frame jumped into and out of is a rest/T-pose frame; a run of jumps
+  at the start is a **leading rest pose** (the rest frame and the blend out of it), which training and
+  ``data convert`` drop by default (``drop_leading_rest``);
 - **units**: the mean leg (hip to knee to ankle; a marker set: standing height) against an adult's
   (0.85 m; 1.7 m), in the unit that brings it nearest: m, cm, mm, inches or CMU ASF units (1/0.0564444
   per metre). More than 1.5 times off in every unit: ``arbitrary``, with the metres per unit a body
@@ -30,6 +36,114 @@ LEG_M = 0.85  # hip -> knee -> ankle of an adult, metres
 HEIGHT_M = 1.7  # a standing adult, metres (marker sets)
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "cmu_asf": 0.0564444}
 AXES = ("y", "-y", "z", "-z", "x", "-x")
+JUMP = 3.0  # a step over JUMP x the take's 99th-percentile step is a jump (see the module docstring)
+LEAD_SECONDS = 0.1  # a leading rest pose: frame 0 and at most this long a blend out of it
+
+
+@dataclasses.dataclass(frozen=True)
+class Jumps:
+  """Where a take's pose or root jumps far beyond its own frame-to-frame steps (``find_jumps``).
+
+  Attributes:
+    leading: frames at the start that are a rest pose and the blend out of it (0: none).
+    pose: frames (numbered from 0) the pose jumps into, after the leading ones.
+    root: frames the root jumps into, after the leading ones.
+    rest: frames the pose jumps into and out of (rest or T-pose frames inside the take).
+    worst: the largest step after the leading frames / the take's 99th-percentile step.
+    lead_ratio: frame 0's step / the take's 99th-percentile step (0 without a leading rest pose).
+  """
+
+  leading: int = 0
+  pose: tuple = ()
+  root: tuple = ()
+  rest: tuple = ()
+  worst: float = 0.0
+  lead_ratio: float = 0.0
+
+  def describe(self) -> list[str]:
+    """One note per finding, with frame numbers."""
+    out = []
+    if self.leading:
+      blend = f" and the {self.leading - 1} frame(s) blending out of it" if self.leading > 1 else ""
+      out.append(
+        f"frame 0 is a rest pose ({self.lead_ratio:.0f}x the take's 99th-percentile step){blend}: "
+        f"training and `data convert` drop {'frame 0' if self.leading == 1 else f'frames 0-{self.leading - 1}'} "
+        "(data.keep_rest_frames keeps them)"
+      )
+    if self.rest:
+      out.append(f"the pose jumps away and back at frame(s) {_frames(self.rest)} (rest/T-pose or glitch frames)")
+    other = [f for f in self.pose if f not in self.rest and f - 1 not in self.rest]
+    if other:
+      out.append(f"the pose jumps at frame(s) {_frames(other)} (up to {self.worst:.1f}x the 99th-percentile step)")
+    if self.root:
+      out.append(f"the root jumps at frame(s) {_frames(self.root)}")
+    return out
+
+
+def _frames(frames) -> str:
+  shown = ", ".join(str(f) for f in frames[:8])
+  return shown + (f" and {len(frames) - 8} more" if len(frames) > 8 else "")
+
+
+def _steps(positions, root: int | None) -> tuple[np.ndarray, np.ndarray, float]:
+  """(pose step [T-1], root step [T-1], body size): the largest joint move measured from the root
+  (a marker set: from the markers' centroid), the root's move, and the median per-frame spread."""
+  p = np.asarray(positions, np.float64)
+  anchor = p.mean(1, keepdims=True) if root is None else p[:, root : root + 1]
+  pose = np.linalg.norm(np.diff(p - anchor, axis=0), axis=-1).max(-1)
+  moved = np.linalg.norm(np.diff(anchor[:, 0], axis=0), axis=-1)
+  body = float(np.median(np.ptp(p, axis=1).max(-1)))
+  return pose, moved, body
+
+
+def _jumps_in(step: np.ndarray, body: float) -> np.ndarray:
+  return (step > JUMP * np.percentile(step, 99)) & (step > 0.05 * body)
+
+
+def find_jumps(motion: Motion) -> Jumps:
+  """Rest frames, pose jumps and root jumps of ``motion`` (see the module docstring)."""
+  if motion.num_frames < 3:
+    return Jumps()
+  root = motion.skeleton.root if motion.skeleton.bones else None
+  pose, moved, body = _steps(motion.positions, root)
+  pose_jump, root_jump = _jumps_in(pose, body), _jumps_in(moved, body)
+  lead = 0
+  if pose_jump[0]:
+    cap = max(round(LEAD_SECONDS * motion.fps), 1)
+    usual = np.percentile(pose[cap:], 99) if len(pose) > 2 * cap else np.percentile(pose, 99)
+    lead = 1  # the blend out of the rest pose: steps over 2x the usual ones (real motion stays within ~2x)
+    while lead < min(cap, len(pose)) and pose[lead] > 2 * usual:
+      lead += 1
+  jumps = np.flatnonzero(pose_jump[lead:]) + lead
+  rest = tuple(int(t) for t in jumps if t + 1 in jumps)
+  p99 = np.percentile(pose, 99)
+  return Jumps(
+    leading=lead,
+    pose=tuple(int(t) + 1 for t in jumps),
+    root=tuple(int(t) + 1 for t in np.flatnonzero(root_jump[lead:]) + lead),
+    rest=tuple(t + 1 for t in rest),
+    worst=float(pose[lead:].max() / max(p99, 1e-12)),
+    lead_ratio=float(pose[0] / max(p99, 1e-12)) if lead else 0.0,
+  )
+
+
+def drop_leading_rest(motion: Motion) -> tuple[Motion, int]:
+  """``motion`` without its leading rest pose (``Jumps.leading`` frames), and how many were dropped."""
+  lead = find_jumps(motion).leading
+  if not lead:
+    return motion, 0
+  return motion.replace(positions=motion.positions[lead:]), lead
+
+
+def drop_rest_note(dropped: dict) -> str | None:
+  """One line for the user: which takes lost a leading rest pose (``{take: frames dropped}``)."""
+  if not dropped:
+    return None
+  names = sorted(dropped)
+  takes = names[0] if len(names) == 1 else f"{len(names)} takes ({names[0]}, ...)"
+  counts = sorted(set(dropped.values()))
+  n = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]}-{counts[-1]}"
+  return f"dropped a leading rest pose ({n} frames) of {takes}; data.keep_rest_frames = true keeps it"
 
 
 @dataclasses.dataclass
@@ -50,8 +164,10 @@ class TakeReport:
   bone_cv: str = ""
   held_frames: int = 0
   teleports: int = 0
+  rest_frames: int = 0
   floor: str = ""
   notes: list = dataclasses.field(default_factory=list)
+  body: np.ndarray | None = None  # median 16-joint bone lengths (mapped takes), for comparing takes
   fatal: list = dataclasses.field(default_factory=list)
 
   @property
@@ -143,6 +259,7 @@ def check_take(motion: Motion, joint_map=None, mapping=None) -> TakeReport:
     try:
       mapping = mapping or find_mapping(motion, joint_map)
       mapped = apply_mapping(motion, mapping)
+      r.body = np.median(mapped.bone_lengths(), axis=0)
       r.mapping = f"{mapping.method}: " + ", ".join(f"{t}={s}" for t, s in mapping.joints.items())
     except UserError as e:
       r.fatal.append(str(e))
@@ -158,13 +275,9 @@ def check_take(motion: Motion, joint_map=None, mapping=None) -> TakeReport:
   r.held_frames = int(np.sum(step == 0))
   if r.held_frames:
     r.notes.append(f"{r.held_frames} frames repeat the one before exactly (dropped frames or filled gaps)")
-  root = pos[:, motion.skeleton.root]
-  move = np.linalg.norm(np.diff(root, axis=0), axis=-1)
-  body = 1.0 / max(r.metres_per_unit, 1e-12)  # one metre in file units
-  jumps = np.flatnonzero(move > max(10 * np.median(move), 0.25 * body))  # 0.25 m in one frame: 7.5 m/s at 30 fps
-  r.teleports = len(jumps)
-  if len(jumps):
-    r.notes.append(f"the root jumps {len(jumps)} times (first at frame {jumps[0] + 1}: {move[jumps[0]]:.3g} units)")
+  jumps = find_jumps(motion)
+  r.teleports, r.rest_frames = len(jumps.root), jumps.leading
+  r.notes += jumps.describe()
   r.floor, floor_notes = _floor(mapped, r.up_axis, motion.fps)
   r.notes += floor_notes
   return r
@@ -198,7 +311,7 @@ def check_paths(specs, joint_map=None, fps: float = 30.0) -> tuple[list[TakeRepo
   """Reports for every take named by ``specs`` (files, folders, bundled names) and the suggested config."""
   from chorjax.data.csv import sidecar_path
   from chorjax.data.dataset import read_motions, resolve_files
-  from chorjax.data.mapping import map_takes
+  from chorjax.data.mapping import HEAD_TOP_FROM_EYES, map_takes
 
   reports, motions, csv = [], [], False
   for spec in specs:
@@ -212,5 +325,36 @@ def check_paths(specs, joint_map=None, fps: float = 30.0) -> tuple[list[TakeRepo
     used = map_takes([m for m in motions if m.skeleton.bones], joint_map)[1]
   except UserError:
     used = {}  # some take cannot be mapped: each take on its own shows which
-  reports += [check_take(m, joint_map, used.get(m.name)) for m in motions]
+  fits = lambda m, u: u is not None and set(u.joints.values()) <= set(m.skeleton.joint_names) | {HEAD_TOP_FROM_EYES}
+  taken = [check_take(m, joint_map, used.get(m.name) if fits(m, used.get(m.name)) else None) for m in motions]
+  _compare_bodies(taken)
+  reports += taken
   return reports, suggest_config(reports, csv)
+
+
+PROPORTION_TOLERANCE = 0.15  # a 16-joint bone's share of the body differing by more from the takes' median
+
+
+def _compare_bodies(reports) -> None:
+  """Notes on the takes whose 16-joint body differs from the set's: another skeleton of the same dancer
+  (CMU's BVH releases lack the ASF's thorax bone: their arms and head sit ~2 units lower) or another
+  scale (a copy in metres beside one in inches)."""
+  from chorjax.data.skeletons import MPII16
+
+  bodies = {r.path: (r, r.body) for r in reports if r.body is not None}
+  if len(bodies) < 2:
+    return
+  sizes = {k: b.sum() for k, (_, b) in bodies.items()}
+  share = np.median([b / sizes[k] for k, (_, b) in bodies.items()], axis=0)
+  size = float(np.median(list(sizes.values())))
+  for k, (r, b) in bodies.items():
+    ratio = b / sizes[k] / share
+    worst = int(np.argmax(np.abs(np.log(ratio))))
+    if abs(np.log(ratio[worst])) > np.log(1 + PROPORTION_TOLERANCE):
+      a, c = (MPII16.joint_names[j] for j in MPII16.bones[worst])
+      r.notes.append(
+        f"another body than the other takes': its {a}-{c} bone is {ratio[worst]:.2f}x their share of the body "
+        "(another skeleton or export of the dancer; `data convert --like` gives takes one body size, not one skeleton)"
+      )
+    if abs(np.log(sizes[k] / size)) > np.log(1.5):
+      r.notes.append(f"{sizes[k] / size:.3g}x the size of the other takes' bodies (another unit?)")

@@ -119,12 +119,23 @@ def one_rate(motions: Sequence[Motion], seq_length: int) -> tuple[list[Motion], 
   return [to_rate(m, fps) for m in motions], fps, notes
 
 
-def conform(motions: Sequence[Motion], data_cfg, mappings: dict | None = None) -> list[Motion]:
-  """Brings takes of any format into the dataset's layout: joints (``data.joints``, mapped as
-  ``chorjax.data.mapping`` decides; the mappings used are put into ``mappings``) and up axis."""
+def conform(
+  motions: Sequence[Motion], data_cfg, mappings: dict | None = None, notes: list | None = None, *, rest: bool = True
+) -> list[Motion]:
+  """Brings takes of any format into the dataset's layout: without a leading rest pose (unless
+  ``data.keep_rest_frames``; ``rest=False`` keeps frame numbers as in the file), joints (``data.joints``,
+  mapped as ``chorjax.data.mapping`` decides; the mappings used are put into ``mappings``) and up axis.
+  What the user should know goes into ``notes``."""
+  from chorjax.data.check import drop_leading_rest, drop_rest_note
   from chorjax.data.mapping import map_takes
 
   out = list(motions)
+  if rest and not data_cfg.keep_rest_frames:
+    kept = [drop_leading_rest(m) for m in out]
+    out = [m for m, _ in kept]
+    note = drop_rest_note({m.name: n for m, n in kept if n})
+    if note and notes is not None:
+      notes.append(note)
   if data_cfg.joints == "mpii16":
     out, used = map_takes(out, data_cfg.joint_map or None)
     if mappings is not None:
@@ -195,8 +206,10 @@ def load_dataset(data_cfg) -> Dataset:
     UserError: for unreadable files, an empty selection, or a take shorter than one window.
   """
   mappings: dict = {}
-  motions = conform(read_takes([data_cfg.dataset], data_cfg), data_cfg, mappings)
+  rest_notes: list[str] = []
+  motions = conform(read_takes([data_cfg.dataset], data_cfg), data_cfg, mappings, rest_notes)
   motions, fps, notes = one_rate(motions, data_cfg.seq_length)
+  notes = rest_notes + notes
   names = [m.name for m in motions]
   if len(set(names)) != len(names):
     raise UserError(f"{data_cfg.dataset}: two takes share a name; ids come from file names")

@@ -12,8 +12,10 @@
    ForeArm/Elbow/LowerArm, Wrist/Hand, Arm/UpperArm/Shoulder). Structure settles what names leave open:
    the pelvis is where the two legs meet, the thorax where the two arms meet, a missing knee or
    shoulder is the joint above the ankle or elbow, and the head joint is the neck point when a head top
-   sits above it (else the head top, with the neck below). This covers MotionBuilder/HumanIK, Mixamo,
-   the CMU converters, LaFAN1/Ubisoft, SMPL/AIST++, Kinect v2 and Bandai Namco namings;
+   sits above it (else the head top, with the neck below). A head with eyes but nothing above them (an
+   acLSTM/Poser rig) gets a derived head top, ``HEAD_TOP_FROM_EYES`` (see ``with_head_top``). This
+   covers MotionBuilder/HumanIK, Mixamo, the CMU converters, LaFAN1/Ubisoft, SMPL/AIST++, Kinect v2 and
+   Bandai Namco namings;
 4. **topology** alone, when names say nothing: two leg chains downward from the root, two arm chains
    and a head chain from the spine; the thigh/shin and upper arm/forearm are the two longest
    consecutive bones of each limb; left is ``up x forward`` (right-handed coordinates), forward the
@@ -72,7 +74,8 @@ SYNONYMS = {
   "elbow": ("elbow", "forearm", "lowerarm"),
   "shoulder": ("upperarm", "arm", "shoulder", "uparm"),
 }
-_HEAD_TOPS = ("headtop", "headend", "headtopend", "headnub", "headsite", "headtip", "headtopend1")
+HEAD_TOP_FROM_EYES = "head_top_from_eyes"  # a derived joint: see with_head_top
+_HEAD_TOPS = ("headtop", "headend", "headtopend", "headnub", "headsite", "headtip", "headtopend1", "headtopfromeyes")
 _KNOWN_BASES = {b for v in SYNONYMS.values() for b in v} | {"collar", "clavicle", "toe", "toebase", "foot", "eye"}
 _SIDES = {"left": "left", "right": "right", "l": "left", "r": "right"}
 _PARTS = {  # target name -> (side, role)
@@ -166,11 +169,7 @@ class _Tree:
     self.tiny = 0.05 * body
 
   def ancestors(self, j: int) -> list[int]:
-    out = []
-    while self.parents[j] >= 0:
-      j = self.parents[j]
-      out.append(j)
-    return out
+    return _ancestors(self.parents, j)
 
   def up(self, j: int) -> int | None:
     """The nearest ancestor at a distance (skips joints that sit on top of ``j``)."""
@@ -326,8 +325,66 @@ def _limb(tree: _Tree, base: int, start: int):
   return path[k], path[k + 1], path[k + 2], (path[k + 3] if k + 3 < len(path) else None)
 
 
+def with_head_top(motion: Motion) -> Motion:
+  """``motion`` plus a derived head-top joint (``HEAD_TOP_FROM_EYES``, a child of the head) where the head has
+  two eyes and no joint or End Site above them; otherwise ``motion`` itself.
+
+  The 16-joint layout's head top is where CMU's head bone ends (its ASF head bone is about as long as the
+  upper neck: roughly eye level, well below the crown). On a rig without that point (acLSTM's takes: the
+  ``head`` joint sits at the base of the skull, its only children are the eyes) it is put at the eyes'
+  height along the neck -> head direction, turned with the head: the head's own frame is read from the
+  head and eye positions in every frame (lateral: eye to eye; up: towards the eyes), and the direction is
+  the neck -> head direction's mean in that frame.
+  """
+  sk = motion.skeleton
+  if HEAD_TOP_FROM_EYES in sk.joint_names or not sk.bones:
+    return motion
+  split = [split_name(n) for n in sk.joint_names]
+  heads = [j for j, (side, base, end) in enumerate(split) if side is None and base == "head" and not end]
+  if not heads or sk.parents[heads[0]] < 0:
+    return motion
+  head = heads[0]
+  below = [j for j in range(sk.num_joints) if head in _ancestors(sk.parents, j)]
+  eyes = {split[j][0]: j for j in below if split[j][1] == "eye" and not split[j][2]}
+  above = [j for j in below if split[j][1] != "eye" and split[j][1] != "" and not split[j][1].endswith("eye")]
+  if set(eyes) != {"left", "right"} or above:
+    return motion
+  p = np.asarray(motion.positions, np.float64)
+  base, top_of_neck = p[:, sk.parents[head]], p[:, head]
+  x = _unit(p[:, eyes["left"]] - p[:, eyes["right"]])
+  rise = (p[:, eyes["left"]] + p[:, eyes["right"]]) / 2 - top_of_neck
+  y = _unit(rise - (rise * x).sum(-1, keepdims=True) * x)
+  frame = np.stack([x, y, np.cross(x, y)], axis=-1)  # [T, 3, 3]: columns are the head's axes
+  axis = _unit(top_of_neck - base)
+  local = _unit(np.einsum("tji,tj->ti", frame, axis).mean(0))
+  height = float((rise * axis).sum(-1).mean())
+  top = top_of_neck + height * np.einsum("tij,j->ti", frame, local)
+  skeleton = dataclasses.replace(
+    sk,
+    joint_names=(*sk.joint_names, HEAD_TOP_FROM_EYES),
+    parents=(*sk.parents, head),
+    twins=(*sk.twins, sk.num_joints),
+    end_joints=(*sk.end_joints, sk.num_joints),
+  )
+  positions = np.concatenate([motion.positions, top[:, None].astype(np.float32)], axis=1)
+  return motion.replace(positions=positions, skeleton=skeleton)
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+  return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
+
+
+def _ancestors(parents, j: int) -> list[int]:
+  out = []
+  while parents[j] >= 0:
+    j = parents[j]
+    out.append(j)
+  return out
+
+
 def check_topology(motion: Motion, joints: dict) -> str | None:
   """Why ``joints`` (target -> source name) do not form the 16-joint chains, or None when they do."""
+  motion = with_head_top(motion)
   tree = _Tree(motion)
   idx = {n: i for i, n in enumerate(tree.names)}
   j = {t: idx[s] for t, s in joints.items()}
@@ -351,6 +408,7 @@ def find_mapping(motion: Motion, joint_map=None) -> Mapping:
   Raises:
     UserError: naming the joints that could not be placed and the file's own joint names.
   """
+  motion = with_head_top(motion)
   names = motion.skeleton.joint_names
   where = motion.source or motion.name
   if joint_map is not None:
@@ -404,14 +462,14 @@ def map_takes(motions, joint_map=None) -> tuple[list[Motion], dict]:
   for m in motions:
     if m.skeleton.joint_names != MPII16.joint_names:
       rigs.setdefault(tuple(n for n in m.skeleton.joint_names if not split_name(n)[2]), []).append(m)
-  decided = {}
+  decided = {}  # by id(): takes of one name may come from two files (131_01.amc beside 131_01.bvh)
   for takes in rigs.values():
     common = set.intersection(*(set(t.skeleton.joint_names) for t in takes))
     mapping = find_mapping(_restrict(takes[0], common), joint_map)
     for t in takes:
-      decided[t.name] = mapping if t is takes[0] else _checked(t, mapping, t.source or t.name)
-  out = [apply_mapping(m, decided[m.name]) if m.name in decided else m for m in motions]
-  return out, decided
+      decided[id(t)] = mapping if t is takes[0] else _checked(t, mapping, t.source or t.name)
+  out = [apply_mapping(m, decided[id(m)]) if id(m) in decided else m for m in motions]
+  return out, {m.name: decided[id(m)] for m in motions if id(m) in decided}
 
 
 def _restrict(motion: Motion, names: set) -> Motion:
@@ -441,6 +499,8 @@ def to_mpii16(motion: Motion, joint_map=None) -> Motion:
 
 
 def apply_mapping(motion: Motion, mapping: Mapping) -> Motion:
+  if HEAD_TOP_FROM_EYES in mapping.joints.values():
+    motion = with_head_top(motion)
   index = {n: i for i, n in enumerate(motion.skeleton.joint_names)}
   cols = [index[mapping.joints[n]] for n in TARGETS]
   return motion.replace(positions=motion.positions[:, cols], skeleton=MPII16)
