@@ -383,6 +383,8 @@ METRIC_KEYS = (
   "pfc",
   "foot_sliding",
   "novelty",
+  "speed",
+  "root_travel",
 )
 
 
@@ -397,6 +399,8 @@ def _print_metrics(result: dict, keys) -> None:
       print(f"{k:22s} {'-':>10s}   (none: a GAN has no likelihood)" if k == "heldout_loss" else f"{k:22s} -")
       continue
     note = f"   (real: {mean_of(real):.4g})" if real is not None else ""
+    if result.get(k + "_train") is not None:  # the training takes against the held-out ones
+      note += f"   (training takes: {mean_of(result[k + '_train']):.4g})"
     if k == "heldout_loss" and result.get("loss_takes") == "all":
       note = "   (on the run's own training takes: --data holds no other)"
     print(f"{k:22s} {mean_of(result[k]):10.4g}{note}")
@@ -969,7 +973,8 @@ def _add_report_commands(sub) -> None:
     nargs="+",
     required=True,
     metavar="PATH_OR_NAME",
-    help="real takes to compare with, e.g. cmu94/94_10_skeleton_3d.csv (the held-out take)",
+    help="real takes to compare with, e.g. cmu94/94_10_skeleton_3d.csv, or `held-out`: the takes of the "
+    "run's dataset it did not train on (its validation takes)",
   )
   ev.add_argument("--frames", type=int, default=10_000, help="frames per generated sequence (default 10000)")
   ev.add_argument("--num", type=int, default=4, help="generated sequences (default 4)")

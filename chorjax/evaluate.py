@@ -96,14 +96,24 @@ def generate_positions(run: Run, train, num: int, frames: int, seed: int, sampli
   return dance(run.graphdef, run.params, run.features, motion, jax.random.key(seed), frames, sampling)
 
 
+HELD_OUT = "held-out"  # --data held-out: the takes of the run's dataset it did not train on
+
+
 def read_reference(run: Run, data: Sequence[str]) -> tuple[list, list]:
-  """``(the takes in data, the run's training takes)``, read exactly as training read its takes."""
+  """``(the takes in data, the run's training takes)``, read exactly as training read its takes; ``data`` of
+  ``["held-out"]``: the takes of the run's own dataset that it did not train on."""
   data_cfg = run.config.data
-  real = conform(read_takes(list(data), data_cfg), data_cfg)
+  every = conform(read_takes([data_cfg.dataset], data_cfg), data_cfg)
+  trained = set(run.train_takes)
+  if list(data) == [HELD_OUT]:
+    real = [m for m in every if m.name not in trained]
+    if not real:
+      raise UserError(f"--data held-out: the run trained on every take of {data_cfg.dataset}; name takes to judge on")
+  else:
+    real = conform(read_takes(list(data), data_cfg), data_cfg)
   if not real:
     raise UserError(f"--data {' '.join(data)}: no takes")
-  train = conform(read_takes([data_cfg.dataset], data_cfg), data_cfg)
-  return real, [m for m in train if m.name in set(run.train_takes)] or train
+  return real, [m for m in every if m.name in trained] or every
 
 
 def held_out(real, train_takes) -> tuple[list, str]:

@@ -26,6 +26,13 @@ Keys (a value, or ``{"mean", "sd"}`` over several motions or reference splits):
   second half in time); the motions' windows and B's windows are subsampled to the same count n =
   min(|motions|, |B|); ``fid_*`` = FID(A, motions_n) and ``fid_*_real`` = FID(A, B_n). Windows are
   ``window`` frames (60 = 2 s at 30 fps), reference hop ``window // 4``, motion hop ``window // 2``.
+  ``fid_k_train`` / ``fid_g_train`` (when the reference is held-out takes and the training takes are
+  given): the same figure for the run's TRAINING takes scored as if they were a sample against the
+  held-out ones, with the same splits: as close as another stretch of real dance by this dancer gets. The
+  honest bar for a model judged on takes it never saw (None otherwise).
+* ``speed``: mean joint speed per frame / the reference's (trembling is fast too: read it with
+  ``jitter``); ``root_travel``: the root's path length per frame / the reference's (a dancer who stays on
+  one spot -> 0).
 * ``div_k`` / ``div_g``: mean pairwise distance between the motions' normalized window features.
 * ``pfc``: EDGE's physical foot contact score; ``foot_sliding``: horizontal foot speed in contact
   (both in body sizes per second; ``data_pfc`` and ``data_foot_sliding`` are the reference's).
@@ -221,6 +228,12 @@ def score(
   # geometric features are fractions of a window's frames: a std below 5% of the frames is noise
   fid_g, fid_g_real, div_g, div_g_real = _distribution(motions, reference, geo, window, splits, seed, 0.05)
   speed = float(np.mean(np.concatenate([metrics.joint_speed(t) for t in reference])))
+  travel = lambda p: np.linalg.norm(np.diff(p[:, skeleton.root], axis=0), axis=-1)
+  ref_travel = float(np.mean(np.concatenate([travel(t) for t in reference])))
+  fid_k_train = fid_g_train = None
+  if train and unseen:  # the training takes as a "sample": the reference every figure is held against
+    fid_k_train = spread(_distribution(train, reference, kin, window, splits, seed, 1e-10)[0])
+    fid_g_train = spread(_distribution(train, reference, geo, window, splits, seed, 0.05)[0])
   moving, steps = (
     _movement_and_jitter(motions, reference, skeleton, fps, segment),
     _root_steps(motions, reference, skeleton),
@@ -244,6 +257,10 @@ def score(
     "data_foot_sliding": float(np.mean([metrics.foot_sliding(t, skeleton, fps, size) for t in reference])),
     **_novelty(motions, reference, train, unseen, skeleton, size, window),
     "speed_ratio": spread([metrics.speed_ratio(m, speed) for m in motions]),  # extra: NOT a freeze measure
+    "speed": spread([metrics.speed_ratio(m, speed) for m in motions]),
+    "root_travel": spread([float(travel(m).mean() / max(ref_travel, 1e-12)) for m in motions]),
+    "fid_k_train": fid_k_train,
+    "fid_g_train": fid_g_train,
     "body_size": size,
     "window": window,
     "splits": splits,

@@ -115,7 +115,7 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
     'name = "t"\nbase = "base.toml"\nvectorize = ["train.seed"]\n'
     f'[grid]\n"model.head" = ["mdn", "mse"]\n"train.seed" = [0, 1]\n'
     f'[set]\n{set_lines}\n"log.tensorboard" = false\n'
-    '[eval]\ndata = ["cmu94/94_10_skeleton_3d.csv"]\nframes = 240\nnum = 1\nseeds = [0, 1]\nsplits = 3\n'
+    '[eval]\ndata = ["held-out"]\nframes = 240\nnum = 1\nseeds = [0, 1]\nsplits = 3\n'
   )
   assert cli.main(["sweep", str(sweep), "--shard", "0/2"]) == 0  # two jobs of an array, no coordinator
   # the seeds of one head trained together (vectorize), as one group of the shard
@@ -127,8 +127,9 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
   runs = sorted((tmp_path / "runs" / "t").iterdir())
   assert [r.name for r in runs] == ["t-head=mdn-seed=0", "t-head=mdn-seed=1", "t-head=mse-seed=0", "t-head=mse-seed=1"]
   m = json.loads((runs[0] / "eval" / "metrics.json").read_text())
-  for key in ("heldout_loss", *METRIC_KEYS, "fid_k_real", "fid_g_real", "novelty_real"):
+  for key in ("heldout_loss", *METRIC_KEYS, "fid_k_real", "fid_g_real", "novelty_real", "fid_k_train", "fid_g_train"):
     assert np.isfinite(mean_of(m[key])), key
+  assert m["data"] == ["held-out"]  # judged on the run's own held-out take (94_10) alone
   assert set(m["fid_k"]) == {"mean", "sd"} and set(m["movement_first"]) == {"mean", "sd"}  # 2 seeds
   each = m["per_motion"]  # every sample's own value of the per-sample bars, the keys' mean and sd over them
   assert len(each["movement_min"]) == len(each["root_step_max"]) == 2
@@ -147,6 +148,9 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
   assert "## Who wins" in text and "not comparable" in text and " ± " in text and "(incl. training takes)" not in text
   assert m["segment_frames"] == 240 and "Evaluation of every run: 1 x 240 frames" in text  # what was measured
   assert "segments of 240 frames" in text and "movement first segment" in text
+  row = next(line for line in text.splitlines() if line.startswith("| t-head=mdn |")).split(" | ")
+  header = next(line for line in text.splitlines() if line.startswith("| config |")).split(" | ")
+  assert " ± " in row[header.index("FID_k / train takes'")] and " ± " in row[header.index("root travel")]
   assert (tmp_path / "report_strip0.png").exists() and "![t-head=mse](report_strip1.png)" in text
   assert (tmp_path / "report_loss.png").exists() and (tmp_path / "report_movement.png").exists()
   # eval through the CLI, and its errors
@@ -326,3 +330,23 @@ def test_the_held_out_loss_is_measured_on_the_takes_the_run_did_not_train_on():
   own = [m for m in takes if m.name in split.train_names]
   scored, kind = held_out(own, split.train_names)  # nothing held out: the loss on the run's own takes, said so
   assert kind == "all" and [m.name for m in scored] == [m.name for m in own] and len(own) == 9
+
+
+def test_the_training_takes_are_the_reference_held_out_figures_are_held_against(takes):
+  """fid_*_train: the run's training takes scored as a sample against the held-out takes, the same
+  ruler as a sample (passing those takes as the motions gives the same figure); speed and root travel
+  are 1 for the held-out takes themselves and 0 for a dancer frozen on the spot."""
+  held = ["94_09_skeleton_3d", "94_10_skeleton_3d"]
+  train = [t for n, t in takes.items() if n not in held]
+  unseen = [takes[n] for n in held]
+  r = score(train, unseen, MPII16, 30.0, train=train, unseen=unseen, splits=5)
+  for k in ("fid_k", "fid_g"):
+    assert r[f"{k}_train"] == r[k], k  # the same windows, splits and seed
+    assert r[f"{k}_train"]["mean"] > r[f"{k}_real"]["mean"] > 0  # other takes differ more than halves
+  same = score(unseen, unseen, MPII16, 30.0, splits=5)
+  assert same["fid_k_train"] is None  # no training takes: no such reference
+  assert same["speed"] == pytest.approx({"mean": 1.0, "sd": same["speed"]["sd"]}, rel=0.3)
+  assert np.mean([same["root_travel"]["mean"]]) == pytest.approx(1.0, rel=0.3)
+  frozen = np.repeat(unseen[0][:1], 600, axis=0)
+  still = score([frozen], unseen, MPII16, 30.0, splits=5)
+  assert still["speed"] == 0.0 and still["root_travel"] == 0.0
