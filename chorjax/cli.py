@@ -361,6 +361,7 @@ def _live(args) -> int:
     input_spec=args.input,
     record=args.record,
     checkpoint=args.checkpoint,
+    allow_origins=args.allow_origin,
     on_ready=ready,
   )
 
@@ -893,6 +894,14 @@ def _add_live_command(sub) -> None:
   )
   live.add_argument(
     "--record", metavar="OUT.npz", help="write every frame sent to OUT.npz when stopped (default: not recorded)"
+  )
+  live.add_argument(
+    "--allow-origin",
+    action="append",
+    default=[],
+    metavar="ORIGIN",
+    help="also let WebSocket clients from this page origin in (repeatable; `null`: a page opened from a file; "
+    "default: only the page this server serves, and programs that send no Origin)",
   )
   _add_sampling_args(live)
   live.set_defaults(func=_live)

@@ -291,8 +291,10 @@ class SampleConfig:
   frames: int = _field(600, "frames written by the sample at the end of training", minimum=1, resumable=True)
   num: int = _field(1, "dancers sampled in parallel", minimum=1, resumable=True)
   motion: int = _field(0, "motion id that conditions the sample")
-  pi_temperature: float = _field(1.0, "MDN mixture-weight temperature (0 = most likely component)", minimum=0.0)
-  sigma_temperature: float = _field(1.0, "MDN scale multiplier", minimum=0.0)
+  pi_temperature: float = _field(
+    1.0, "MDN mixture-weight temperature (0 = most likely component)", minimum=0.0, below=1000.0
+  )
+  sigma_temperature: float = _field(1.0, "MDN scale multiplier", minimum=0.0, below=1000.0)
   greedy: bool = _field(False, "take the mean of the most likely component (no noise)")
   noise_smoothing: float = _field(
     0.0,

@@ -45,6 +45,8 @@ import numpy as np
 from chorjax.errors import UserError
 
 AHEAD = 2  # chunks generated ahead of the clock
+PRIME_RANGE = 10.0  # a primed frame's features may lie this many times the training range's span outside it
+MAX_MESSAGE = 4 * 2**20  # bytes of one client message (a prime of minutes of frames, a file's text)
 CLOSE_TIMEOUT = 0.5  # seconds a client gets to answer the closing handshake when the server stops
 
 
@@ -108,19 +110,34 @@ class Stream:
       raise UserError(f"prime: expected at least 2 frames of {j} joints x 3, got shape {list(pos.shape)}")
     if not np.isfinite(pos).all():
       raise UserError("prime: positions must be finite numbers")
-    pos = pos[-self.keep :]
+    pos = pos[-self.prime_length(len(pos)) :]  # a few compiled lengths: no client stalls the others
     z = np.asarray(self.features.encode(pos), np.float32)
+    f = self.features
+    if f.low is not None and f.high is not None:
+      span = np.asarray(f.high, np.float32) - np.asarray(f.low, np.float32)
+      outside = (z < np.asarray(f.low) - PRIME_RANGE * span) | (z > np.asarray(f.high) + PRIME_RANGE * span)
+      if not np.isfinite(z).all() or outside.any():
+        raise UserError(f"prime: the phrase lies far outside the training data's range (over {PRIME_RANGE}x its span)")
     self._start(z)
     self.last = (z[-1], pos[-1])
     self.history.clear()
     self.history.extend(z)
 
+  def prime_length(self, frames: int) -> int:
+    """The frames of a phrase of ``frames`` that a prime keeps: the longest of ``keep`` and the powers of
+    two below it that fits (older frames go), so primes run one of a few programs compiled in advance."""
+    return max(n for n in self.prime_lengths() if n <= frames)
+
+  def prime_lengths(self) -> list[int]:
+    return sorted({self.keep, *(2**k for k in range(1, self.keep.bit_length()) if 2**k < self.keep)})
+
   def warm_up(self) -> None:
-    """Compiles what a prime of ``keep`` frames runs (longer phrases are cut to it; a new mix re-primes
-    with that many), so the usual prime shows in a few frames instead of after a compile."""
+    """Compiles every prime length (``prime_lengths``; a new mix re-primes with ``keep`` frames), so a
+    prime shows in a few frames instead of after a compile that would stall every viewer."""
     rest = np.asarray(self.features.decode(np.zeros((self.keep, self.features.dim), np.float32)), np.float32)
     z = np.asarray(self.features.encode(rest), np.float32)  # the mean pose, held: any phrase will do
-    jax.block_until_ready(self._started(z[None]))
+    for n in self.prime_lengths():
+      jax.block_until_ready(self._started(z[None, -n:]))
 
   def set(self, pi_temperature=None, sigma_temperature=None, mix=None) -> None:
     """New temperatures (from the next chunk) and/or a new motion mix (``"4:0.5,5:0.5"``): the model is
@@ -321,8 +338,32 @@ def host_port(text: str, flag: str) -> tuple[str, int]:
   return host or "127.0.0.1", int(port)
 
 
-async def serve(live: Live, host: str, port: int, *, osc_in=None, on_ready=print) -> None:
-  """Serves until SIGINT or SIGTERM; ``on_ready`` gets the line ``serving http://HOST:PORT``."""
+LOOPBACK = {"127.0.0.1", "localhost", "::1", "[::1]"}
+
+
+def origin_refusal(headers, host: str, allowed=()) -> str | None:
+  """Why a WebSocket handshake with these request ``headers`` is refused, or None to accept it.
+
+  Browsers send ``Origin`` with every WebSocket handshake, and any page the user has open may open one:
+  only the page this server serves (Origin ``http://`` + the request's own Host) is let in, and programs
+  that send no Origin (a script, a creative tool). ``allowed`` adds origins (``null`` for a page opened from
+  a file, ``*`` for any). The Host must name this server (a loopback name when it listens on loopback), so
+  a foreign domain resolved to 127.0.0.1 (DNS rebinding) is refused too.
+  """
+  origin, host_header = headers.get("Origin"), headers.get("Host", "")
+  name = host_header.rsplit(":", 1)[0] if not host_header.endswith("]") else host_header
+  if host in LOOPBACK and name not in LOOPBACK:
+    return f"Host {host_header!r} is not this server"
+  if origin is None or "*" in allowed or origin in allowed:
+    return None
+  if origin == f"http://{host_header}":
+    return None
+  return f"Origin {origin!r} is not this server's page (chorjax live --allow-origin ORIGIN lets it in)"
+
+
+async def serve(live: Live, host: str, port: int, *, osc_in=None, on_ready=print, origins=()) -> None:
+  """Serves until SIGINT or SIGTERM; ``on_ready`` gets the line ``serving http://HOST:PORT``; WebSocket
+  clients from other pages are refused (``origin_refusal``; ``origins``: more allowed)."""
   from websockets.asyncio.server import serve as ws_serve
   from websockets.datastructures import Headers
   from websockets.http11 import Response
@@ -332,6 +373,9 @@ async def serve(live: Live, host: str, port: int, *, osc_in=None, on_ready=print
   page = live_html(title=f"chorjax live ({live.stream.run.workdir})").encode("utf-8")
 
   def route(connection, request):
+    refused = origin_refusal(request.headers, host, origins)
+    if refused:
+      return connection.respond(403, f"refused: {refused}\n")
     if request.path == "/ws":
       return None  # the WebSocket handshake goes on
     if request.path in ("/", "/index.html"):
@@ -359,7 +403,7 @@ async def serve(live: Live, host: str, port: int, *, osc_in=None, on_ready=print
     live.ahead.extend(await live.call(live.stream.next_chunk))
   await live.call(live.stream.warm_up)
   async with ws_serve(
-    client, host, port, process_request=route, ping_interval=None, close_timeout=CLOSE_TIMEOUT
+    client, host, port, process_request=route, ping_interval=None, close_timeout=CLOSE_TIMEOUT, max_size=MAX_MESSAGE
   ) as server:
     bound = server.sockets[0].getsockname()[1] if server.sockets else port
     tasks = [asyncio.create_task(live.generate()), asyncio.create_task(live.pace())]
@@ -431,6 +475,7 @@ def run_live(
   record=None,
   checkpoint="latest",
   on_ready=print,
+  allow_origins=(),
 ) -> int:
   """``chorjax live``: loads the run, serves until Ctrl-C, writes the recording; returns 0."""
   from chorjax.data.npz import write_npz
@@ -470,7 +515,7 @@ def run_live(
     sender = SimpleUDPClient(*osc_out)
   live = Live(stream, rate, osc=sender, alternate=alternate, source=source)
   try:
-    asyncio.run(serve(live, host, port, osc_in=listen, on_ready=on_ready))
+    asyncio.run(serve(live, host, port, osc_in=listen, on_ready=on_ready, origins=tuple(allow_origins)))
   except OSError as e:  # the port is taken, the host is not this machine's
     raise UserError(f"cannot serve on {host}:{port}: {e.strerror or e}") from None
   finally:

@@ -95,6 +95,15 @@ def test_stream_continues_without_jumps_and_takes_steering(live_run):
       stream.set(**bad)
   with pytest.raises(UserError, match="prime: expected at least 2 frames"):
     stream.prime(np.zeros((5, 3, 3)))
+  # primes of any length run one of a few programs compiled at warm-up: no client stalls the others
+  from chorjax.sample import start_stream
+
+  stream.warm_up()
+  compiled = start_stream._cache_size()
+  for n in (2, 3, 5, 7, 9, 13, 17, 25, 33, 40):
+    stream.prime(read_csv(TAKE).positions[:n])
+    assert len(stream.history) == stream.prime_length(n) <= n
+  assert start_stream._cache_size() == compiled
 
 
 def _osc_listener():
@@ -137,6 +146,7 @@ def _start_live(run_dir, *flags):
 
 @pytest.mark.slow
 def test_live_server_end_to_end(live_run, tmp_path):
+  from websockets.exceptions import InvalidStatus
   from websockets.sync.client import connect
 
   osc_port, osc_frames, osc_stop = _osc_listener()
@@ -177,19 +187,36 @@ def test_live_server_end_to_end(live_run, tmp_path):
         json.dumps({"set": {"temperature": 2}}),
         json.dumps({"prime": [[[0, 0]]]}),
         json.dumps({"prime_file": {"name": "phrase.csv", "text": "".join(TAKE.read_text().splitlines(True)[:60])}}),
+        json.dumps({"set": {"mix": "0:1e308,1:1e308"}}),  # overflowed to NaN once, poisoning every frame
+        json.dumps({"prime": [[[float("nan")] * 3] * 16] * 4}),
+        json.dumps({"prime": (np.asarray(phrase) * 1e30).tolist()}),
+        json.dumps({"set": {"sigma_temperature": 1e300}}),
+        *(json.dumps({"prime": phrase[:n]}) for n in (3, 5, 7, 9, 13, 17, 25)),  # lengths never seen before
       ):
         ws.send(message)
       start, after = time.monotonic(), 0
-      while time.monotonic() - start < 4.0 and (len(replies) < 6 or after < FPS):
+      while time.monotonic() - start < 6.0 and (len(replies) < 17 or after < FPS):
         msg = json.loads(ws.recv())
         if "frame" in msg:
           received[msg["frame"]] = np.asarray(msg["positions"])
-          after += len(replies) >= 6
+          after += len(replies) >= 17
         else:
           replies.append(msg)
-      assert [next(iter(r)) for r in replies] == ["ok", "ok", "error", "error", "error", "ok"], replies
+      kinds = [next(iter(r)) for r in replies]
+      assert kinds == ["ok", "ok", "error", "error", "error", "ok", "ok", "error", "error", "error"] + ["ok"] * 7, (
+        replies
+      )
       assert "not JSON" in replies[2]["error"] and "prime: expected" in replies[4]["error"]
+      assert "finite" in replies[7]["error"] and "outside the training data's range" in replies[8]["error"]
+      assert "sigma_temperature" in replies[9]["error"]
       assert after >= FPS  # frames keep coming after steering and bad messages
+      assert all(np.isfinite(p).all() for p in received.values())  # never poisoned
+      for origin in ("http://evil.example", "null"):  # another page in the user's browser: refused
+        with pytest.raises(InvalidStatus, match="403"):
+          connect(url.replace("http://", "ws://") + "/ws", origin=origin)  # type: ignore[arg-type]
+      host = url.removeprefix("http://")
+      with connect(url.replace("http://", "ws://") + "/ws", origin=f"http://{host}") as page:  # type: ignore[arg-type]
+        assert "hello" in json.loads(page.recv())  # the page this server serves
 
     shots = _screenshots_of_live_page(url, tmp_path)
     assert shots["state"]["errors"] == [] and shots["state"]["frames"] > 5
@@ -379,3 +406,34 @@ def test_osc_input_takes_turns_and_osc_pauses_the_stream(live_run):
   assert inputs and {m["source"] for m in msgs} == {"input", "model"}
   for p in inputs:  # every passed-through frame is one the dancer sent
     assert np.abs(take[:400] - p).max(axis=(1, 2)).min() < 1e-3
+
+
+def test_only_the_served_page_and_programs_without_an_origin_may_connect():
+  from websockets.datastructures import Headers
+
+  from chorjax.live import origin_refusal
+
+  h = lambda **kw: Headers([(k.replace("_", "-").title(), v) for k, v in kw.items()])
+  assert origin_refusal(h(host="127.0.0.1:8765"), "127.0.0.1") is None  # a script, a creative tool
+  assert origin_refusal(h(host="127.0.0.1:8765", origin="http://127.0.0.1:8765"), "127.0.0.1") is None
+  assert origin_refusal(h(host="localhost:8765", origin="http://localhost:8765"), "127.0.0.1") is None
+  assert "is not this server's page" in origin_refusal(
+    h(host="127.0.0.1:8765", origin="https://evil.example"), "127.0.0.1"
+  )
+  assert "is not this server's page" in origin_refusal(h(host="127.0.0.1:8765", origin="null"), "127.0.0.1")
+  assert origin_refusal(h(host="127.0.0.1:8765", origin="null"), "127.0.0.1", ("null",)) is None  # --allow-origin
+  # DNS rebinding: a foreign name resolved to 127.0.0.1 sends its own Host and a matching Origin
+  assert "is not this server" in origin_refusal(
+    h(host="evil.example:8765", origin="http://evil.example:8765"), "127.0.0.1"
+  )
+
+
+def test_a_mix_of_huge_weights_is_normalized_and_bad_ones_are_one_line():
+  from chorjax.models import parse_mix
+
+  np.testing.assert_array_equal(parse_mix("0:1e308,1:1e308", 3), [0.5, 0.5, 0.0])
+  for bad in ("0:inf", "0:nan,1:1", "0:-1", "0:0", "9:1", "x"):
+    with pytest.raises(UserError, match="--mix"):
+      parse_mix(bad, 3)
+  with pytest.raises(UserError, match="at most"):
+    parse_mix("0:1," * 5000, 3)

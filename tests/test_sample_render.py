@@ -500,3 +500,40 @@ def test_impossible_counts_and_weights_are_one_line_errors(run_dir, tmp_path, ca
   err = capsys.readouterr().err
   assert err.count("\n") == 1 and err.startswith("chorjax: error: --"), err
   assert not list(tmp_path.iterdir()) and sorted(p.name for p in run_dir.rglob("*")) == before
+
+
+def test_hostile_take_names_and_titles_run_no_script_in_the_player(tmp_path):
+  """A take named like markup and a title holding the data placeholder: the page shows them as text, no
+  script of theirs runs (their own would push to window.__errors), and the dancers still play."""
+  hostile = ["<img src=x onerror=window.__errors.push('pwned-img')>", "a<!--<script>b"]
+  takes = []
+  for k, name in enumerate(hostile):
+    path = tmp_path / f"{name}.csv"
+    path.write_bytes((bundled_path("cmu94") / f"94_0{k + 1}_skeleton_3d.csv").read_bytes())
+    takes.append(str(path))
+  html = tmp_path / "player.html"
+  title = "__DATA__ </title><script>window.__errors.push('pwned-title')</script>"
+  assert cli.main(["render", *takes, "-o", str(html), "--title", title]) == 0
+  text = html.read_text()
+  assert "<img src=x" not in text and "<script>window.__errors.push('pwned" not in text and "<!--<script>b" not in text
+  dom = subprocess.run(
+    [
+      chromium(),
+      "--no-sandbox",
+      "--disable-gpu",
+      "--disable-background-networking",
+      "--no-first-run",
+      f"--user-data-dir={tmp_path / 'profile'}",
+      "--virtual-time-budget=3000",
+      "--dump-dom",
+      f"file://{html}#selftest",
+    ],
+    capture_output=True,
+    text=True,
+    timeout=120,
+  ).stdout
+  report = json.loads(dom.split('<pre id="selftest">')[1].split("</pre>")[0])
+  assert report["errors"] == []  # nothing of the names or the title ran (nor broke the page's script)
+  assert report["changed"] and report["frames"][1] > report["frames"][0] and len(report["boxes"]) == 2
+  assert "&lt;img src=x onerror" in dom and "<img src=" not in dom  # the name shown as text in its caption
+  assert dom.count("__DATA__") == 2  # the title, as text (in <title> and the heading)

@@ -24,24 +24,33 @@ def as_weights(motion, num_motions: int):
   return motion
 
 
+MAX_MIX_CHARS = 10_000  # a mix names at most a few thousand takes; longer text is refused unread
+
+
 def parse_mix(text: str, num_motions: int) -> np.ndarray:
-  """``'4:0.5,5:0.5'`` -> a weight vector over the motions; weights >= 0, normalized to sum 1 (so
-  ``4:1,5:1`` is an even blend)."""
-  w = np.zeros(num_motions, np.float32)
+  """``'4:0.5,5:0.5'`` -> a weight vector over the motions; weights finite and >= 0, normalized to sum 1
+  (so ``4:1,5:1`` is an even blend, and ``0:1e308,1:1e308`` too: no overflow to NaN)."""
+  if len(text) > MAX_MIX_CHARS:
+    raise UserError(f"--mix: {len(text)} characters; at most {MAX_MIX_CHARS}")
+  w = np.zeros(num_motions, np.float64)
+  parts = []
   for part in text.split(","):
     try:
       i_text, v_text = part.split(":")
       i, v = int(i_text), float(v_text)
     except ValueError:
-      raise UserError(f"--mix {text!r}: expected ID:WEIGHT,ID:WEIGHT (e.g. 4:0.5,5:0.5)") from None
+      raise UserError(f"--mix {text[:80]!r}: expected ID:WEIGHT,ID:WEIGHT (e.g. 4:0.5,5:0.5)") from None
     if not 0 <= i < num_motions:
-      raise UserError(f"--mix {text!r}: motion id {i} out of range (0..{num_motions - 1})")
+      raise UserError(f"--mix {text[:80]!r}: motion id {i} out of range (0..{num_motions - 1})")
     if not (np.isfinite(v) and v >= 0):
-      raise UserError(f"--mix {text!r}: weight {v_text} must be a finite number >= 0")
-    w[i] += v
-  if w.sum() <= 0:
-    raise UserError(f"--mix {text!r}: weights must sum to a positive number")
-  return w / w.sum()
+      raise UserError(f"--mix {text[:80]!r}: weight {v_text} must be a finite number >= 0")
+    parts.append((i, v))
+  top = max(v for _, v in parts)
+  if top <= 0:
+    raise UserError(f"--mix {text[:80]!r}: weights must sum to a positive number")
+  for i, v in parts:  # divided by the largest first: huge weights cannot overflow the sum
+    w[i] += v / top
+  return (w / w.sum()).astype(np.float32)
 
 
 def motion_weight_vector(

@@ -16,6 +16,7 @@ from __future__ import annotations
 import base64
 import html as html_lib
 import json
+import re
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -44,9 +45,25 @@ def player_html(motions: Sequence[Motion], title: str = "chorjax", columns: int 
   """The player page as a string; ``columns`` fixes the grid's columns (default: as many side by side
   as fit, each at least 300 CSS pixels wide)."""
   grid = f"repeat({columns}, minmax(0, 1fr))" if columns else "repeat(auto-fit, minmax(min(100%, 300px), 1fr))"
-  data = json.dumps([_payload(m) for m in motions])
-  page = _TEMPLATE.replace("__STYLE__", _STYLE).replace("__FIGURE__", _FIGURE)
-  return page.replace("__TITLE__", html_lib.escape(title)).replace("__GRID__", grid).replace("__DATA__", data)
+  data = script_json([_payload(m) for m in motions])
+  page = _fill(_TEMPLATE, STYLE=_STYLE, FIGURE=_FIGURE)  # our own parts first, then what came from outside
+  return _fill(page, TITLE=html_lib.escape(title), GRID=grid, DATA=data)
+
+
+def script_json(value) -> str:
+  """``value`` as JSON that is safe inside ``<script>``: ``<``, ``>``, ``&`` and the line separators
+  U+2028/2029 written as ``\\uXXXX`` escapes (a name holding ``</script>`` or ``<!--`` cannot end or bend the
+  script; JSON reads the escapes back as the same characters)."""
+  text = json.dumps(value)
+  for char in "<>&\u2028\u2029":
+    text = text.replace(char, f"\\u{ord(char):04x}")
+  return text
+
+
+def _fill(template: str, **values: str) -> str:
+  """``__NAME__`` placeholders replaced in ONE pass: text put in (a title) is never searched for more
+  placeholders, so a title holding ``__DATA__`` stays text."""
+  return re.sub(r"__([A-Z]+)__", lambda m: values[m.group(1)] if m.group(1) in values else m.group(0), template)
 
 
 def live_html(title: str = "chorjax live") -> str:
@@ -54,8 +71,8 @@ def live_html(title: str = "chorjax live") -> str:
   host and draws the dancer as frames arrive, with the player's look; controls for the temperatures, the
   motion mix, pause/resume and "prime from file". ``window.__live`` holds what a test reads (frames
   received, replies, errors)."""
-  page = _LIVE.replace("__STYLE__", _STYLE).replace("__FIGURE__", _FIGURE)
-  return page.replace("__TITLE__", html_lib.escape(title)).replace("__GRID__", "minmax(0, 1fr)")
+  page = _fill(_LIVE, STYLE=_STYLE, FIGURE=_FIGURE)
+  return _fill(page, TITLE=html_lib.escape(title), GRID="minmax(0, 1fr)")
 
 
 def write_player(motions: Sequence[Motion], path, title: str = "chorjax", columns: int | None = None) -> Path:
