@@ -527,6 +527,15 @@ def _eval(args) -> int:
   return 0
 
 
+def _calibrate(args) -> int:
+  from chorjax.calibrate import calibrate, calibration_path
+
+  _counts(args, frames=60, num=1)
+  _refuse_existing([calibration_path(args.workdir)], args.force)
+  calibrate(args.workdir, args.data, frames=args.frames, num=args.num, seed=args.seed)
+  return 0
+
+
 def _metrics(args) -> int:
   import json
 
@@ -608,21 +617,24 @@ def _add_checkpoint_args(p) -> None:
 
 
 def _add_sampling_args(p) -> None:
-  """Sampling controls shared by `sample` and `eval`; unset ones come from the run's [sample] config."""
+  """Sampling controls shared by `sample` and `eval`; unset ones come from the run's calibration.json
+  (noise smoothing and scale temperature, `chorjax calibrate`), else its [sample] config."""
   p.add_argument(
     "--pi-temperature",
     type=float,
     help="mixture-weight temperature, 0 = most likely component (default: the run's sample.pi_temperature)",
   )
   p.add_argument(
-    "--sigma-temperature", type=float, help="MDN scale multiplier (default: the run's sample.sigma_temperature)"
+    "--sigma-temperature",
+    type=float,
+    help="MDN scale multiplier (default: the run's calibration, else its sample.sigma_temperature)",
   )
   p.add_argument("--greedy", action="store_true", help="mean of the most likely component (no noise)")
   p.add_argument(
     "--noise-smoothing",
     type=float,
     metavar="RHO",
-    help="MDN noise correlated over frames, 0 <= RHO < 1 (default: the run's sample.noise_smoothing)",
+    help="MDN noise correlated over frames, 0 <= RHO < 1 (default: the run's calibration, else sample.noise_smoothing)",
   )
   p.add_argument(
     "--persistence",
@@ -1002,6 +1014,24 @@ def _add_report_commands(sub) -> None:
   )
   _add_sampling_args(ev)
   ev.set_defaults(func=_eval)
+
+  cal = sub.add_parser(
+    "calibrate",
+    help="choose the run's noise smoothing and scale temperature on its dancer's takes; the run's default after",
+    description="Samples the run over a grid of noise_smoothing and sigma_temperature and keeps the pair whose "
+    "dance moves like the reference takes (movement over 0.5 s and jitter, each nearest the takes' own). The "
+    "reference is the run's training takes: never the takes it is judged on. Writes WORKDIR/calibration.json, "
+    "which sample, eval and live then use unless a flag says otherwise.",
+  )
+  cal.add_argument("workdir", metavar="WORKDIR", help="a trained run directory")
+  cal.add_argument(
+    "--data", nargs="+", metavar="PATH_OR_NAME", help="reference takes (default: the run's training takes)"
+  )
+  cal.add_argument("--frames", type=int, default=1200, help="frames per drawn dancer (default 1200)")
+  cal.add_argument("--num", type=int, default=4, help="dancers drawn per setting (default 4)")
+  cal.add_argument("--seed", type=int, default=0, help="sampling seed (default 0)")
+  cal.add_argument("--force", action="store_true", help="replace an existing calibration.json")
+  cal.set_defaults(func=_calibrate)
 
   me = sub.add_parser("metrics", help="score any motion files against real takes with the eval metrics")
   me.add_argument("motions", nargs="+", metavar="MOTION", help="motion files (.csv, .npz, .bvh, .amc) or folders")

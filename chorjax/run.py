@@ -234,9 +234,13 @@ class Run:
     return self
 
   def sampling(self, **given) -> dict:
-    """Sampling controls: the ones given (not None), else the run's ``[sample]`` config. A GAN draws whole
-    sequences from noise: the frame-by-frame MDN draw controls do not apply and are recorded as off."""
-    controls = self.config.sample.controls(**given)
+    """Sampling controls: the ones given (not None), else the run's calibration (``chorjax calibrate``),
+    else its ``[sample]`` config. A GAN draws whole sequences from noise: the frame-by-frame MDN draw
+    controls do not apply and are recorded as off."""
+    from chorjax.calibrate import read_calibration
+
+    calibrated = read_calibration(self.workdir) if self.workdir and not self.is_gan else {}
+    controls = self.config.sample.controls(**{**calibrated, **{k: v for k, v in given.items() if v is not None}})
     return gan_controls(controls) if self.is_gan else controls
 
   def ranged(self, sampling: dict) -> Run:
