@@ -271,7 +271,7 @@ def resolve_step(manager, which, workdir) -> int:
   try:
     step = int(which)
   except ValueError:
-    raise UserError(f"--checkpoint {which!r}: expected a step number, 'latest' or 'best'") from None
+    raise UserError(f"--checkpoint {which!r}: expected a step number, 'kept', 'latest' or 'best'") from None
   if step not in steps:
     raise UserError(f"{workdir}: no checkpoint at step {step}; available: {', '.join(map(str, sorted(steps)))}")
   return step

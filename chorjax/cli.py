@@ -609,9 +609,10 @@ def _add_checkpoint_args(p) -> None:
   """``--checkpoint`` and ``--force`` (commands that read a run and write a file)."""
   p.add_argument(
     "--checkpoint",
-    default="latest",
-    metavar="STEP|best|latest",
-    help="which checkpoint: a step, the best validation loss, or the latest (default latest)",
+    default="kept",
+    metavar="STEP|best|latest|kept",
+    help="which checkpoint: a step, the best validation loss, the latest, or the one the run keeps "
+    "(default kept: its train.keep, the latest unless set to best)",
   )
   p.add_argument("--force", action="store_true", help="overwrite the output if it exists")
 

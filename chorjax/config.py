@@ -263,6 +263,20 @@ class TrainConfig:
     0.0, "std of Gaussian noise on inputs (normalized units), against exposure bias", minimum=0.0
   )
   val_windows: int = _field(64, "most validation windows evaluated", minimum=1)
+  keep: str = _field(
+    "last",
+    "the checkpoint that sample, eval, calibrate and live use unless told (--checkpoint kept, their default): "
+    "the last, or the best by validation loss (a small dataset over-fits: its held-out NLL rises late); "
+    "the last where nothing is held out",
+    choices=("last", "best"),
+    resumable=True,
+  )
+  calibrate: bool = _field(
+    False,
+    "after training, choose the sampling's noise_smoothing and sigma_temperature on the training takes "
+    "(`chorjax calibrate`; the end sample is drawn with them)",
+    resumable=True,
+  )
   feedback: str = _field(
     "none",
     "against exposure bias, feed the model's own outputs back as inputs during training: 'auto' "

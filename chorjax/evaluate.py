@@ -25,7 +25,7 @@ def evaluate(
   *,
   frames: int = 10_000,
   num: int = 4,
-  checkpoint="latest",
+  checkpoint="kept",
   seed: int = 0,
   seeds: Sequence[int] | None = None,
   window: int = 60,

@@ -473,7 +473,7 @@ def run_live(
   alternate: float = 0.0,
   input_spec: str | None = None,
   record=None,
-  checkpoint="latest",
+  checkpoint="kept",
   on_ready=print,
   allow_origins=(),
 ) -> int:

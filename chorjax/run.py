@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import json
 from pathlib import Path
 from typing import Any
 
@@ -272,8 +273,17 @@ class Run:
     return dataclasses.replace(self, features=f)
 
 
-def load_run(workdir, which: str | int = "latest") -> Run:
-  """The run in ``workdir`` at checkpoint ``which`` (``latest``, ``best`` or a step number).
+def _keeps_best(workdir: Path) -> bool:
+  """Whether the run's config (``config.json``) says ``train.keep = "best"``."""
+  try:
+    return json.loads((workdir / "config.json").read_text())["train"].get("keep") == "best"
+  except (OSError, ValueError, KeyError, TypeError, AttributeError):
+    return False
+
+
+def load_run(workdir, which: str | int = "kept") -> Run:
+  """The run in ``workdir`` at checkpoint ``which``: ``kept`` (what the run's ``train.keep`` names: the
+  latest, or the best by validation loss), ``latest``, ``best`` or a step number.
 
   Raises:
     UserError: no such directory, no checkpoints, no such step, or a checkpoint that does not
@@ -284,6 +294,8 @@ def load_run(workdir, which: str | int = "latest") -> Run:
     raise UserError(f"{workdir}: no such run directory")
   manager = ckpt.open_run(workdir)
   try:
+    if which == "kept":
+      which = "best" if _keeps_best(workdir) and ckpt.best_step(manager) is not None else "latest"
     step = ckpt.resolve_step(manager, which, workdir)
     try:
       meta, cfg, features, graphdef, params = _read_step(manager, step)

@@ -487,7 +487,19 @@ def figure_hook(writer, graphdef, host_params, ds: Dataset, cfg: Config):
   return draw
 
 
-def write_end_sample(workdir: Path, graphdef, params, ds: Dataset, cfg: Config) -> dict:
+def _calibrate_and_sample(workdir: Path, ds: Dataset, cfg: Config) -> dict:
+  """``train.calibrate``: ``chorjax calibrate`` on the kept checkpoint, then the end sample drawn with it."""
+  from chorjax.calibrate import calibrate
+  from chorjax.run import load_run
+
+  calibrate(workdir, log=lambda line: print(line, flush=True))
+  if cfg.sample.frames <= 0:
+    return {}
+  kept = load_run(workdir)
+  return write_end_sample(workdir, kept.graphdef, kept.params, ds, cfg, kept.sampling())
+
+
+def write_end_sample(workdir: Path, graphdef, params, ds: Dataset, cfg: Config, controls: dict | None = None) -> dict:
   """``samples/sample.csv`` and ``samples/player.html``: the dance the run ends with (in-betweening: the
   piece :func:`chorjax.inbetween.end_sample` writes between key poses of a real take, beside that take)."""
   from chorjax.data.csv import write_csv
@@ -500,7 +512,7 @@ def write_end_sample(workdir: Path, graphdef, params, ds: Dataset, cfg: Config) 
     csv = write_csv(pieces[0], workdir / "samples" / "sample.csv")
     return {"csv": str(csv), "html": str(write_player(motions, workdir / "samples" / "player.html", title=cfg.name))}
 
-  s, controls = cfg.sample, cfg.sample.controls()
+  s, controls = cfg.sample, controls or cfg.sample.controls()
   features = with_ceiling(ds.features, graphdef, params, ds.train, cfg.data.seq_length, controls)
   pos = dance(graphdef, params, features, np.full((s.num,), s.motion), jax.random.key(s.seed), s.frames, controls)
   out = workdir / "samples"
@@ -649,13 +661,16 @@ def _train(
 
   loop.on_stop = save_now
   samples: dict = {}
-  if is_main and cfg.sample.frames > 0 and total > 0:
+  calibrating = is_main and total > 0 and cfg.train.calibrate and cfg.model.family == "rnn"
+  if is_main and cfg.sample.frames > 0 and total > 0 and not calibrating:
     loop.end_hooks.append(
       lambda loop: samples.update(write_end_sample(workdir, spec.graphdef, host_params(loop.state["params"]), ds, cfg))
     )
   with stop_on_signals() as stop:
     loop.stop = stop if parallel is None else agreed_stop(stop)
     loop.run()
+  if calibrating and loop.step >= total:  # finished, not stopped: settings for the checkpoint the run keeps
+    samples.update(_calibrate_and_sample(workdir, ds, cfg))
   summary = {
     "start_step": start,
     "final_step": loop.step,

@@ -76,3 +76,33 @@ def test_calibrate_records_the_settings_and_the_run_uses_them_unless_told(run_di
   assert cli.main(["sample", str(run_dir), "-o", str(tmp_path / "t.npz"), "--frames", "30"]) == 2
   assert "damaged calibration" in capsys.readouterr().err
   calibration_path(run_dir).unlink()
+
+
+def test_a_run_keeps_its_best_checkpoint_and_calibrates_it_when_told(tmp_path):
+  """train.keep = "best": sample, eval, calibrate and live default to the checkpoint with the lowest
+  validation loss (lr 0.3 makes this tiny run's held-out loss rise at the end); train.calibrate: the
+  settings are chosen after training, on that checkpoint, and the end sample is drawn with them."""
+  w = tmp_path / "run"
+  cfg = tiny_config(
+    "train.num_steps=40",
+    "train.eval_every=10",
+    "train.checkpoint_every=10",
+    "optim.lr=0.3",
+    "train.keep=best",
+    "train.calibrate=true",
+    "log.tensorboard=false",
+    "sample.frames=30",
+  )
+  train_and_evaluate(cfg, w)
+  curve = {
+    r["step"]: r["val_loss"] for r in map(json.loads, (w / "metrics.jsonl").read_text().splitlines()) if "val_loss" in r
+  }
+  kept = load_run(w)
+  assert kept.step == load_run(w, "best").step == min(curve, key=curve.get)
+  assert load_run(w, "latest").step == 40
+  assert set(json.loads(calibration_path(w).read_text())["settings"]) == {"noise_smoothing", "sigma_temperature"}
+  assert (w / "samples" / "sample.csv").exists() and (w / "samples" / "player.html").exists()
+  config = json.loads((w / "config.json").read_text())
+  config["train"]["keep"] = "last"
+  (w / "config.json").write_text(json.dumps(config))
+  assert load_run(w).step == 40  # keep = "last": the latest
