@@ -19,37 +19,18 @@ from __future__ import annotations
 import itertools
 import json
 from collections.abc import Sequence
-from pathlib import Path
 
 import jax
 import numpy as np
 
 from chorjax import metrics
 from chorjax.errors import UserError, atomic_write
+from chorjax.run import CALIBRATED, calibration_path, read_calibration  # noqa: F401  (re-exported)
 
-CALIBRATED = ("noise_smoothing", "sigma_temperature")
 GRID = {
   "noise_smoothing": (0.6, 0.75, 0.85, 0.9, 0.95),
   "sigma_temperature": (0.8, 0.9, 1.0, 1.15, 1.3, 1.5),
 }
-
-
-def calibration_path(workdir) -> Path:
-  return Path(workdir) / "calibration.json"
-
-
-def read_calibration(workdir) -> dict:
-  """The calibrated controls of a run (``{}`` when it was never calibrated)."""
-  path = calibration_path(workdir)
-  if not path.is_file():
-    return {}
-  try:
-    settings = json.loads(path.read_text())["settings"]
-  except (json.JSONDecodeError, KeyError, TypeError, UnicodeDecodeError):
-    raise UserError(f"{path}: damaged calibration; run `chorjax calibrate {workdir}` again (or delete it)") from None
-  if not isinstance(settings, dict) or set(settings) - set(CALIBRATED):
-    raise UserError(f"{path}: damaged calibration; run `chorjax calibrate {workdir}` again (or delete it)")
-  return settings
 
 
 def objective(movement: float, jitter: float) -> float:
@@ -103,8 +84,7 @@ def calibrate(
   Returns:
     What ``calibration.json`` holds: the settings, the reference, and every setting's measurements.
   """
-  from chorjax.evaluate import read_reference
-  from chorjax.run import load_run
+  from chorjax.run import load_run, read_reference
   from chorjax.sample import dance
 
   if frames < 60 or num < 1:

@@ -124,7 +124,7 @@ def _data_convert(args) -> int:
   if args.drop_first_frame:
     motions = [m.replace(positions=m.positions[1:]) for m in motions]
   elif not args.keep_rest_frames:
-    from chorjax.data.check import drop_leading_rest, drop_rest_note
+    from chorjax.data.rest import drop_leading_rest, drop_rest_note
 
     kept = [drop_leading_rest(m) for m in motions]
     motions = [m for m, _ in kept]
@@ -986,6 +986,27 @@ def _add_render_command(sub) -> None:
   render.set_defaults(func=_render)
 
 
+def _add_calibrate_command(sub) -> None:
+  """`chorjax calibrate`."""
+  cal = sub.add_parser(
+    "calibrate",
+    help="choose the run's noise smoothing and scale temperature on its dancer's takes; the run's default after",
+    description="Samples the run over a grid of noise_smoothing and sigma_temperature and keeps the pair whose "
+    "dance moves like the reference takes (movement over 0.5 s and jitter, each nearest the takes' own). The "
+    "reference is the run's training takes: never the takes it is judged on. Writes WORKDIR/calibration.json, "
+    "which sample, eval and live then use unless a flag says otherwise.",
+  )
+  cal.add_argument("workdir", metavar="WORKDIR", help="a trained run directory")
+  cal.add_argument(
+    "--data", nargs="+", metavar="PATH_OR_NAME", help="reference takes (default: the run's training takes)"
+  )
+  cal.add_argument("--frames", type=int, default=1200, help="frames per drawn dancer (default 1200)")
+  cal.add_argument("--num", type=int, default=4, help="dancers drawn per setting (default 4)")
+  cal.add_argument("--seed", type=int, default=0, help="sampling seed (default 0)")
+  cal.add_argument("--force", action="store_true", help="replace an existing calibration.json")
+  cal.set_defaults(func=_calibrate)
+
+
 def _add_report_commands(sub) -> None:
   """`chorjax eval`, `sweep` and `compare`."""
   ev = sub.add_parser("eval", help="held-out likelihood and generation metrics of a trained run")
@@ -1016,23 +1037,7 @@ def _add_report_commands(sub) -> None:
   _add_sampling_args(ev)
   ev.set_defaults(func=_eval)
 
-  cal = sub.add_parser(
-    "calibrate",
-    help="choose the run's noise smoothing and scale temperature on its dancer's takes; the run's default after",
-    description="Samples the run over a grid of noise_smoothing and sigma_temperature and keeps the pair whose "
-    "dance moves like the reference takes (movement over 0.5 s and jitter, each nearest the takes' own). The "
-    "reference is the run's training takes: never the takes it is judged on. Writes WORKDIR/calibration.json, "
-    "which sample, eval and live then use unless a flag says otherwise.",
-  )
-  cal.add_argument("workdir", metavar="WORKDIR", help="a trained run directory")
-  cal.add_argument(
-    "--data", nargs="+", metavar="PATH_OR_NAME", help="reference takes (default: the run's training takes)"
-  )
-  cal.add_argument("--frames", type=int, default=1200, help="frames per drawn dancer (default 1200)")
-  cal.add_argument("--num", type=int, default=4, help="dancers drawn per setting (default 4)")
-  cal.add_argument("--seed", type=int, default=0, help="sampling seed (default 0)")
-  cal.add_argument("--force", action="store_true", help="replace an existing calibration.json")
-  cal.set_defaults(func=_calibrate)
+  _add_calibrate_command(sub)
 
   me = sub.add_parser("metrics", help="score any motion files against real takes with the eval metrics")
   me.add_argument("motions", nargs="+", metavar="MOTION", help="motion files (.csv, .npz, .bvh, .amc) or folders")

@@ -10,11 +10,11 @@ import jax
 import numpy as np
 
 from chorjax import scoring
-from chorjax.data.dataset import conform, eval_windows, read_takes
+from chorjax.data.dataset import eval_windows
 from chorjax.data.motion import Motion
 from chorjax.data.transforms import to_y_up
 from chorjax.errors import UserError, atomic_write
-from chorjax.run import Run, load_run
+from chorjax.run import HELD_OUT, Run, load_run, read_reference  # noqa: F401  (re-exported)
 from chorjax.sample import dance
 from chorjax.train import eval_step
 
@@ -94,26 +94,6 @@ def generate_positions(run: Run, train, num: int, frames: int, seed: int, sampli
   ids = [run.id_map[m.name] for m in train] or [0]
   motion = np.array([ids[k % len(ids)] for k in range(num)])
   return dance(run.graphdef, run.params, run.features, motion, jax.random.key(seed), frames, sampling)
-
-
-HELD_OUT = "held-out"  # --data held-out: the takes of the run's dataset it did not train on
-
-
-def read_reference(run: Run, data: Sequence[str]) -> tuple[list, list]:
-  """``(the takes in data, the run's training takes)``, read exactly as training read its takes; ``data`` of
-  ``["held-out"]``: the takes of the run's own dataset that it did not train on."""
-  data_cfg = run.config.data
-  every = conform(read_takes([data_cfg.dataset], data_cfg), data_cfg)
-  trained = set(run.train_takes)
-  if list(data) == [HELD_OUT]:
-    real = [m for m in every if m.name not in trained]
-    if not real:
-      raise UserError(f"--data held-out: the run trained on every take of {data_cfg.dataset}; name takes to judge on")
-  else:
-    real = conform(read_takes(list(data), data_cfg), data_cfg)
-  if not real:
-    raise UserError(f"--data {' '.join(data)}: no takes")
-  return real, [m for m in every if m.name in trained] or every
 
 
 def held_out(real, train_takes) -> tuple[list, str]:

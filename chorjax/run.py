@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -238,8 +239,6 @@ class Run:
     """Sampling controls: the ones given (not None), else the run's calibration (``chorjax calibrate``),
     else its ``[sample]`` config. A GAN draws whole sequences from noise: the frame-by-frame MDN draw
     controls do not apply and are recorded as off."""
-    from chorjax.calibrate import read_calibration
-
     calibrated = read_calibration(self.workdir) if self.workdir and not self.is_gan else {}
     controls = self.config.sample.controls(**{**calibrated, **{k: v for k, v in given.items() if v is not None}})
     return gan_controls(controls) if self.is_gan else controls
@@ -271,6 +270,27 @@ class Run:
     f = dataclasses.replace(f, **stats)
     f = with_ceiling(f, self.graphdef, self.params, ds.train, self.config.data.seq_length, sampling)
     return dataclasses.replace(self, features=f)
+
+
+CALIBRATED = ("noise_smoothing", "sigma_temperature")  # what `chorjax calibrate` chooses
+
+
+def calibration_path(workdir) -> Path:
+  return Path(workdir) / "calibration.json"
+
+
+def read_calibration(workdir) -> dict:
+  """The calibrated controls of a run (``{}`` when it was never calibrated)."""
+  path = calibration_path(workdir)
+  if not path.is_file():
+    return {}
+  try:
+    settings = json.loads(path.read_text())["settings"]
+  except (json.JSONDecodeError, KeyError, TypeError, UnicodeDecodeError):
+    raise UserError(f"{path}: damaged calibration; run `chorjax calibrate {workdir}` again (or delete it)") from None
+  if not isinstance(settings, dict) or set(settings) - set(CALIBRATED):
+    raise UserError(f"{path}: damaged calibration; run `chorjax calibrate {workdir}` again (or delete it)")
+  return settings
 
 
 def _keeps_best(workdir: Path) -> bool:
@@ -368,3 +388,25 @@ def with_ceiling(features, graphdef, params, train, seq_length: int, controls: d
   if not q:
     return features
   return dataclasses.replace(features, scale_ceiling=scale_ceiling(graphdef, params, train, seq_length, q))
+
+
+HELD_OUT = "held-out"  # --data held-out: the takes of the run's dataset it did not train on
+
+
+def read_reference(run: Run, data: Sequence[str]) -> tuple[list, list]:
+  """``(the takes in data, the run's training takes)``, read exactly as training read its takes; ``data`` of
+  ``["held-out"]``: the takes of the run's own dataset that it did not train on."""
+  from chorjax.data.dataset import conform, read_takes
+
+  data_cfg = run.config.data
+  every = conform(read_takes([data_cfg.dataset], data_cfg), data_cfg)
+  trained = set(run.train_takes)
+  if list(data) == [HELD_OUT]:
+    real = [m for m in every if m.name not in trained]
+    if not real:
+      raise UserError(f"--data held-out: the run trained on every take of {data_cfg.dataset}; name takes to judge on")
+  else:
+    real = conform(read_takes(list(data), data_cfg), data_cfg)
+  if not real:
+    raise UserError(f"--data {' '.join(data)}: no takes")
+  return real, [m for m in every if m.name in trained] or every

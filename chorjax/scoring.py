@@ -194,6 +194,19 @@ def _novelty(motions, reference, train, unseen, skeleton: Skeleton, size: float,
   }
 
 
+def _travel_and_train_reference(motions, reference, skeleton, train, unseen, features, window, splits, seed) -> dict:
+  """``root_travel`` (the root's path per frame / the reference's) and, when the reference is held-out takes
+  and the training takes are given, ``fid_k_train`` / ``fid_g_train``: the training takes scored as a sample."""
+  travel = lambda p: np.linalg.norm(np.diff(p[:, skeleton.root], axis=0), axis=-1)
+  ref_travel = float(np.mean(np.concatenate([travel(t) for t in reference])))
+  out: dict = {"root_travel": spread([float(travel(m).mean() / max(ref_travel, 1e-12)) for m in motions])}
+  for name, feats, floor in (("fid_k_train", features[0], 1e-10), ("fid_g_train", features[1], 0.05)):
+    out[name] = (
+      spread(_distribution(train, reference, feats, window, splits, seed, floor)[0]) if train and unseen else None
+    )
+  return out
+
+
 def score(
   motions,
   reference,
@@ -228,12 +241,6 @@ def score(
   # geometric features are fractions of a window's frames: a std below 5% of the frames is noise
   fid_g, fid_g_real, div_g, div_g_real = _distribution(motions, reference, geo, window, splits, seed, 0.05)
   speed = float(np.mean(np.concatenate([metrics.joint_speed(t) for t in reference])))
-  travel = lambda p: np.linalg.norm(np.diff(p[:, skeleton.root], axis=0), axis=-1)
-  ref_travel = float(np.mean(np.concatenate([travel(t) for t in reference])))
-  fid_k_train = fid_g_train = None
-  if train and unseen:  # the training takes as a "sample": the reference every figure is held against
-    fid_k_train = spread(_distribution(train, reference, kin, window, splits, seed, 1e-10)[0])
-    fid_g_train = spread(_distribution(train, reference, geo, window, splits, seed, 0.05)[0])
   moving, steps = (
     _movement_and_jitter(motions, reference, skeleton, fps, segment),
     _root_steps(motions, reference, skeleton),
@@ -258,9 +265,7 @@ def score(
     **_novelty(motions, reference, train, unseen, skeleton, size, window),
     "speed_ratio": spread([metrics.speed_ratio(m, speed) for m in motions]),  # extra: NOT a freeze measure
     "speed": spread([metrics.speed_ratio(m, speed) for m in motions]),
-    "root_travel": spread([float(travel(m).mean() / max(ref_travel, 1e-12)) for m in motions]),
-    "fid_k_train": fid_k_train,
-    "fid_g_train": fid_g_train,
+    **_travel_and_train_reference(motions, reference, skeleton, train, unseen, (kin, geo), window, splits, seed),
     "body_size": size,
     "window": window,
     "splits": splits,

@@ -126,8 +126,8 @@ def conform(
   ``data.keep_rest_frames``; ``rest=False`` keeps frame numbers as in the file), joints (``data.joints``,
   mapped as ``chorjax.data.mapping`` decides; the mappings used are put into ``mappings``) and up axis.
   What the user should know goes into ``notes``."""
-  from chorjax.data.check import drop_leading_rest, drop_rest_note
   from chorjax.data.mapping import map_takes
+  from chorjax.data.rest import drop_leading_rest, drop_rest_note
 
   out = list(motions)
   if rest and not data_cfg.keep_rest_frames:
