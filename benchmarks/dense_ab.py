@@ -26,7 +26,7 @@ def _step(path, overrides, use_dense: bool, batch):
   from chorjax.config import load_config
   from chorjax.models import cells, fused, heads
   from chorjax.run import create_train_state
-  from chorjax.train import _train_step
+  from chorjax.training import _train_step
 
   cells.dense = heads.dense = fused.dense if use_dense else (lambda x, w: x @ w)  # read when traced, below
   cfg = load_config(path, overrides)

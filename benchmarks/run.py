@@ -58,7 +58,7 @@ def random_batch(rng, b: int, t: int, d: int) -> dict:
 def jax_train_step(cell, head):
   from chorjax.config import load_config
   from chorjax.run import create_train_state
-  from chorjax.train import train_step
+  from chorjax.training import train_step
 
   cfg = load_config(
     None,

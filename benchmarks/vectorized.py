@@ -47,7 +47,7 @@ def steady_steps(k: int, reps: int = 30) -> dict:
   """Median seconds of one lone step and of one vectorized step of ``k`` points."""
   from chorjax.data.dataset import WindowSampler, load_dataset
   from chorjax.run import create_train_state
-  from chorjax.train import train_step
+  from chorjax.training import train_step
   from chorjax.vectorized import vec_train_step
 
   cfgs = _cfgs(k, 100)
@@ -129,7 +129,7 @@ def torch_steps(k: int, form: str, reps: int = 30) -> dict:
 
 
 def whole_training(k: int, steps: int) -> dict:
-  from chorjax.train import train_and_evaluate
+  from chorjax.training import train_and_evaluate
   from chorjax.vectorized import train_vectorized
 
   cfgs = _cfgs(k, steps)

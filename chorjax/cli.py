@@ -185,7 +185,7 @@ def _config_show(args) -> int:
 
 def _train(args) -> int:
   from chorjax.config import load_config
-  from chorjax.train import default_workdir, train_and_evaluate
+  from chorjax.training import default_workdir, train_and_evaluate
 
   overrides = list(args.overrides)
   if args.distributed:
@@ -243,12 +243,8 @@ def _train_points(args, overrides, points, workdir: Path) -> int:
 
 
 def _sample(args) -> int:
-  import jax
-  import numpy as np
-
-  from chorjax.models import motion_weight_vector
   from chorjax.run import load_run
-  from chorjax.sample import dance, read_prime
+  from chorjax.sample import sample_dancers
 
   _counts(args, frames=1, num=1)
   out, _ = _output(args.output, (".csv", ".npz", ".bvh", ".html"))
@@ -258,26 +254,12 @@ def _sample(args) -> int:
   run = load_run(args.workdir, args.checkpoint).generating("sample")
   if character is not None and run.features.skeleton.name != "mpii16":
     raise UserError(f"--skeleton: {args.workdir} dances on its own skeleton, not the 16 joints it retargets from")
-  sampling = run.sampling(**_controls(args))
-  run = run.ranged(sampling)
-  features = run.features
-  motion_BxM = np.tile(motion_weight_vector(run.num_motions, args.motion, args.mix)[None], (args.num, 1))
-  prime = phrase = None
-  if args.prime:
-    phrase = read_prime(args.prime, features, run.config.data)
-    prime = np.tile(phrase[None], (args.num, 1, 1))
-  pos = dance(run.graphdef, run.params, features, motion_BxM, jax.random.key(args.seed), args.frames, sampling, prime)
-  settings = {
-    "workdir": str(args.workdir),
-    "checkpoint_step": run.step,
-    "frames": args.frames,
-    "motion": args.motion,
-    "mix": args.mix,
-    "prime": args.prime,
-    "seed": args.seed,
-    **sampling,
-  }
-  written = _write_sample(out, paths, pos, run.fps, features.skeleton, features.up_axis, settings, character)
+  pos, settings = sample_dancers(
+    run, args.frames, args.num, args.seed, args.prime, args.motion, args.mix, _controls(args)
+  )
+  settings["workdir"] = str(args.workdir)
+  f = run.features
+  written = _write_sample(out, paths, pos, run.fps, f.skeleton, f.up_axis, settings, character)
   print("wrote " + ", ".join(map(str, written)))
   return 0
 

@@ -16,7 +16,7 @@ from chorjax.data.transforms import to_y_up
 from chorjax.errors import UserError, atomic_write
 from chorjax.run import HELD_OUT, Run, load_run, read_reference  # noqa: F401  (re-exported)
 from chorjax.sample import dance
-from chorjax.train import eval_step
+from chorjax.training import eval_step
 
 
 def evaluate(

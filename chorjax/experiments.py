@@ -173,7 +173,7 @@ def run_sweep(path, log=print, shard: tuple[int, int] = (0, 1)) -> list[Path]:
 
 def _train_points(points, log) -> None:
   """Trains ``(name, overrides, cfg, workdir)`` points: together when there are several, else alone."""
-  from chorjax.train import train_and_evaluate
+  from chorjax.training import train_and_evaluate
   from chorjax.vectorized import NotAligned, train_vectorized
 
   if len(points) > 1:

@@ -1,5 +1,5 @@
 """Training the LSTM-GAN family (``model.family = "gan"``): its state, the critic and generator steps, and
-the jitted train step that :func:`chorjax.train.train_and_evaluate` runs in its loop.
+the jitted train step that :func:`chorjax.training.train_and_evaluate` runs in its loop.
 
 The state is ``{params: {generator, critic}, opt_state: {generator, critic}, step}``: one checkpoint,
 one exact resume, as for the other families. One train step makes ``gan.critic_steps`` critic updates,

@@ -293,3 +293,30 @@ def read_phrase(spec: str, features, data_cfg, flag: str = "--prime") -> np.ndar
       f"{flag} {spec}: frames {start}..{end} are not inside the take's {motion.num_frames} frames (need at least 2)"
     )
   return np.asarray(motion.positions[start:end], np.float32)
+
+
+def sample_dancers(run, frames: int, num: int, seed: int, prime=None, motion=None, mix=None, controls=None):
+  """``(positions [num, frames (+ prime), J, 3] in data space, settings)``: what ``chorjax sample`` and
+  ``Run.sample`` draw. ``run``: a loaded run; ``prime``: ``FILE[:START:LEN]``; ``motion`` / ``mix``: the take
+  id or blend that conditions the dance; ``controls``: sampling controls (unset: the run's own)."""
+  from chorjax.models import motion_weight_vector
+
+  run = run.generating("sample")
+  sampling = run.sampling(**(controls or {}))
+  run = run.ranged(sampling)
+  motion_BxM = np.tile(motion_weight_vector(run.num_motions, motion, mix)[None], (num, 1))
+  primed = None
+  if prime:
+    primed = np.tile(read_prime(prime, run.features, run.config.data)[None], (num, 1, 1))
+  pos = dance(run.graphdef, run.params, run.features, motion_BxM, jax.random.key(seed), frames, sampling, primed)
+  settings = {
+    "workdir": str(run.workdir),
+    "checkpoint_step": run.step,
+    "frames": frames,
+    "motion": motion,
+    "mix": mix,
+    "prime": prime,
+    "seed": seed,
+    **sampling,
+  }
+  return pos, settings

@@ -281,20 +281,29 @@ def read_for_scoring(specs, data_cfg) -> list:
 
 
 def score_files(motion_specs, data_specs, **kw) -> dict:
-  """``chorjax metrics``: :func:`score` of motion files against real takes, any formats.
-
-  Every motion is brought to the reference's frame rate (resampled) and body size (scaled), so
-  another system's output is measured with the same ruler as a chorjax sample.
-  """
+  """``chorjax metrics``: :func:`score_motions` of motion files against real takes, any formats."""
   from chorjax.config import DataConfig
-  from chorjax.data import transforms
-  from chorjax.errors import UserError
 
   data_cfg = DataConfig()
   reference = read_for_scoring(data_specs, data_cfg)
   motions = read_for_scoring(motion_specs, data_cfg)
+  result = score_motions(motions, reference, **kw)
+  return {"motions": result.pop("motions"), "data": list(data_specs), **result}
+
+
+def score_motions(motions, reference, **kw) -> dict:
+  """:func:`score` of motions (Motions of any skeleton the 16-joint layout maps) against real takes.
+
+  Every motion is brought to the reference's frame rate (resampled) and body size (scaled), so
+  another system's output is measured with the same ruler as a chorjax sample.
+  """
+  from chorjax.data import transforms
+  from chorjax.data.mapping import to_mpii16
+  from chorjax.errors import UserError
+
   if not reference or not motions:
     raise UserError(f"{'--data' if not reference else 'MOTION'}: no takes found")
+  reference, motions = [to_mpii16(m) for m in reference], [to_mpii16(m) for m in motions]
   fps, skeleton = reference[0].fps, reference[0].skeleton
   y_up = lambda m: np.asarray(transforms.to_y_up(m.positions, m.up_axis), np.float64)
   ref = [y_up(m) for m in reference]
@@ -309,4 +318,4 @@ def score_files(motion_specs, data_specs, **kw) -> dict:
   if short:
     raise UserError(f"{short[0]}: too short to score (need at least {2 * kw.get('window', 60)} frames)")
   result = score(out, ref, skeleton, fps, **kw)
-  return {"motions": [m.name for m in motions], "data": list(data_specs), "fps": fps, **result}
+  return {"motions": [m.name for m in motions], "fps": fps, **result}

@@ -36,7 +36,7 @@ from chorjax.config import Config
 from chorjax.data.dataset import WindowSampler, dataset_notes, eval_windows, load_dataset
 from chorjax.errors import UserError
 from chorjax.run import StepSpec, run_meta
-from chorjax.train import (
+from chorjax.training import (
   Loop,
   MetricsLog,
   TrainingDiverged,

@@ -12,7 +12,7 @@ from chorjax.calibrate import calibration_path, search
 from chorjax.data.npz import read_npz
 from chorjax.run import load_run
 from chorjax.sample import dance
-from chorjax.train import train_and_evaluate
+from chorjax.training import train_and_evaluate
 
 QUICKSTART_SAMPLING = [
   "data.representation=canonical",

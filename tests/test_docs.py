@@ -10,7 +10,7 @@ from helpers import TINY
 
 from chorjax import cli
 from chorjax.data.dataset import bundled_path
-from chorjax.train import train_and_evaluate
+from chorjax.training import train_and_evaluate
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -21,7 +21,7 @@ from chorjax.models.gan import Critic, GanModel, Generator, pose_layer
 from chorjax.models.rnn import RecurrentCore
 from chorjax.run import load_run
 from chorjax.scoring import mean_of
-from chorjax.train import train_and_evaluate
+from chorjax.training import train_and_evaluate
 
 GAN = [
   "model.family=gan",

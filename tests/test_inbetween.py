@@ -18,7 +18,7 @@ from chorjax.data.npz import read_npz
 from chorjax.metrics import foot_skate, l2p, npss, position_error
 from chorjax.models.inbetween import noise_strength, rollout, tta_embedding
 from chorjax.run import load_run
-from chorjax.train import train_and_evaluate
+from chorjax.training import train_and_evaluate
 
 IB = [
   "model.family=inbetween",

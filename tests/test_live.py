@@ -27,7 +27,7 @@ from chorjax.errors import UserError
 from chorjax.live import Stream
 from chorjax.models import motion_weight_vector
 from chorjax.run import load_run
-from chorjax.train import train_and_evaluate
+from chorjax.training import train_and_evaluate
 
 TAKE = bundled_path("cmu94") / "94_07_skeleton_3d.csv"
 FPS = 20.0

@@ -271,7 +271,7 @@ def test_model_gradients_through_the_fused_layer_equal_the_plain_scan(real_batch
 
   from chorjax.models.cells import CELLS
   from chorjax.run import StepSpec
-  from chorjax.train import _loss_fn
+  from chorjax.training import _loss_fn
 
   batch, num_motions = real_batch
   cfg = tiny_config(

@@ -14,7 +14,7 @@ from helpers import tiny_config
 
 from chorjax import cli
 from chorjax.parallel import setup_parallel
-from chorjax.train import train_and_evaluate
+from chorjax.training import train_and_evaluate
 
 HERE = Path(__file__).resolve().parent
 

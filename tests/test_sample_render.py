@@ -21,7 +21,7 @@ from chorjax.data.npz import read_npz
 from chorjax.models import as_weights, parse_mix
 from chorjax.run import load_run
 from chorjax.sample import generate
-from chorjax.train import train_and_evaluate
+from chorjax.training import train_and_evaluate
 
 ROOT = Path(__file__).resolve().parents[1]
 TAKE = bundled_path("cmu94") / "94_07_skeleton_3d.csv"

@@ -23,7 +23,7 @@ from chorjax.data.csv import read_csv
 from chorjax.data.dataset import WindowSampler, load_dataset
 from chorjax.errors import UserError
 from chorjax.run import create_train_state, load_run
-from chorjax.train import due, eval_step, train_and_evaluate, train_step, workdir_lock
+from chorjax.training import due, eval_step, train_and_evaluate, train_step, workdir_lock
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -251,7 +251,7 @@ def test_sigint_and_sigterm_save_a_checkpoint_and_resume_exactly(tmp_path, monke
     "sample.frames=1",
   )
   run, straight = tmp_path / "run", tmp_path / "straight"
-  import chorjax.train as train_mod
+  import chorjax.training as train_mod
 
   # Ctrl-C (in this process) once step 5 is logged: the step finishes, a checkpoint is saved, exit 130
   log_call = train_mod.MetricsLog.__call__
@@ -332,7 +332,7 @@ def _feedback(**kw):
 
 
 def test_feedback_masks_follow_the_mode_and_the_schedule():
-  from chorjax.train import feedback_mask
+  from chorjax.training import feedback_mask
 
   key, step = jax.random.key(0), jnp.asarray(10)
   auto = np.asarray(feedback_mask(_feedback(), key, step, 4, 12))
@@ -347,7 +347,7 @@ def test_feedback_masks_follow_the_mode_and_the_schedule():
 
 def test_feedback_replaces_inputs_with_own_outputs_and_is_teacher_forcing_when_off(tiny_setup):
   from chorjax.run import StepSpec
-  from chorjax.train import _feedback_loss_fn, _loss_fn
+  from chorjax.training import _feedback_loss_fn, _loss_fn
 
   cfg, ds = tiny_setup
   state, spec = create_train_state(cfg, 48, ds.num_motions)

@@ -83,7 +83,13 @@ def draw_strip(ax, pos_TxJx3, skeleton, frames, spacing: float) -> None:
 
 
 def plot_strip(motion: Motion, path, every: int = 6, poses: int = 12) -> Path:
-  """Filmstrips of a motion: ``poses`` stick figures ``every`` frames apart, at the start, middle and end.
+  """Filmstrips of a motion written to ``path`` (PNG by default): see :func:`strip_figure`."""
+  return save_figure(strip_figure(motion, every, poses), path)
+
+
+def strip_figure(motion: Motion, every: int = 6, poses: int = 12):
+  """Filmstrips of a motion as a matplotlib figure: ``poses`` stick figures ``every`` frames apart, at the
+  start, middle and end.
 
   A dance that freezes shows the same figure over and over in the end row; one that trembles, the
   same figure with its limbs slightly shaken. Positions are drawn y-up, each pose centred on its root.
@@ -102,4 +108,4 @@ def plot_strip(motion: Motion, path, every: int = 6, poses: int = 12) -> Path:
     ax.set_title(f"{label}: frames {frames[0]}-{frames[-1]}, every {every}", fontsize=8, loc="left")
   fig.suptitle(f"{motion.name} ({motion.num_frames} frames, {motion.fps:g} fps)", fontsize=9)
   fig.tight_layout()
-  return save_figure(fig, path)
+  return fig

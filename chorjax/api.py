@@ -1,0 +1,225 @@
+"""chorjax as a Python library: train, sample, score and watch from a notebook or a script.
+
+    import chorjax
+    run = chorjax.train("configs/quickstart.toml")       # or chorjax.load_run("runs/quickstart")
+    dance = run.sample(frames=600, seed=0)                # the draw `chorjax sample` makes
+    dance.show(chorjax.read_motion("take.bvh"))           # the HTML player, inline in Jupyter
+    chorjax.score(dance, "cmu94")                         # the keys of `chorjax metrics`
+    dance.write("dance.bvh")                              # CSV, NPZ, BVH (onto a character too), HTML
+
+The command line is a thin layer over these functions: the same checks, the same files on disk, and the
+same one-line messages, raised here as :class:`chorjax.UserError`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import html
+from collections.abc import Sequence
+from pathlib import Path
+
+from chorjax.data import motion as _motion
+from chorjax.errors import UserError
+from chorjax.run import Run as _Run
+
+__all__ = ["Motion", "Player", "Run", "UserError", "load_dataset", "load_run", "read_motion", "score", "train"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Motion(_motion.Motion):
+  """One take or one generated dancer: ``positions [T, J, 3]``, ``fps``, ``skeleton``, ``up_axis`` ...
+  (see ``chorjax.data.motion.Motion``), with a way to write, watch and draw it."""
+
+  @classmethod
+  def of(cls, motion: _motion.Motion) -> Motion:
+    """``motion`` as this class (the readers and samplers return the plain data class)."""
+    return (
+      motion
+      if isinstance(motion, cls)
+      else cls(**{f.name: getattr(motion, f.name) for f in dataclasses.fields(motion)})
+    )
+
+  def write(self, path, skeleton=None, *, force: bool = False) -> Path:
+    """Writes the motion as ``path``'s suffix says: ``.csv``, ``.npz``, ``.bvh`` (with ``skeleton``, a
+    character BVH: the dance on its hierarchy, as ``chorjax sample --skeleton``) or ``.html`` (the player).
+    An existing file is not replaced unless ``force``."""
+    from chorjax.data.npz import write_npz
+    from chorjax.render.html import write_player
+
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in (".csv", ".npz", ".bvh", ".html"):
+      raise UserError(f"{path}: output must end in .csv, .npz, .bvh or .html")
+    if path.exists() and not force:
+      raise UserError(f"{path}: already exists (use force=True to overwrite)")
+    if skeleton is not None and suffix != ".bvh":
+      raise UserError(f"{path}: a character skeleton is for .bvh output")
+    if suffix == ".csv":
+      from chorjax.data.csv import write_csv
+
+      return write_csv(self, path)
+    if suffix == ".npz":
+      settings = {"name": self.name}
+      return write_npz(
+        path,
+        self.positions[None],
+        fps=self.fps,
+        skeleton=self.skeleton,
+        up_axis=self.up_axis,
+        units=self.units,
+        settings=settings,
+      )
+    if suffix == ".html":
+      return write_player([self], path, title=self.name or "chorjax")
+    return self._write_bvh(path, skeleton)
+
+  def _write_bvh(self, path: Path, skeleton) -> Path:
+    from chorjax.data.bvh import write_bvh
+
+    if skeleton is None:
+      return write_bvh(self, path)
+    from chorjax.data.bvh import read_bvh
+    from chorjax.data.mapping import to_mpii16
+    from chorjax.data.retarget import write_retargeted
+
+    return write_retargeted(to_mpii16(self), read_bvh(skeleton), path)
+
+  def show(self, *others: _motion.Motion, title: str | None = None) -> Player:
+    """The HTML player with this motion and ``others`` side by side; shown inline by Jupyter (and kept in
+    a notebook's HTML export), or ``.html`` for the page."""
+    from chorjax.render.html import player_html
+
+    motions = [self, *others]
+    return Player(player_html(motions, title or " | ".join(m.name or "motion" for m in motions)))
+
+  def strip(self, every: int = 6, poses: int = 12):
+    """The filmstrip figure (matplotlib): ``poses`` figures ``every`` frames apart at the start, middle and
+    end, as ``chorjax render --strip`` draws it."""
+    from chorjax.render.plot import strip_figure
+
+    return strip_figure(self, every, poses)
+
+
+@dataclasses.dataclass(frozen=True)
+class Player:
+  """A self-contained player page. Jupyter shows it inline (``_repr_html_``: an iframe holding the page,
+  so its script runs in JupyterLab, the classic notebook and an exported HTML file alike)."""
+
+  html: str
+  height: int = 480
+
+  def _repr_html_(self) -> str:
+    return (
+      f'<iframe srcdoc="{html.escape(self.html, quote=True)}" style="width:100%;height:{self.height}px;border:0" '
+      'sandbox="allow-scripts"></iframe>'
+    )
+
+  def save(self, path) -> Path:
+    from chorjax.errors import atomic_write
+
+    return atomic_write(path, lambda p: p.write_text(self.html, encoding="utf-8"))
+
+
+@dataclasses.dataclass(frozen=True)
+class Run(_Run):
+  """A trained run (see ``chorjax.run.Run``: ``config``, ``features``, ``id_map``, ``step`` ...) that can dance."""
+
+  def sample(
+    self,
+    frames: int = 600,
+    num: int = 1,
+    seed: int = 0,
+    prime: str | None = None,
+    motion: int | None = None,
+    mix: str | None = None,
+    **controls,
+  ) -> Motion | list[Motion]:
+    """New dance: ``num`` dancers of ``frames`` frames, the draw ``chorjax sample`` makes with the same
+    arguments. ``prime``: ``FILE[:START:LEN]``, a phrase to continue; ``motion``: the take id to dance
+    (default 0), or ``mix``: ``"ID:W,ID:W"``; ``controls``: sampling controls (``pi_temperature``,
+    ``noise_smoothing`` ...; unset: the run's calibration, then its ``[sample]``). One dancer is returned
+    as a :class:`Motion`, several as a list."""
+    from chorjax.sample import sample_dancers
+
+    if frames < 1 or num < 1:
+      raise UserError(f"frames {frames} / num {num}: must be at least 1")
+    pos, _ = sample_dancers(self, frames, num, seed, prime, motion, mix, controls)
+    f = self.features
+    name = f"{Path(self.workdir).name} seed {seed}"
+    out = [
+      Motion(p, self.fps, f.skeleton, f.up_axis, "data", name=name if num == 1 else f"{name} #{k}")
+      for k, p in enumerate(pos)
+    ]
+    return out[0] if num == 1 else out
+
+
+def load_run(workdir, checkpoint: str | int = "kept") -> Run:
+  """The trained run in ``workdir`` at ``checkpoint`` (``kept``: what its ``train.keep`` names; ``latest``,
+  ``best`` or a step number)."""
+  from chorjax.run import load_run as load
+
+  r = load(workdir, checkpoint)
+  return Run(**{f.name: getattr(r, f.name) for f in dataclasses.fields(r)})
+
+
+def train(config, workdir=None, overrides: Sequence[str] | None = None, *, force: bool = False) -> Run:
+  """Trains ``config`` (a TOML path or a loaded ``chorjax.config.Config``; ``overrides``: ``"key=value"``
+  strings) in ``workdir`` (default ``runs/<name>``), resuming from its latest checkpoint as ``chorjax
+  train`` does, and returns the run at the checkpoint it keeps."""
+  from chorjax.training import default_workdir, train_and_evaluate
+
+  cfg = _config(config, list(overrides or []))
+  workdir = Path(workdir) if workdir is not None else default_workdir(cfg)
+  train_and_evaluate(cfg, workdir, force=force)
+  return load_run(workdir)
+
+
+def _config(config, overrides: list[str]):
+  """A Config from a TOML path (or None: the defaults) or a loaded Config, with ``overrides`` applied."""
+  from chorjax.config import Config, config_from_dict, load_config, parse_override
+
+  if not isinstance(config, Config):
+    return load_config(config, overrides)
+  tree = config.to_dict()
+  for item in overrides:
+    key, value = parse_override(item)
+    if key == "name":
+      tree["name"] = str(value)
+    elif "." not in key:
+      raise UserError(f"override {item!r}: expected SECTION.KEY=VALUE")
+    else:
+      section, sub = key.split(".", 1)
+      tree.setdefault(section, {})[sub] = value
+  return config_from_dict(tree)
+
+
+def read_motion(path) -> Motion | list[Motion]:
+  """A motion file in any format the command line reads (CSV, BVH, ASF/AMC, C3D, NPZ): one take, or the
+  dancers of a sample ``.npz`` (a list when it holds several)."""
+  from chorjax.data.dataset import read_motions
+
+  path = Path(path)
+  if not path.is_file():
+    raise UserError(f"{path}: no such file")
+  motions = [Motion.of(m) for m in read_motions(path)]
+  return motions[0] if len(motions) == 1 else motions
+
+
+def load_dataset(name_or_dir) -> list[Motion]:
+  """Every take of a bundled dataset (``cmu94``), a folder or a file, as training reads them."""
+  from chorjax.data.dataset import read_takes
+
+  return [Motion.of(m) for m in read_takes([str(name_or_dir)])]
+
+
+def score(motions, data, **kw) -> dict:
+  """The metrics of ``chorjax metrics`` (same keys, same ruler) for ``motions`` (a Motion, a list of them,
+  or file paths) against the real takes of ``data`` (a bundled name, folder or file, or a list of them;
+  or Motions). ``kw``: ``window``, ``splits``, ``seed``."""
+  from chorjax.scoring import score_motions
+
+  as_list = lambda x: list(x) if isinstance(x, list | tuple) else [x]
+  read = lambda x: [x] if isinstance(x, _motion.Motion) else load_dataset(x)
+  return score_motions(
+    [m for x in as_list(motions) for m in read(x)], [m for x in as_list(data) for m in read(x)], **kw
+  )

@@ -1,0 +1,76 @@
+"""chorjax as a Python library: the API drives what the command line does, with the same results."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from helpers import TINY
+
+import chorjax
+from chorjax import cli
+from chorjax.data.bvh import read_bvh
+from chorjax.data.npz import read_npz
+
+
+def test_train_sample_score_and_write_through_the_api_equal_the_command_line(tmp_path, capsys):
+  run = chorjax.train(None, tmp_path / "run", [*TINY, "train.num_steps=3", "log.tensorboard=false"])
+  assert isinstance(run, chorjax.Run) and run.step == 3
+  again = chorjax.load_run(tmp_path / "run")
+  dance = again.sample(frames=90, seed=3, pi_temperature=0.8)
+  assert isinstance(dance, chorjax.Motion) and dance.positions.shape == (90, 16, 3)
+  assert (
+    cli.main(
+      [
+        "sample",
+        str(tmp_path / "run"),
+        "-o",
+        str(tmp_path / "cli.npz"),
+        "--frames",
+        "90",
+        "--seed",
+        "3",
+        "--pi-temperature",
+        "0.8",
+      ]
+    )
+    == 0
+  )
+  np.testing.assert_array_equal(read_npz(tmp_path / "cli.npz")[0].positions, dance.positions)  # the same draw
+  several = again.sample(frames=30, num=2, seed=1, mix="0:1,1:1")
+  assert len(several) == 2 and all(m.num_frames == 30 for m in several)
+  scores = chorjax.score(dance, "cmu94/94_10_skeleton_3d.csv", splits=2, window=30)
+  assert set(cli.METRIC_KEYS) <= set(scores) and np.isfinite(scores["jitter"])
+  out = dance.write(tmp_path / "dance.bvh")
+  back = chorjax.read_motion(out)
+  assert isinstance(back, chorjax.Motion) and back.num_frames == 90
+  np.testing.assert_allclose(read_bvh(out).positions, chorjax.read_motion(out).positions)
+  assert dance.write(tmp_path / "dance.csv").exists() and dance.write(tmp_path / "d.npz").exists()
+  with pytest.raises(chorjax.UserError, match="already exists"):
+    dance.write(tmp_path / "dance.csv")  # nothing of the user's is replaced without force
+  with pytest.raises(chorjax.UserError, match="no such run directory"):
+    chorjax.load_run(tmp_path / "nope")
+  with pytest.raises(chorjax.UserError, match="motion id 99 out of range"):
+    again.sample(frames=10, mix="99:1")
+  with pytest.raises(chorjax.UserError, match="unknown"):
+    chorjax.train(None, tmp_path / "bad", ["model.hiden_size=3"])
+  assert not (tmp_path / "bad").exists()
+
+
+def test_motions_show_as_a_player_and_draw_as_a_strip(tmp_path):
+  takes = chorjax.load_dataset("cmu94")
+  assert len(takes) == 10 and all(isinstance(t, chorjax.Motion) for t in takes)
+  player = takes[0].show(takes[1])
+  page = player._repr_html_()
+  assert page.startswith("<iframe srcdoc=") and "&lt;script&gt;" in page and "<script>" not in page
+  assert "var MOTIONS" in player.html and player.save(tmp_path / "p.html").read_text() == player.html
+  fig = takes[0].strip(every=10, poses=6)
+  assert len(fig.axes) == 3  # start, middle, end
+
+
+def test_import_chorjax_is_light_and_help_lists_the_api():
+  code = "import sys, chorjax; print('jax' in sys.modules); help(chorjax)"
+  out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+  assert out.startswith("False")  # the command line starts without jax; the API loads it on first use
+  for name in ("train", "load_run", "read_motion", "load_dataset", "score", "class Motion", "class Run"):
+    assert name in out, name
