@@ -17,8 +17,14 @@ import dataclasses
 import html
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any  # noqa: F401  (the inherited fields' annotations name these: the API docs resolve them here)
 
+import numpy as np  # noqa: F401
+
+from chorjax.config import Config
 from chorjax.data import motion as _motion
+from chorjax.data.features import Features  # noqa: F401
+from chorjax.data.motion import Skeleton  # noqa: F401
 from chorjax.errors import UserError
 from chorjax.run import Run as _Run
 
@@ -95,9 +101,19 @@ class Motion(_motion.Motion):
   def strip(self, every: int = 6, poses: int = 12):
     """The filmstrip figure (matplotlib): ``poses`` figures ``every`` frames apart at the start, middle and
     end, as ``chorjax render --strip`` draws it."""
+    import io
+
     from chorjax.render.plot import strip_figure
 
-    return strip_figure(self, every, poses)
+    fig = strip_figure(self, every, poses)
+
+    def png() -> bytes:
+      buffer = io.BytesIO()
+      fig.savefig(buffer, format="png", dpi=80)
+      return buffer.getvalue()
+
+    fig._repr_png_ = png  # type: ignore[attr-defined]  # Jupyter shows it inline, whatever its plotting backend
+    return fig
 
 
 @dataclasses.dataclass(frozen=True)
@@ -176,7 +192,7 @@ def train(config, workdir=None, overrides: Sequence[str] | None = None, *, force
 
 def _config(config, overrides: list[str]):
   """A Config from a TOML path (or None: the defaults) or a loaded Config, with ``overrides`` applied."""
-  from chorjax.config import Config, config_from_dict, load_config, parse_override
+  from chorjax.config import config_from_dict, load_config, parse_override
 
   if not isinstance(config, Config):
     return load_config(config, overrides)

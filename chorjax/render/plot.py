@@ -22,6 +22,14 @@ def require_matplotlib():
     raise UserError("this needs matplotlib: pip install 'chorjax[viz]'") from None
 
 
+def _figure_class():
+  try:
+    from matplotlib.figure import Figure
+  except ImportError:
+    raise UserError("this needs matplotlib: pip install 'chorjax[viz]'") from None
+  return Figure
+
+
 def save_figure(fig, path) -> Path:
   """Writes a matplotlib figure atomically (format from the suffix, PNG by default) and closes it."""
   import matplotlib.pyplot as plt
@@ -84,7 +92,9 @@ def draw_strip(ax, pos_TxJx3, skeleton, frames, spacing: float) -> None:
 
 def plot_strip(motion: Motion, path, every: int = 6, poses: int = 12) -> Path:
   """Filmstrips of a motion written to ``path`` (PNG by default): see :func:`strip_figure`."""
-  return save_figure(strip_figure(motion, every, poses), path)
+  fig = strip_figure(motion, every, poses)
+  fmt = (Path(path).suffix or ".png").lstrip(".")
+  return atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=80, format=fmt))
 
 
 def strip_figure(motion: Motion, every: int = 6, poses: int = 12):
@@ -96,12 +106,13 @@ def strip_figure(motion: Motion, every: int = 6, poses: int = 12):
   """
   from chorjax.data import transforms
 
-  plt = require_matplotlib()
+  figure = _figure_class()  # no pyplot: drawing a strip never changes a notebook's own plotting backend
   pos = np.asarray(transforms.to_y_up(motion.positions, motion.up_axis), np.float64)
   sk = motion.skeleton
   height = float(np.ptp(pos[:, :, 1], axis=1).mean()) or 1.0
   rows = strip_rows(motion.num_frames, every, poses)
-  fig, axes = plt.subplots(len(rows), 1, figsize=(poses * 0.9, 1.9 * len(rows)), squeeze=False)
+  fig = figure(figsize=(poses * 0.9, 1.9 * len(rows)))
+  axes = fig.subplots(len(rows), 1, squeeze=False)
   for ax, (label, start) in zip(axes[:, 0], rows):
     frames = [t for t in range(start, start + every * poses, every) if t < motion.num_frames]
     draw_strip(ax, pos, sk, frames, spacing=0.7 * height)
