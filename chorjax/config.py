@@ -398,7 +398,12 @@ class SampleConfig:
 @dataclasses.dataclass(frozen=True)
 class LogConfig:
   tensorboard: bool = _field(True, "write tensorboardX event files into the workdir", resumable=True)
-  progress: str = _field("auto", "progress display", choices=("auto", "bar", "lines", "none"), resumable=True)
+  progress: str = _field(
+    "auto",
+    "progress display: auto = a bar on a terminal, one line rewritten in place in Jupyter, lines otherwise",
+    choices=("auto", "bar", "lines", "none"),
+    resumable=True,
+  )
 
 
 @dataclasses.dataclass(frozen=True)

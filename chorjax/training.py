@@ -362,11 +362,12 @@ def _truncate_metrics(path: Path, upto_step: int) -> None:
 
 
 class _Progress:
-  """A rich progress bar on a terminal; plain periodic lines otherwise (CI, cluster logs)."""
+  """A rich progress bar on a terminal; in Jupyter one line rewritten in place (``inline``); plain periodic
+  lines otherwise (CI, cluster logs)."""
 
   def __init__(self, mode: str, total: int, start: int):
     if mode == "auto":
-      mode = "bar" if sys.stdout.isatty() else "lines"
+      mode = "bar" if sys.stdout.isatty() else "inline" if "ipykernel" in sys.modules else "lines"
     self.mode = mode
     self.total, self.bar = total, None
     if self.mode == "bar":
@@ -382,12 +383,15 @@ class _Progress:
     info = f"loss {row['train_loss']:.4g}" + (f" val {row['val_loss']:.4g}" if "val_loss" in row else "")
     if self.bar is not None:
       self.bar.update(self.task, completed=step, info=info)
-    elif self.mode == "lines":
-      print(f"step {step}/{self.total} {info} {row.get('steps_per_s', 0):.1f} steps/s ETA {eta_s:.0f}s", flush=True)
+    elif self.mode in ("lines", "inline"):
+      line = f"step {step}/{self.total} {info} {row.get('steps_per_s', 0):.1f} steps/s ETA {eta_s:.0f}s"
+      print(f"\r{line}" if self.mode == "inline" else line, end="" if self.mode == "inline" else "\n", flush=True)
 
   def close(self):
     if self.bar is not None:
       self.bar.stop()
+    if self.mode == "inline":
+      print(flush=True)
 
 
 # ---------------------------------------------------------------- listeners and hooks

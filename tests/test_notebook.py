@@ -30,7 +30,11 @@ def test_the_notebook_runs_and_its_export_plays_the_dancer(tmp_path, monkeypatch
   from nbclient import NotebookClient
   from nbconvert import HTMLExporter
 
-  overrides = [*TINY, "train.num_steps=3", "log.tensorboard=false", "sample.frames=20"]
+  overrides = [o for o in TINY if not o.startswith("log.progress")] + [
+    "train.num_steps=3",
+    "log.tensorboard=false",
+    "sample.frames=20",
+  ]
   monkeypatch.setenv("CHORJAX_NOTEBOOK_OVERRIDES", json.dumps(overrides))
   monkeypatch.setenv("CHORJAX_NOTEBOOK_RUNS", str(tmp_path / "runs"))
   nb = nbformat.read(NOTEBOOK, as_version=4)
@@ -46,6 +50,7 @@ def test_the_notebook_runs_and_its_export_plays_the_dancer(tmp_path, monkeypatch
   assert "jitter" in text and "root_travel" in text
   assert "mdn: movement in the last segment" in text and "over 2 seeds" in text and "mse:" in text
   assert "Error" not in text and "Traceback" not in text
+  assert "\rstep 3/3 loss" in text  # training's progress: one line rewritten in place (log.progress auto)
 
   page = tmp_path / "quickstart.html"
   page.write_text(HTMLExporter().from_notebook_node(nb)[0], encoding="utf-8")
