@@ -462,6 +462,20 @@ def checkpoint_hook(manager, meta_of: Callable[[int], dict]):
   return save
 
 
+def best_checkpoint_hook(manager, save: Callable):
+  """``train.keep = "best"``: a checkpoint at every evaluation whose validation loss is the lowest so far
+  (the manager keeps the best by validation loss beside the latest ones)."""
+  best = [math.inf]
+
+  def save_if_best(loop: Loop) -> None:
+    if loop.val_loss is not None and loop.val_loss < best[0]:
+      best[0] = loop.val_loss
+      if manager.latest_step() != loop.step:
+        save(loop)
+
+  return save_if_best
+
+
 def figure_hook(writer, graphdef, host_params, ds: Dataset, cfg: Config):
   """A short generated sample beside a real one, as a TensorBoard figure (needs matplotlib)."""
   from chorjax.render.plot import require_matplotlib
@@ -654,6 +668,8 @@ def _train(
   loop.add_hook(evaluation_hook(val, lambda params, val: val_loss(params, val, spec)), cfg.train.eval_every)
   save = checkpoint_hook(manager, meta_of)
   loop.add_hook(save, cfg.train.checkpoint_every)
+  if cfg.train.keep == "best" and val:  # the best is kept where it happens, not at the next checkpoint_every
+    loop.add_hook(best_checkpoint_hook(manager, save), cfg.train.eval_every or total)
   if log is not None and log.writer is not None and cfg.train.figure_every and cfg.model.family != "inbetween":
     loop.add_hook(figure_hook(log.writer, spec.graphdef, host_params, ds, cfg), cfg.train.figure_every, at_last=False)
   loop.end_hooks.append(lambda loop: ckpt.wait(manager))

@@ -33,7 +33,22 @@ def main() -> None:
     (copy / "config.json").write_text(json.dumps(config, indent=2))
     subprocess.run([CHORJAX, "calibrate", str(copy)], check=True)
     subprocess.run(
-      [CHORJAX, "eval", str(copy), "--data", "held-out", "--frames", "10000", "--num", "1", "--seeds", "0", "1", "2", "3"],
+      [
+        CHORJAX,
+        "eval",
+        str(copy),
+        "--data",
+        "held-out",
+        "--frames",
+        "10000",
+        "--num",
+        "1",
+        "--seeds",
+        "0",
+        "1",
+        "2",
+        "3",
+      ],
       check=True,
     )
 

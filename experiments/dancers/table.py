@@ -1,0 +1,93 @@
+"""The dancers benchmark's summary: one row per dataset and recipe, every figure judged on the held-out
+takes; and, per dataset, the end of a generated dance beside a held-out take (filmstrips).
+
+  .venv/bin/python experiments/dancers/table.py > experiments/dancers/table.md
+
+Reads runs/dancers/dancers-* (the recipe as shipped) and runs/dancers_learned/learned-* (the same runs kept
+at their best validation checkpoint and calibrated: experiments/dancers/learned.py).
+"""
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+
+from chorjax.scoring import mean_of
+
+HERE = Path(__file__).parent
+VARIANTS = {"as shipped": Path("runs/dancers"), "best + calibrated": Path("runs/dancers_learned")}
+DATASETS = ("cmu94", "salsa", "martial", "cmu05", "cmu131")
+# (label, value of one evaluation, how a row's worst seed is picked: the one farthest from the bar)
+COLUMNS = [
+  (
+    "movement, worst 1,000-frame segment",
+    lambda e: min(mean_of(e["movement_min"]), 2 - mean_of(e["movement_max"])),
+    min,
+  ),
+  ("jitter", lambda e: mean_of(e["jitter"]), lambda v: max(v, key=lambda x: abs(np.log(x)))),
+  ("speed", lambda e: mean_of(e["speed"]), lambda v: max(v, key=lambda x: abs(np.log(x)))),
+  ("root travel", lambda e: mean_of(e["root_travel"]), lambda v: max(v, key=lambda x: abs(np.log(x)))),
+  ("root step max", lambda e: mean_of(e["root_step_max"]), max),
+  ("FID_k / train takes'", lambda e: mean_of(e["fid_k"]) / mean_of(e["fid_k_train"]), max),
+  ("FID_g / train takes'", lambda e: mean_of(e["fid_g"]) / mean_of(e["fid_g_train"]), max),
+  ("novelty / held-out takes'", lambda e: mean_of(e["novelty"]) / mean_of(e["novelty_real"]), min),
+]
+
+
+def evaluations(root: Path, dataset: str) -> list[tuple[Path, dict]]:
+  runs = sorted(d for d in root.glob(f"*-{dataset}-seed=*") if (d / "eval" / "metrics.json").exists())
+  return [(d, json.loads((d / "eval" / "metrics.json").read_text())) for d in runs]
+
+
+def cell(values, worst) -> str:
+  v = np.asarray(values)
+  return f"{v.mean():.2f} ± {v.std(ddof=1):.2f} ({worst(list(v)):.2f})" if len(v) > 1 else f"{v[0]:.2f}"
+
+
+def table() -> list[str]:
+  head = ["dataset", "recipe", "runs", *[c[0] for c in COLUMNS], "held-out NLL kept - best"]
+  lines = ["| " + " | ".join(head) + " |", "|---" * len(head) + "|"]
+  for dataset in DATASETS:
+    for variant, root in VARIANTS.items():
+      evs = evaluations(root, dataset)
+      if not evs:
+        continue
+      cells = [cell([f(e) for _, e in evs], worst) for _, f, worst in COLUMNS]
+      gap = [
+        e["heldout_loss"]
+        - min(r["val_loss"] for r in map(json.loads, (d / "metrics.jsonl").read_text().splitlines()) if "val_loss" in r)
+        for d, e in evs
+      ]
+      lines.append(f"| {dataset} | {variant} | {len(evs)} | " + " | ".join(cells) + f" | {cell(gap, max)} |")
+  return lines
+
+
+def strips() -> list[str]:
+  """Per dataset: the end of the first evaluated dancer of seed 0 (as shipped, and best + calibrated)
+  beside a held-out take, as training read it."""
+  from chorjax.data.npz import read_npz
+  from chorjax.render.plot import plot_strip
+  from chorjax.run import load_run, read_reference
+
+  out = []
+  for dataset in DATASETS:
+    runs = {v: r / f"{'dancers' if 'shipped' in v else 'learned'}-{dataset}-seed=0" for v, r in VARIANTS.items()}
+    if not all((r / "eval" / "sample.npz").exists() for r in runs.values()):
+      continue
+    out += [f"### {dataset}", ""]
+    for variant, run in runs.items():
+      dance = read_npz(run / "eval" / "sample.npz")[0]
+      end = dance.replace(positions=dance.positions[-900:], name=f"{dataset} {variant}: frames 9,100-10,000")
+      png = HERE / f"strip_{dataset}_{re.sub('[^a-z]+', '_', variant)}.png"
+      plot_strip(end, png, every=10, poses=12)
+      out += [f"![{dataset} {variant}]({png.name})", ""]
+    real = read_reference(load_run(runs["as shipped"]), ["held-out"])[0][0]
+    png = HERE / f"strip_{dataset}_real.png"
+    plot_strip(real.replace(name=f"{dataset} held-out take {real.name}"), png, every=10, poses=12)
+    out += [f"![{dataset} real]({png.name})", ""]
+  return out
+
+
+if __name__ == "__main__":
+  print("\n".join(table() + [""] + strips()))
