@@ -111,7 +111,8 @@ class Stream:
     if not np.isfinite(pos).all():
       raise UserError("prime: positions must be finite numbers")
     pos = pos[-self.prime_length(len(pos)) :]  # a few compiled lengths: no client stalls the others
-    z = np.asarray(self.features.encode(pos), np.float32)
+    with np.errstate(all="ignore"):  # absurd magnitudes overflow to inf here and are refused just below
+      z = np.asarray(self.features.encode(pos), np.float32)
     f = self.features
     if f.low is not None and f.high is not None:
       span = np.asarray(f.high, np.float32) - np.asarray(f.low, np.float32)

@@ -20,6 +20,31 @@ TINY = [
 ]
 
 
+# the quickstart's way of drawing: smoothed noise, persistence, crossfade, clamp, pace, rigid bones, foot lock
+QUICKSTART_SAMPLING = [
+  "data.representation=canonical",
+  "sample.noise_smoothing=0.9",
+  "sample.persistence=6.0",
+  "sample.crossfade=0.8",
+  "sample.clamp=true",
+  "sample.pace=0.5",
+  "sample.rigid_bones=true",
+  "sample.foot_lock=true",
+]
+
+
+def headless(profile, page: str, *flags: str, timeout: int = 120, **kw):
+  """Runs headless Chromium on ``page`` (a URL) with ``flags`` (``--dump-dom``, ``--screenshot=...``) and a
+  fresh profile; the completed process (``stdout`` holds a dumped DOM)."""
+  import subprocess
+
+  from test_sample_render import chromium
+
+  base = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--no-first-run"]
+  cmd = [chromium(), *base, f"--user-data-dir={profile}", *flags, page]
+  return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, **kw)
+
+
 def tiny_config(*overrides, path=None):
   """The defaults shrunk to toy sizes (hidden 16, 2 layers, T 12, batch 4, 2 steps)."""
   return load_config(path, [*TINY, *overrides])

@@ -5,7 +5,7 @@ import json
 import jax
 import numpy as np
 import pytest
-from helpers import tiny_config
+from helpers import QUICKSTART_SAMPLING, tiny_config
 
 from chorjax import cli
 from chorjax.calibrate import calibration_path, search
@@ -14,16 +14,6 @@ from chorjax.run import load_run
 from chorjax.sample import dance
 from chorjax.training import train_and_evaluate
 
-QUICKSTART_SAMPLING = [
-  "data.representation=canonical",
-  "sample.noise_smoothing=0.9",
-  "sample.persistence=6.0",
-  "sample.crossfade=0.8",
-  "sample.clamp=true",
-  "sample.pace=0.5",
-  "sample.rigid_bones=true",
-  "sample.foot_lock=true",
-]
 GRID = {"noise_smoothing": (0.6, 0.75, 0.85, 0.95), "sigma_temperature": (0.8, 0.9, 1.0, 1.15, 1.3, 1.5)}
 
 

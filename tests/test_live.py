@@ -17,7 +17,7 @@ import urllib.request
 import imageio.v3 as iio
 import numpy as np
 import pytest
-from helpers import tiny_config
+from helpers import QUICKSTART_SAMPLING, tiny_config
 from test_sample_render import chromium
 
 from chorjax.data.csv import read_csv
@@ -31,17 +31,6 @@ from chorjax.training import train_and_evaluate
 
 TAKE = bundled_path("cmu94") / "94_07_skeleton_3d.csv"
 FPS = 20.0
-# the quickstart's way of drawing: smoothed noise, persistence, crossfade, clamp, pace, rigid bones, foot lock
-QUICKSTART_SAMPLING = [
-  "data.representation=canonical",
-  "sample.noise_smoothing=0.9",
-  "sample.persistence=6.0",
-  "sample.crossfade=0.8",
-  "sample.clamp=true",
-  "sample.pace=0.5",
-  "sample.rigid_bones=true",
-  "sample.foot_lock=true",
-]
 
 
 @pytest.fixture(scope="module")

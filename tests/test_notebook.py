@@ -8,8 +8,7 @@ from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
-from helpers import TINY
-from test_sample_render import chromium
+from helpers import TINY, headless
 
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOK = ROOT / "examples" / "quickstart.ipynb"
@@ -57,22 +56,8 @@ def test_the_notebook_runs_and_its_export_plays_the_dancer(tmp_path, monkeypatch
   shots = []
   for budget in (1500, 3500):  # two moments of the page's own clock: the players play by themselves
     shot = tmp_path / f"shot{budget}.png"
-    subprocess.run(
-      [
-        chromium(),
-        "--no-sandbox",
-        "--disable-gpu",
-        "--disable-background-networking",
-        "--no-first-run",
-        f"--user-data-dir={tmp_path / 'profile'}",
-        "--window-size=1280,4000",
-        f"--virtual-time-budget={budget}",
-        f"--screenshot={shot}",
-        f"file://{page}",
-      ],
-      capture_output=True,
-      timeout=120,
-    )
+    flags = ["--window-size=1280,4000", f"--virtual-time-budget={budget}", f"--screenshot={shot}"]
+    headless(tmp_path / "profile", f"file://{page}", *flags)
     shots.append(iio.imread(shot)[..., :3].astype(int))
   changed = int((np.abs(shots[0] - shots[1]).sum(-1) > 30).sum())
   assert changed > 200, changed  # stick figures moved between the two moments

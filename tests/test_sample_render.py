@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from flax import nnx
-from helpers import tiny_config
+from helpers import headless, tiny_config
 
 from chorjax import cli, sample
 from chorjax.data.csv import read_csv
@@ -516,22 +516,7 @@ def test_hostile_take_names_and_titles_run_no_script_in_the_player(tmp_path):
   assert cli.main(["render", *takes, "-o", str(html), "--title", title]) == 0
   text = html.read_text()
   assert "<img src=x" not in text and "<script>window.__errors.push('pwned" not in text and "<!--<script>b" not in text
-  dom = subprocess.run(
-    [
-      chromium(),
-      "--no-sandbox",
-      "--disable-gpu",
-      "--disable-background-networking",
-      "--no-first-run",
-      f"--user-data-dir={tmp_path / 'profile'}",
-      "--virtual-time-budget=3000",
-      "--dump-dom",
-      f"file://{html}#selftest",
-    ],
-    capture_output=True,
-    text=True,
-    timeout=120,
-  ).stdout
+  dom = headless(tmp_path / "profile", f"file://{html}#selftest", "--virtual-time-budget=3000", "--dump-dom").stdout
   report = json.loads(dom.split('<pre id="selftest">')[1].split("</pre>")[0])
   assert report["errors"] == []  # nothing of the names or the title ran (nor broke the page's script)
   assert report["changed"] and report["frames"][1] > report["frames"][0] and len(report["boxes"]) == 2
