@@ -84,11 +84,10 @@ class Motion(_motion.Motion):
 
     if skeleton is None:
       return write_bvh(self, path)
-    from chorjax.data.bvh import read_bvh
     from chorjax.data.mapping import to_mpii16
     from chorjax.data.retarget import write_retargeted
 
-    return write_retargeted(to_mpii16(self), read_bvh(skeleton), path)
+    return write_retargeted(to_mpii16(self), skeleton, path)  # a character BVH file (or a retarget.Character)
 
   def show(self, *others: _motion.Motion, title: str | None = None) -> Player:
     """The HTML player with this motion and ``others`` side by side; shown inline by Jupyter (and kept in

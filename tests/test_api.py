@@ -5,6 +5,7 @@ import sys
 
 import numpy as np
 import pytest
+from conftest import SHARED
 from helpers import TINY
 
 import chorjax
@@ -46,6 +47,9 @@ def test_train_sample_score_and_write_through_the_api_equal_the_command_line(tmp
   assert isinstance(back, chorjax.Motion) and back.num_frames == 90
   np.testing.assert_allclose(read_bvh(out).positions, chorjax.read_motion(out).positions)
   assert dance.write(tmp_path / "dance.csv").exists() and dance.write(tmp_path / "d.npz").exists()
+  character = SHARED / "bvh" / "bandai" / "dataset-1_dance-short_normal_001.bvh"  # onto a character's rig
+  on_rig = read_bvh(dance.write(tmp_path / "rig.bvh", skeleton=character))
+  assert on_rig.skeleton.joint_names == read_bvh(character).skeleton.joint_names and on_rig.num_frames == 90
   with pytest.raises(chorjax.UserError, match="already exists"):
     dance.write(tmp_path / "dance.csv")  # nothing of the user's is replaced without force
   with pytest.raises(chorjax.UserError, match="no such run directory"):
