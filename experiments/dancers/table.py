@@ -8,7 +8,6 @@ at their best validation checkpoint and calibrated: experiments/dancers/learned.
 """
 
 import json
-import re
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +15,12 @@ import numpy as np
 from chorjax.scoring import mean_of
 
 HERE = Path(__file__).parent
-VARIANTS = {"as shipped": Path("runs/dancers"), "best + calibrated": Path("runs/dancers_learned")}
+VARIANTS = {
+  "as shipped": Path("runs/dancers"),
+  "kept at best of 4 checkpoints + calibrated": Path("runs/dancers_learned"),
+  "train.keep best + train.calibrate": Path("runs/dancers_best"),
+}
+SLUG = dict(zip(VARIANTS, ("shipped", "copy_best_calibrated", "keep_best_calibrate")))
 DATASETS = ("cmu94", "salsa", "martial", "cmu05", "cmu131")
 # (label, value of one evaluation, how a row's worst seed is picked: the one farthest from the bar)
 COLUMNS = [
@@ -72,14 +76,15 @@ def strips() -> list[str]:
 
   out = []
   for dataset in DATASETS:
-    runs = {v: r / f"{'dancers' if 'shipped' in v else 'learned'}-{dataset}-seed=0" for v, r in VARIANTS.items()}
-    if not all((r / "eval" / "sample.npz").exists() for r in runs.values()):
+    runs = {v: next(iter(sorted(r.glob(f"*-{dataset}-seed=0"))), r / "-") for v, r in VARIANTS.items()}
+    runs = {v: r for v, r in runs.items() if (r / "eval" / "sample.npz").exists()}
+    if "as shipped" not in runs:
       continue
     out += [f"### {dataset}", ""]
     for variant, run in runs.items():
       dance = read_npz(run / "eval" / "sample.npz")[0]
       end = dance.replace(positions=dance.positions[-900:], name=f"{dataset} {variant}: frames 9,100-10,000")
-      png = HERE / f"strip_{dataset}_{re.sub('[^a-z]+', '_', variant)}.png"
+      png = HERE / f"strip_{dataset}_{SLUG[variant]}.png"
       plot_strip(end, png, every=10, poses=12)
       out += [f"![{dataset} {variant}]({png.name})", ""]
     real = read_reference(load_run(runs["as shipped"]), ["held-out"])[0][0]
