@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -546,7 +547,10 @@ def _sweep(args) -> int:
 def _compare(args) -> int:
   from chorjax.experiments import compare
 
-  _refuse_existing([args.output], args.force)
+  stem = Path(args.output).with_suffix("")
+  images = sorted(stem.parent.glob(f"{stem.name}_loss.png")) + sorted(stem.parent.glob(f"{stem.name}_movement.png"))
+  images += sorted(stem.parent.glob(f"{stem.name}_strip*.png"))
+  _refuse_existing([args.output, *images], args.force)  # the report's images are written beside it
   print(f"wrote {compare(args.workdirs, args.output)}")
   return 0
 
@@ -734,7 +738,7 @@ def _add_data_commands(sub) -> None:
   plot = dsub.add_parser("plot", help="pelvis and end joints over time (first 200 frames, the rest) as PNG")
   plot.add_argument("input", metavar="PATH", help="one motion file")
   plot.add_argument("-o", "--output", required=True, metavar="FILE.png", help="the PNG to write (required)")
-  plot.add_argument("--split", type=int, default=200, help="frames in the first row (default 200)")
+  plot.add_argument("--split", type=_in_range(1, 10**7), default=200, help="frames in the first row (default 200)")
   plot.set_defaults(func=_data_plot)
   check = dsub.add_parser(
     "check",
@@ -867,7 +871,9 @@ def _add_live_command(sub) -> None:
   )
   live.add_argument("workdir", metavar="WORKDIR", help="a run directory with checkpoints")
   live.add_argument("--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1)")
-  live.add_argument("--port", type=int, default=8765, help="port to serve on, 0 = any free one (default 8765)")
+  live.add_argument(
+    "--port", type=_in_range(0, 65535), default=8765, help="port to serve on, 0 = any free one (default 8765)"
+  )
   live.add_argument("--osc", metavar="HOST:PORT", help="also send every frame as OSC /chorjax/frame (default: off)")
   live.add_argument(
     "--osc-in",
@@ -1068,6 +1074,21 @@ class _Parser(argparse.ArgumentParser):
     self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
+def _in_range(low: int, high: int):
+  """An argparse type: a whole number within [low, high] (a port, a frame count)."""
+
+  def whole(text: str) -> int:
+    try:
+      value = int(text)
+    except ValueError:
+      raise argparse.ArgumentTypeError(f"invalid whole number: {text!r}") from None
+    if not low <= value <= high:
+      raise argparse.ArgumentTypeError(f"{text}: must be within {low}-{high}")
+    return value
+
+  return whole
+
+
 def _positive(text: str) -> float:
   """An argparse type: a finite number above 0 (a frame rate, a scale)."""
   try:
@@ -1141,6 +1162,16 @@ def main(argv=None) -> int:
   except KeyboardInterrupt:
     print("chorjax: interrupted", file=sys.stderr)
     return 130
+  except Exception as e:  # the last resort: a bug gets one line that says so, not a traceback
+    if os.environ.get("CHORJAX_DEBUG"):
+      raise
+    what = f"{type(e).__name__}: {str(e).splitlines()[0][:200] if str(e) else ''}"
+    print(
+      f"chorjax: internal error ({what}): this is a bug in chorjax, please report it; "
+      "CHORJAX_DEBUG=1 shows the traceback",
+      file=sys.stderr,
+    )
+    return 1
 
 
 if __name__ == "__main__":

@@ -62,12 +62,13 @@ class DataConfig:
     'a TOML file, one `target = "source joint"` line per training joint, for skeletons whose joints '
     "cannot be placed automatically (default: by family, names, then topology)",
   )
-  fps: float = _field(30.0, "frame rate of CSV takes (CSV files do not record it)", minimum=1e-3)
+  fps: float = _field(30.0, "frame rate of CSV takes (CSV files do not record it), 1-1000", minimum=1.0, below=1000.5)
   resample_fps: float = _field(
     0.0,
     "resample every take to this frame rate after reading, any format (0 = keep the files' rates; "
     "takes of mixed rates go to the most common one)",
     minimum=0.0,
+    below=1000.5,
   )
   up_axis: str = _field(
     "-y", "signed up axis of the files (cmu94: -y, y points down)", choices=("y", "-y", "z", "-z", "x", "-x")
@@ -112,7 +113,7 @@ class ModelConfig:
     "diagonal", "MDN scales: one per dim, or one per component (chor-rnn)", choices=("diagonal", "isotropic")
   )
   min_scale: float = _field(1e-3, "floor of MDN scales (normalized units)", minimum=0.0)
-  dropout: float = _field(0.0, "dropout rate between layers (same mask at every time step)", minimum=0.0)
+  dropout: float = _field(0.0, "dropout rate between layers (same mask at every time step)", minimum=0.0, below=1.0)
   forget_bias: float = _field(1.0, "initial forget-gate bias of (LN-)LSTM cells (notebook: 5.0)")
   initial_state: str = _field(
     "motion", "initial (c, h): projected motion-id weights, or zeros", choices=("motion", "zero")
@@ -240,8 +241,8 @@ class InbetweenConfig:
 class OptimConfig:
   name: str = _field("adam", "optimizer", choices=("adam", "adamw", "amsgrad"))
   lr: float = _field(1e-3, "peak learning rate", minimum=0.0)
-  b1: float = _field(0.9, "Adam beta1", minimum=0.0)
-  b2: float = _field(0.999, "Adam beta2", minimum=0.0)
+  b1: float = _field(0.9, "Adam beta1", minimum=0.0, below=1.0)
+  b2: float = _field(0.999, "Adam beta2", minimum=0.0, below=1.0)
   weight_decay: float = _field(0.0, "decoupled weight decay (adamw)", minimum=0.0)
   clip_norm: float = _field(10.0, "clip gradients by global norm (0 = off)", minimum=0.0)
   schedule: str = _field("constant", "learning-rate schedule", choices=("constant", "warmup_cosine"))
@@ -253,7 +254,7 @@ class OptimConfig:
 class TrainConfig:
   batch_size: int = _field(50, "windows per step (global, over all devices)", minimum=1)
   num_steps: int = _field(1000, "total optimizer steps", minimum=0, resumable=True)
-  seed: int = _field(0, "seed of parameters, batches, dropout and noise")
+  seed: int = _field(0, "seed of parameters, batches, dropout and noise", minimum=0, below=2**32)
   checkpoint_every: int = _field(500, "steps between checkpoints", minimum=1)
   keep_checkpoints: int = _field(3, "latest checkpoints kept (the best by val loss is kept too)", minimum=1)
   eval_every: int = _field(250, "steps between validation passes (0 = only at the end)", minimum=0, resumable=True)
@@ -371,7 +372,7 @@ class SampleConfig:
     below=1.0,
     resumable=True,
   )
-  seed: int = _field(0, "sampling seed", resumable=True)
+  seed: int = _field(0, "sampling seed", resumable=True, minimum=0, below=2**32)
 
   def controls(self, **given) -> dict:
     """How to draw and decode a dance (``sample.dance``): each of ``CONTROLS`` as given, where given and
@@ -568,7 +569,7 @@ def load_config(path: str | Path | None = None, overrides: Sequence[str] = ()) -
   if path is not None:
     path = Path(path)
     try:
-      text = path.read_text(encoding="utf-8")
+      text = path.read_text(encoding="utf-8-sig")  # a byte-order mark some editors write is not TOML
     except FileNotFoundError:
       raise UserError(f"{path}: no such config file") from None
     except (OSError, UnicodeDecodeError) as e:
@@ -595,7 +596,15 @@ def load_config(path: str | Path | None = None, overrides: Sequence[str] = ()) -
       raise UserError(f"override {item!r}: expected SECTION.KEY=VALUE" + suggest(key, valid_keys()))
     section, sub = key.split(".", 1)
     _apply(sections, {section: {sub: value}}, lambda s, k, item=item: f"override {item!r}")
-  return Config(**{s: cls(**sections[s]) for s, cls in _SECTION_CLASSES.items()}, name=name)
+  return Config(**{s: cls(**sections[s]) for s, cls in _SECTION_CLASSES.items()}, name=plain_name(name, "name"))
+
+
+def plain_name(name: str, what: str) -> str:
+  """``name`` if it can be one folder's name (runs/<name>), else a one-line UserError: a name with ``/`` or
+  ``..`` would write a run outside the runs folder."""
+  if not name or name.startswith(".") or ".." in name or any(c in name for c in "/\\\0") or len(name) > 200:
+    raise UserError(f"{what} {name!r}: must be a plain file name (no / or \\, no .., not starting with .)")
+  return name
 
 
 def _line_of_section(text: str, section: str) -> int | None:

@@ -78,14 +78,41 @@ def _alive(pid: int) -> bool:
 
 
 def read_text(path, kind: str, errors: str = "strict") -> str:
-  """A text file's contents, or a one-line ``UserError`` naming the file (``kind``: e.g. "BVH")."""
+  """A text file's contents (a UTF-8 byte-order mark dropped), or a one-line ``UserError`` naming the file
+  (``kind``: e.g. "BVH"); anything but a regular file (a named pipe would block forever) is refused."""
   path = Path(path)
+  if path.exists() and not path.is_file() and not path.is_dir():
+    raise UserError(f"{path}: not a regular file (a pipe or a device); motion files are read whole")
   try:
-    return path.read_text(encoding="utf-8", errors=errors)
+    return path.read_text(encoding="utf-8-sig", errors=errors)
   except FileNotFoundError:
     raise UserError(f"{path}: no such {kind} file") from None
   except (UnicodeDecodeError, IsADirectoryError, PermissionError) as e:
     raise UserError(f"{path}: cannot read as a {kind} text file ({type(e).__name__})") from None
+
+
+RATES = (1.0, 1000.0)  # frames per second that motion capture uses (30-120 fps; high-speed 240-960)
+UP_AXES = ("y", "-y", "z", "-z", "x", "-x")
+
+
+def check_rate(fps, where: str) -> float:
+  """``fps`` as a float, or a one-line UserError (``where`` names the file or flag) when it is not a
+  finite rate within ``RATES``: a header's ``Frame Time: 999`` or a rate of 0 is refused when read, not
+  divided by later."""
+  try:
+    rate = float(fps)
+  except (TypeError, ValueError):
+    raise UserError(f"{where}: frame rate {fps!r} is not a number") from None
+  if not (RATES[0] <= rate <= RATES[1]):  # also false for nan
+    raise UserError(f"{where}: frame rate {rate:g} fps is outside {RATES[0]:g}-{RATES[1]:g} fps")
+  return rate
+
+
+def check_up_axis(axis, where: str) -> str:
+  """``axis`` if it is one of ``UP_AXES``, else a one-line UserError."""
+  if axis not in UP_AXES:
+    raise UserError(f"{where}: up axis {axis!r} is not one of {', '.join(UP_AXES)}")
+  return axis
 
 
 # no motion capture value (a coordinate in any unit, an angle in degrees) comes near this: larger is garbage

@@ -48,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-from chorjax.config import SampleConfig, load_config, suggest, valid_keys
+from chorjax.config import SampleConfig, load_config, plain_name, suggest, valid_keys
 from chorjax.errors import UserError, atomic_write
 from chorjax.scoring import mean_of, upgrade
 
@@ -115,7 +115,8 @@ def sweep_points(sweep: dict) -> list[tuple[str, list[str]]]:
     own = [f"{k}={_fmt(v)}" for k, v in body.items()]
     for values in itertools.product(*(sweep["grid"][k] for k in keys)):
       tag = "-".join([cand] * bool(cand) + [f"{k.split('.')[-1]}={v}" for k, v in zip(keys, values)])
-      points.append((f"{sweep['name']}-{tag}", fixed + own + [f"{k}={_fmt(v)}" for k, v in zip(keys, values)]))
+      name = plain_name(f"{sweep['name']}-{tag}", "sweep point")  # grid values name folders: no / or ..
+      points.append((name, fixed + own + [f"{k}={_fmt(v)}" for k, v in zip(keys, values)]))
   return points
 
 
@@ -246,18 +247,35 @@ def _read_run(workdir: Path) -> dict:
     raise UserError(f"{workdir}: not a run directory (no config.json)")
   if not ev_path.exists():
     raise UserError(f"{ev_path}: missing; run `chorjax eval {workdir} --data ...` first")
-  rows = (
-    [json.loads(l) for l in (workdir / "metrics.jsonl").read_text().splitlines() if l.strip()]
-    if (workdir / "metrics.jsonl").exists()
-    else []
-  )
+  from chorjax.training import _row
+
+  history = workdir / "metrics.jsonl"
+  rows = [r for l in history.read_text(errors="replace").splitlines() if (r := _row(l))] if history.exists() else []
+  evaluation = upgrade(_json_file(ev_path, "evaluation", f"run `chorjax eval {workdir} --data ... --force` again"))
+  missing = [k for k in EVAL_NEEDS if k not in evaluation]
+  if missing:
+    raise UserError(f"{ev_path}: not a whole evaluation (no {missing[0]!r}); run `chorjax eval {workdir} ... --force`")
   return {
     "name": workdir.name,
     "dir": workdir,
-    "config": json.loads(cfg_path.read_text()),
-    "eval": upgrade(json.loads(ev_path.read_text())),
+    "config": _json_file(cfg_path, "run config", "the run directory is damaged"),
+    "eval": evaluation,
     "history": rows,
   }
+
+
+EVAL_NEEDS = ("frames", "num", "data", "sampling", "segment_frames", "movement_curve", "movement_min", "jitter")
+
+
+def _json_file(path: Path, what: str, fix: str) -> dict:
+  """A JSON object from ``path``, or one line saying it is damaged and what to do."""
+  try:
+    value = json.loads(path.read_text(errors="replace"))
+  except json.JSONDecodeError as e:
+    raise UserError(f"{path}: damaged {what} (not JSON: {e.msg} at line {e.lineno}); {fix}") from None
+  if not isinstance(value, dict):
+    raise UserError(f"{path}: damaged {what} (not a JSON object); {fix}")
+  return value
 
 
 def _value(ev: dict, key: str, rule: str) -> float:

@@ -355,10 +355,23 @@ def _truncate_metrics(path: Path, upto_step: int) -> None:
   """Drops rows logged after the checkpoint we resume from (a killed run may have written them)."""
   if not path.exists():
     return
-  rows = [l for l in path.read_text().splitlines() if l.strip()]
-  kept = [l for l in rows if json.loads(l).get("step", 0) <= upto_step]
+  rows = [l for l in path.read_text(errors="replace").splitlines() if l.strip()]
+  parsed = [_row(l) for l in rows]
+  torn = [k for k, r in enumerate(parsed) if r is None]
+  if torn:  # what a kill mid-write leaves: a half-written line (normally the last)
+    print(f"note: {path}: dropped {len(torn)} unreadable line(s) (first: line {torn[0] + 1}, a write cut short)")
+  kept = [l for l, r in zip(rows, parsed) if r is not None and r.get("step", 0) <= upto_step]
   if len(kept) != len(rows):
     atomic_write(path, lambda p: p.write_text("".join(l + "\n" for l in kept)))
+
+
+def _row(line: str) -> dict | None:
+  """One ``metrics.jsonl`` row, or None where it is not one (torn by a kill)."""
+  try:
+    row = json.loads(line)
+  except json.JSONDecodeError:
+    return None
+  return row if isinstance(row, dict) else None
 
 
 class _Progress:
@@ -560,6 +573,11 @@ def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=No
   workdir = Path(workdir).absolute()
   if workdir.exists() and not workdir.is_dir():
     raise UserError(f"{workdir}: is a file, not a run directory (--workdir names a folder)")
+  if workdir.is_dir() and not force and not _is_run(workdir):
+    raise UserError(
+      f"{workdir}: holds files and is not a chorjax run (no config.json or checkpoints/); training would "
+      "write into it: choose another --workdir, or --force"
+    )
   family = cfg.model.family
   if family == "gan":  # before anything is written
     check_gan(cfg, cfg.data.representation)
@@ -582,6 +600,12 @@ def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=No
     with contextlib.ExitStack() as cleanup:
       cleanup.callback(ckpt.close_quietly, manager)
       return _train(cfg, workdir, ds, manager, parallel, cleanup, keep_old_config)
+
+
+def _is_run(workdir: Path) -> bool:
+  """Whether a folder is a run (or still empty but for a lock a refused start left)."""
+  names = {p.name for p in workdir.iterdir()}
+  return bool(names & {"config.json", "checkpoints"}) or names <= {".lock"}
 
 
 def _restore_or_init(cfg: Config, workdir: Path, ds: Dataset, manager, parallel) -> tuple[dict, Any, int]:

@@ -5,6 +5,7 @@ from pathlib import Path
 
 os.environ.setdefault("XLA_FLAGS", "--xla_force_host_platform_device_count=4")
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
+os.environ.setdefault("CHORJAX_DEBUG", "1")  # a bug raises in tests (the CLI's last-resort line would hide it)
 
 import pytest
 

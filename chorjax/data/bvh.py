@@ -18,13 +18,14 @@ real per-frame offset, so reading the file back gives the input positions exactl
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
 
 from chorjax.data.motion import Motion, Skeleton
 from chorjax.data.rotations import best_fit_rotation, euler_to_matrix, matrix_to_euler, swing
-from chorjax.errors import UserError, atomic_write, parse_numbers, read_text
+from chorjax.errors import UserError, atomic_write, check_rate, parse_numbers, read_text
 
 _ROT = {"xrotation": "x", "yrotation": "y", "zrotation": "z"}
 _POS = {"xposition": 0, "yposition": 1, "zposition": 2}
@@ -45,7 +46,7 @@ def _tokens(path: Path, text: str):
 
 
 def _parse_hierarchy(path: Path, text: str):
-  toks = list(_tokens(path, text.split("MOTION")[0] if "MOTION" in text else text))
+  toks = list(_tokens(path, re.split(r"^[ \t]*MOTION[ \t]*\r?$", text, maxsplit=1, flags=re.M)[0]))
   joints, stack, i = [], [], 0
 
   def need(k):
@@ -174,7 +175,7 @@ def read_bvh(
     end_joints=tuple(k for k in range(len(joints)) if k not in parents),
     feet=_guess_feet(names),
   )
-  fps = 1.0 / frame_time
+  fps = check_rate(1.0 / frame_time, f"{path}: Frame Time {frame_time:g}")
   fps = float(round(fps)) if abs(fps - round(fps)) < 0.01 else fps  # '.0083333' means 120 fps
   return Motion(
     pos.astype(np.float32), fps=fps, skeleton=skeleton, up_axis=up_axis, units=units, name=path.stem, source=str(path)

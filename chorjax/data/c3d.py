@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from chorjax.data.motion import Motion, Skeleton
-from chorjax.errors import UserError, check_array
+from chorjax.errors import UserError, check_array, check_rate
 
 
 def read_c3d(path, *, up_axis: str = "z") -> Motion:
@@ -40,7 +40,7 @@ def read_c3d(path, *, up_axis: str = "z") -> Motion:
       "truncated or inconsistent; refusing a partial read"
     )
   point = c["parameters"]["POINT"]
-  rate = float(np.asarray(point["RATE"]["value"]).ravel()[0])
+  rate = check_rate(np.asarray(point["RATE"]["value"]).ravel()[0], f"{path}: POINT:RATE")
   units = point["UNITS"]["value"][0] if point.get("UNITS", {}).get("value") else "mm"
   labels = [str(l).strip() or f"marker{i}" for i, l in enumerate(point["LABELS"]["value"])][: pts.shape[1]]
   labels = [l if labels.count(l) == 1 else f"{l}_{i}" for i, l in enumerate(labels)]

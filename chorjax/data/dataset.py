@@ -42,6 +42,8 @@ def resolve_files(spec: str) -> list[Path]:
     return files
   if path.is_file():
     return [path]
+  if path.exists():
+    raise UserError(f"{path}: not a regular file (a pipe or a device); motion files are read whole")
   hint = f" (bundled datasets: {', '.join(BUNDLED)})"
   raise UserError(f"{spec}: no such file, folder or bundled dataset{hint}")
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from chorjax.data.motion import Motion, Skeleton
-from chorjax.errors import UserError, atomic_write, check_array
+from chorjax.errors import UserError, atomic_write, check_array, check_rate, check_up_axis
 
 
 def write_npz(
@@ -51,8 +51,8 @@ def read_npz(path) -> list[Motion]:
     pos = pos[None]
   if pos.ndim != 4 or pos.shape[-2:] != (sk.num_joints, 3) or pos.shape[1] < 1:
     raise UserError(f"{path}: positions {pos.shape}, expected [K, T >= 1, {sk.num_joints}, 3] for skeleton {sk.name}")
-  if not (np.isfinite(fps) and fps > 0):
-    raise UserError(f"{path}: fps {fps} is not a positive number")
+  check_rate(fps, f"{path}: fps")
+  check_up_axis(up_axis, f"{path}: meta")
   check_array(pos, f"{path}: positions")
   return [
     Motion(

@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 
 from chorjax.data.motion import Skeleton
-from chorjax.errors import UserError, read_text
+from chorjax.errors import UserError, check_rate, check_up_axis, read_text
 
 # Joint order as in the cmu94 CSV files (see bundled/cmu94/SOURCES.md).
 _MPII16_NAMES = (
@@ -96,6 +96,7 @@ def read_sidecar(path) -> tuple[Skeleton, float, str, str]:
   try:
     data = json.loads(read_text(path, "skeleton JSON"))
     sk = Skeleton.from_dict(data.get("skeleton", data))
-    return sk, float(data.get("fps", 30.0)), str(data.get("up_axis", "y")), str(data.get("units", "arbitrary"))
+    fps, up, units = data.get("fps", 30.0), data.get("up_axis", "y"), str(data.get("units", "arbitrary"))
   except (json.JSONDecodeError, KeyError, TypeError, ValueError, AttributeError) as e:
     raise UserError(f"{path}: not a skeleton file ({type(e).__name__}: {e})") from None
+  return sk, check_rate(fps, f"{path}: fps"), check_up_axis(up, f"{path}: up_axis"), units

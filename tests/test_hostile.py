@@ -1,0 +1,149 @@
+"""Hostile input (issue 40): values that parse but make no sense, damaged runs and reports, files of the
+user's that must not be overwritten, names that would escape the runs folder, and a last-resort line for
+anything unforeseen. Each case: one line, exit 2 (or accepted where the input is valid), nothing written."""
+
+import json
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from helpers import TINY, tiny_config
+
+from chorjax import cli
+from chorjax.data.bvh import read_bvh
+from chorjax.training import train_and_evaluate
+
+BVH = "bvh/cmu131/131_01.bvh"
+QUICKSTART = str(Path(__file__).resolve().parents[1] / "configs" / "quickstart.toml")
+
+
+def _one_line(capsys, *parts) -> str:
+  err = capsys.readouterr().err.strip().splitlines()
+  assert len(err) == 1 and "Traceback" not in err[0], err
+  for p in parts:
+    assert p in err[0], (p, err[0])
+  return err[0]
+
+
+def test_an_unforeseen_exception_is_one_line_that_says_it_is_a_bug(monkeypatch, capsys):
+  monkeypatch.delenv("CHORJAX_DEBUG", raising=False)
+  monkeypatch.setattr(cli, "_data_info", lambda args: [][1])
+  assert cli.main(["data", "info", "cmu94"]) == 1
+  _one_line(capsys, "internal error (IndexError: list index out of range)", "bug", "CHORJAX_DEBUG=1")
+  monkeypatch.setenv("CHORJAX_DEBUG", "1")
+  with pytest.raises(IndexError):
+    cli.main(["data", "info", "cmu94"])
+
+
+def test_readers_accept_a_byte_order_mark_and_a_joint_named_like_a_section(shared_data, tmp_path, capsys):
+  text = (shared_data / BVH).read_text()
+  first = read_bvh(shared_data / BVH)
+  (tmp_path / "bom.bvh").write_bytes(b"\xef\xbb\xbf" + text.encode())
+  np.testing.assert_array_equal(read_bvh(tmp_path / "bom.bvh").positions, first.positions)
+  (tmp_path / "motion.bvh").write_text(
+    text.replace("JOINT Chest2", "JOINT MOTIONSpine").replace("JOINT Chest\n", "JOINT Chest\n")
+  )
+  renamed = read_bvh(tmp_path / "motion.bvh")
+  assert "MOTIONSpine" in renamed.skeleton.joint_names
+  np.testing.assert_array_equal(renamed.positions, first.positions)
+  (tmp_path / "c.toml").write_bytes(b"\xef\xbb\xbf" + b'name = "bom"\n[model]\nhidden_size = 16\n')
+  assert cli.main(["config", "show", str(tmp_path / "c.toml")]) == 0
+  assert "hidden_size = 16" in capsys.readouterr().out
+
+
+def test_rates_and_axes_that_make_no_sense_are_refused_where_they_are_read(shared_data, tmp_path, capsys):
+  text = (shared_data / BVH).read_text()
+  (tmp_path / "slow.bvh").write_text(re.sub(r"Frame Time:\s*\S+", "Frame Time: 999", text))
+  assert cli.main(["data", "info", str(tmp_path / "slow.bvh")]) == 2
+  _one_line(capsys, "slow.bvh: Frame Time 999", "outside 1-1000 fps")
+  from chorjax.data.npz import write_npz
+  from chorjax.data.skeletons import MPII16
+
+  path = write_npz(
+    tmp_path / "s.npz", np.zeros((1, 5, 16, 3)), fps=30.0, skeleton=MPII16, up_axis="y", units="x", settings={}
+  )
+  with np.load(path) as z:
+    meta = json.loads(str(z["meta"]))
+  for key, value, said in (
+    ("fps", 0.0, "frame rate 0 fps"),
+    ("fps", 1e300, "outside"),
+    ("up_axis", "w", "up axis 'w'"),
+  ):
+    bad = tmp_path / f"bad_{key}.npz"
+    np.savez(bad, positions=np.zeros((1, 5, 16, 3), np.float32), meta=np.array(json.dumps({**meta, key: value})))
+    assert cli.main(["data", "info", str(bad)]) == 2
+    _one_line(capsys, str(bad), said)
+
+
+@pytest.mark.parametrize(
+  "override, said",
+  [
+    ("train.seed=99999999999999999999", "train.seed"),
+    ("model.dropout=1.5", "model.dropout"),
+    ("optim.b2=2", "optim.b2"),
+    ("data.fps=0.001", "data.fps"),
+    ("name=../../x", "plain file name"),
+  ],
+)
+def test_config_values_out_of_range_and_names_that_escape_are_one_line(tmp_path, capsys, override, said):
+  assert cli.main(["train", QUICKSTART, "--workdir", str(tmp_path / "w"), *TINY, override]) == 2
+  _one_line(capsys, said)
+  assert not (tmp_path / "w").exists()
+
+
+def test_flags_out_of_range_are_one_line(capsys):
+  for args, said in (
+    (["live", "runs/x", "--port", "70000"], "--port"),
+    (["data", "plot", "cmu94", "-o", "p.png", "--split", "-5"], "--split"),
+  ):
+    with pytest.raises(SystemExit) as e:
+      cli.main(args)
+    assert e.value.code == 2
+    assert said in capsys.readouterr().err
+
+
+def test_a_named_pipe_among_the_takes_is_refused_without_blocking(tmp_path, capsys):
+  os.mkfifo(tmp_path / "pipe.csv")
+  assert cli.main(["data", "info", str(tmp_path / "pipe.csv")]) == 2
+  _one_line(capsys, "pipe.csv: not a regular file")
+
+
+def test_a_sweep_value_that_would_name_a_folder_outside_the_runs_is_refused(tmp_path, capsys):
+  sweep = tmp_path / "s.toml"
+  sweep.write_text('name = "s"\n[grid]\n"data.dataset" = ["../elsewhere"]\n')
+  assert cli.main(["sweep", str(sweep)]) == 2
+  _one_line(capsys, "sweep point", "plain file name")
+
+
+def test_training_into_a_folder_of_the_users_is_refused_unless_forced(tmp_path, capsys):
+  mine = tmp_path / "mine"
+  mine.mkdir()
+  (mine / "samples").mkdir()
+  (mine / "samples" / "notes.txt").write_text("mine")
+  assert cli.main(["train", QUICKSTART, "--workdir", str(mine), *TINY]) == 2
+  _one_line(capsys, "is not a chorjax run")
+  assert sorted(p.name for p in mine.rglob("*")) == ["notes.txt", "samples"]  # nothing written
+
+
+def test_a_run_resumes_past_a_torn_metrics_line_and_compare_names_a_damaged_evaluation(tmp_path, capsys):
+  w = tmp_path / "run"
+  train_and_evaluate(tiny_config("train.num_steps=2", "log.tensorboard=false"), w)
+  with open(w / "metrics.jsonl", "a") as f:
+    f.write('{"step": 3, "train_lo')  # what a kill mid-write leaves
+  train_and_evaluate(tiny_config("train.num_steps=4", "log.tensorboard=false"), w)  # resumes at step 2
+  assert "dropped 1 unreadable line(s)" in capsys.readouterr().out
+  rows = [json.loads(line) for line in (w / "metrics.jsonl").read_text().splitlines()]
+  assert [r["step"] for r in rows] == [1, 2, 3, 4]
+  (w / "eval").mkdir()
+  (w / "eval" / "metrics.json").write_text('{"frames": 10, "nu')
+  assert cli.main(["compare", str(w), "-o", str(tmp_path / "r.md")]) == 2
+  _one_line(capsys, "metrics.json: damaged evaluation (not JSON")
+  (w / "eval" / "metrics.json").write_text('{"frames": 10}')
+  assert cli.main(["compare", str(w), "-o", str(tmp_path / "r.md")]) == 2
+  _one_line(capsys, "not a whole evaluation")
+  (tmp_path / "r_loss.png").write_bytes(b"my picture")
+  assert cli.main(["compare", str(w), "-o", str(tmp_path / "r.md")]) == 2
+  _one_line(capsys, "r_loss.png: already exists")
+  assert (tmp_path / "r_loss.png").read_bytes() == b"my picture"
