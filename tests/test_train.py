@@ -371,3 +371,16 @@ def test_training_with_feedback_lowers_the_loss_and_samples(tmp_path, feedback):
   train_tiny_and_check_it_learns(tmp_path, f"train.feedback={feedback!r}", "sample.frames=30", "train.feedback_ramp=10")
   rows = [json.loads(l) for l in (tmp_path / "metrics.jsonl").read_text().splitlines()]
   assert rows[0]["feedback"] < rows[-1]["feedback"] and rows[-1]["feedback"] > 0.2  # the ramp, logged
+
+
+def test_the_aclstm_config_loads_and_feeds_its_own_outputs_on_5_of_every_10_frames():
+  from chorjax.config import load_config
+  from chorjax.run import Feedback
+  from chorjax.training import feedback_mask
+
+  cfg = load_config(Path(__file__).resolve().parents[1] / "configs" / "aclstm.toml")
+  assert (cfg.model.cell, cfg.model.head, cfg.model.num_layers, cfg.model.hidden_size) == ("lstm", "mse", 3, 1024)
+  assert cfg.data.seq_length == 100 and cfg.data.representation == "root_relative"
+  mask = np.asarray(feedback_mask(Feedback.of(cfg), jax.random.key(0), jnp.asarray(0), 3, 100))
+  own = [t for t in range(100) if (t % 10) >= 5]  # frames 5-9, 15-19, ...: the network's own outputs
+  assert (mask == np.isin(np.arange(100), own)[None]).all()
