@@ -322,6 +322,8 @@ def _live(args) -> int:
   from chorjax.live import run_live
 
   _counts(args, port=0)
+  if args.port > 65535:
+    raise UserError(f"--port {args.port}: must be at most 65535")
   if args.record:
     _output(args.record, (".npz",))
     _refuse_existing([args.record], args.force)
@@ -871,9 +873,7 @@ def _add_live_command(sub) -> None:
   )
   live.add_argument("workdir", metavar="WORKDIR", help="a run directory with checkpoints")
   live.add_argument("--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1)")
-  live.add_argument(
-    "--port", type=_in_range(0, 65535), default=8765, help="port to serve on, 0 = any free one (default 8765)"
-  )
+  live.add_argument("--port", type=int, default=8765, help="port to serve on, 0 = any free one (default 8765)")
   live.add_argument("--osc", metavar="HOST:PORT", help="also send every frame as OSC /chorjax/frame (default: off)")
   live.add_argument(
     "--osc-in",
