@@ -21,7 +21,7 @@ from typing import Any  # noqa: F401  (the inherited fields' annotations name th
 
 import numpy as np  # noqa: F401
 
-from chorjax.config import Config
+from chorjax.config import Config  # noqa: F401
 from chorjax.data import motion as _motion
 from chorjax.data.features import Features  # noqa: F401
 from chorjax.data.motion import Skeleton  # noqa: F401
@@ -39,11 +39,7 @@ class Motion(_motion.Motion):
   @classmethod
   def of(cls, motion: _motion.Motion) -> Motion:
     """``motion`` as this class (the readers and samplers return the plain data class)."""
-    return (
-      motion
-      if isinstance(motion, cls)
-      else cls(**{f.name: getattr(motion, f.name) for f in dataclasses.fields(motion)})
-    )
+    return _recast(cls, motion)
 
   def write(self, path, skeleton=None, *, force: bool = False) -> Path:
     """Writes the motion as ``path``'s suffix says: ``.csv``, ``.npz``, ``.bvh`` (with ``skeleton``, a
@@ -173,39 +169,25 @@ def load_run(workdir, checkpoint: str | int = "kept") -> Run:
   ``best`` or a step number)."""
   from chorjax.run import load_run as load
 
-  r = load(workdir, checkpoint)
-  return Run(**{f.name: getattr(r, f.name) for f in dataclasses.fields(r)})
+  return _recast(Run, load(workdir, checkpoint))
+
+
+def _recast(cls, obj):
+  """``obj`` (a dataclass instance of ``cls``'s base) as ``cls``, field for field."""
+  return obj if isinstance(obj, cls) else cls(**{f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)})
 
 
 def train(config, workdir=None, overrides: Sequence[str] | None = None, *, force: bool = False) -> Run:
   """Trains ``config`` (a TOML path or a loaded ``chorjax.config.Config``; ``overrides``: ``"key=value"``
   strings) in ``workdir`` (default ``runs/<name>``), resuming from its latest checkpoint as ``chorjax
   train`` does, and returns the run at the checkpoint it keeps."""
+  from chorjax.config import load_config
   from chorjax.training import default_workdir, train_and_evaluate
 
-  cfg = _config(config, list(overrides or []))
+  cfg = load_config(config, list(overrides or []))
   workdir = Path(workdir) if workdir is not None else default_workdir(cfg)
   train_and_evaluate(cfg, workdir, force=force)
   return load_run(workdir)
-
-
-def _config(config, overrides: list[str]):
-  """A Config from a TOML path (or None: the defaults) or a loaded Config, with ``overrides`` applied."""
-  from chorjax.config import config_from_dict, load_config, parse_override
-
-  if not isinstance(config, Config):
-    return load_config(config, overrides)
-  tree = config.to_dict()
-  for item in overrides:
-    key, value = parse_override(item)
-    if key == "name":
-      tree["name"] = str(value)
-    elif "." not in key:
-      raise UserError(f"override {item!r}: expected SECTION.KEY=VALUE")
-    else:
-      section, sub = key.split(".", 1)
-      tree.setdefault(section, {})[sub] = value
-  return config_from_dict(tree)
 
 
 def read_motion(path) -> Motion | list[Motion]:

@@ -92,21 +92,16 @@ def calibrate(
   run = load_run(workdir).generating("calibrate")
   if run.is_gan:
     raise UserError(f"{workdir}: a GAN draws whole sequences from noise; there is nothing to calibrate")
-  real, train = read_reference(run, list(data) if data else [run.config.data.dataset])
-  reference = real if data else train
+  reference, train = read_reference(run, list(data) if data else None)
   f = run.features
   ids = [run.id_map[m.name] for m in train] or [0]
   motion = np.array([ids[k % len(ids)] for k in range(num)])
   key = jax.random.key(seed)
-  ranged = {}
+  ranged = run.ranged(run.sampling())  # the grid's controls leave the range, pace and scale ceiling alone
 
   def draw(settings):
     sampling = run.sampling(**settings)
-    wanted = (sampling["clamp"], sampling["pace"], sampling["scale_cap"])
-    if wanted not in ranged:
-      ranged[wanted] = run.ranged(sampling)
-    r = ranged[wanted]
-    return dance(r.graphdef, r.params, r.features, motion, key, frames, sampling)
+    return dance(ranged.graphdef, ranged.params, ranged.features, motion, key, frames, sampling)
 
   log(f"calibrating {workdir} on {'the takes given' if data else 'its training takes'} ({len(reference)} takes)")
   positions = [m.positions for m in reference]

@@ -125,13 +125,11 @@ def _data_convert(args) -> int:
   if args.drop_first_frame:
     motions = [m.replace(positions=m.positions[1:]) for m in motions]
   elif not args.keep_rest_frames:
-    from chorjax.data.rest import drop_leading_rest, drop_rest_note
+    from chorjax.data.rest import drop_leading_rests
 
-    kept = [drop_leading_rest(m) for m in motions]
-    motions = [m for m, _ in kept]
-    note = drop_rest_note({m.name: n for m, n in kept if n})
+    motions, note = drop_leading_rests(motions, "--keep-rest-frames")
     if note:
-      print(note.replace("data.keep_rest_frames = true", "--keep-rest-frames"))
+      print(note)
   if args.joints == "mpii16":
     motions, used = map_takes(motions, args.joint_map)
     for how in dict.fromkeys(m.describe() for m in used.values()):

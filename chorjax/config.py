@@ -557,8 +557,9 @@ def parse_override(text: str) -> tuple[str, Any]:
   return key, value
 
 
-def load_config(path: str | Path | None = None, overrides: Sequence[str] = ()) -> Config:
-  """Loads a TOML config file (or the defaults) and applies dotted ``KEY=VALUE`` overrides.
+def load_config(path: str | Path | Config | None = None, overrides: Sequence[str] = ()) -> Config:
+  """Loads a TOML config file (or the defaults, or a loaded ``Config``) and applies dotted ``KEY=VALUE``
+  overrides.
 
   Raises:
     UserError: for a missing or malformed file, an unknown section or key, a wrong type, or a
@@ -566,7 +567,10 @@ def load_config(path: str | Path | None = None, overrides: Sequence[str] = ()) -
   """
   sections: dict[str, dict] = {s: {} for s in _SECTION_CLASSES}
   name = "default"
-  if path is not None:
+  if isinstance(path, Config):  # chorjax.train(config) from Python: the same overrides, the same checks
+    _apply(sections, {k: v for k, v in path.to_dict().items() if k != "name"}, lambda s, k: "the given config")
+    name = path.name
+  elif path is not None:
     path = Path(path)
     try:
       text = path.read_text(encoding="utf-8-sig")  # a byte-order mark some editors write is not TOML

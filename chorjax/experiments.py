@@ -247,10 +247,12 @@ def _read_run(workdir: Path) -> dict:
     raise UserError(f"{workdir}: not a run directory (no config.json)")
   if not ev_path.exists():
     raise UserError(f"{ev_path}: missing; run `chorjax eval {workdir} --data ...` first")
-  from chorjax.training import _row
+  from chorjax.training import metrics_row
 
   history = workdir / "metrics.jsonl"
-  rows = [r for l in history.read_text(errors="replace").splitlines() if (r := _row(l))] if history.exists() else []
+  rows = (
+    [r for l in history.read_text(errors="replace").splitlines() if (r := metrics_row(l))] if history.exists() else []
+  )
   evaluation = upgrade(_json_file(ev_path, "evaluation", f"run `chorjax eval {workdir} --data ... --force` again"))
   missing = [k for k in EVAL_NEEDS if k not in evaluation]
   if missing:

@@ -393,14 +393,17 @@ def with_ceiling(features, graphdef, params, train, seq_length: int, controls: d
 HELD_OUT = "held-out"  # --data held-out: the takes of the run's dataset it did not train on
 
 
-def read_reference(run: Run, data: Sequence[str]) -> tuple[list, list]:
+def read_reference(run: Run, data: Sequence[str] | None) -> tuple[list, list]:
   """``(the takes in data, the run's training takes)``, read exactly as training read its takes; ``data`` of
-  ``["held-out"]``: the takes of the run's own dataset that it did not train on."""
+  ``["held-out"]``: the takes of the run's own dataset that it did not train on; None: the training takes."""
   from chorjax.data.dataset import conform, read_takes
 
   data_cfg = run.config.data
   every = conform(read_takes([data_cfg.dataset], data_cfg), data_cfg)
   trained = set(run.train_takes)
+  train = [m for m in every if m.name in trained] or every
+  if data is None:
+    return train, train
   if list(data) == [HELD_OUT]:
     real = [m for m in every if m.name not in trained]
     if not real:
@@ -409,4 +412,4 @@ def read_reference(run: Run, data: Sequence[str]) -> tuple[list, list]:
     real = conform(read_takes(list(data), data_cfg), data_cfg)
   if not real:
     raise UserError(f"--data {' '.join(data)}: no takes")
-  return real, [m for m in every if m.name in trained] or every
+  return real, train

@@ -241,6 +241,7 @@ def score(
   # geometric features are fractions of a window's frames: a std below 5% of the frames is noise
   fid_g, fid_g_real, div_g, div_g_real = _distribution(motions, reference, geo, window, splits, seed, 0.05)
   speed = float(np.mean(np.concatenate([metrics.joint_speed(t) for t in reference])))
+  speeds = spread([metrics.speed_ratio(m, speed) for m in motions])
   moving, steps = (
     _movement_and_jitter(motions, reference, skeleton, fps, segment),
     _root_steps(motions, reference, skeleton),
@@ -263,8 +264,8 @@ def score(
     "foot_sliding": spread([metrics.foot_sliding(m, skeleton, fps, size) for m in motions]),
     "data_foot_sliding": float(np.mean([metrics.foot_sliding(t, skeleton, fps, size) for t in reference])),
     **_novelty(motions, reference, train, unseen, skeleton, size, window),
-    "speed_ratio": spread([metrics.speed_ratio(m, speed) for m in motions]),  # extra: NOT a freeze measure
-    "speed": spread([metrics.speed_ratio(m, speed) for m in motions]),
+    "speed_ratio": speeds,  # the name before `speed`, kept for older readers; NOT a freeze measure
+    "speed": speeds,
     **_travel_and_train_reference(motions, reference, skeleton, train, unseen, (kin, geo), window, splits, seed),
     "body_size": size,
     "window": window,
@@ -272,22 +273,14 @@ def score(
   }
 
 
-def read_for_scoring(specs, data_cfg) -> list:
-  """Takes named by ``specs`` as mpii16 motions (BVH/ASF/AMC mapped by joint name), any format."""
-  from chorjax.data.dataset import read_takes
-  from chorjax.data.mapping import to_mpii16
-
-  return [to_mpii16(m) for m in read_takes(list(specs), data_cfg)]
-
-
 def score_files(motion_specs, data_specs, **kw) -> dict:
   """``chorjax metrics``: :func:`score_motions` of motion files against real takes, any formats."""
   from chorjax.config import DataConfig
+  from chorjax.data.dataset import read_takes
 
   data_cfg = DataConfig()
-  reference = read_for_scoring(data_specs, data_cfg)
-  motions = read_for_scoring(motion_specs, data_cfg)
-  result = score_motions(motions, reference, **kw)
+  reference = read_takes(list(data_specs), data_cfg)
+  result = score_motions(read_takes(list(motion_specs), data_cfg), reference, **kw)
   return {"motions": result.pop("motions"), "data": list(data_specs), **result}
 
 

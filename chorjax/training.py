@@ -356,7 +356,7 @@ def _truncate_metrics(path: Path, upto_step: int) -> None:
   if not path.exists():
     return
   rows = [l for l in path.read_text(errors="replace").splitlines() if l.strip()]
-  parsed = [_row(l) for l in rows]
+  parsed = [metrics_row(l) for l in rows]
   torn = [k for k, r in enumerate(parsed) if r is None]
   if torn:  # what a kill mid-write leaves: a half-written line (normally the last)
     print(f"note: {path}: dropped {len(torn)} unreadable line(s) (first: line {torn[0] + 1}, a write cut short)")
@@ -365,7 +365,7 @@ def _truncate_metrics(path: Path, upto_step: int) -> None:
     atomic_write(path, lambda p: p.write_text("".join(l + "\n" for l in kept)))
 
 
-def _row(line: str) -> dict | None:
+def metrics_row(line: str) -> dict | None:
   """One ``metrics.jsonl`` row, or None where it is not one (torn by a kill)."""
   try:
     row = json.loads(line)

@@ -30,7 +30,7 @@ import dataclasses
 import numpy as np
 
 from chorjax.data.motion import Motion, bone_length_cv
-from chorjax.data.rest import Jumps, drop_leading_rest, drop_rest_note, find_jumps  # noqa: F401  (re-exported)
+from chorjax.data.rest import drop_leading_rest, find_jumps  # noqa: F401  (drop_leading_rest: re-exported)
 from chorjax.errors import UserError
 
 LEG_M = 0.85  # hip -> knee -> ankle of an adult, metres
@@ -57,7 +57,6 @@ class TakeReport:
   bone_cv: str = ""
   held_frames: int = 0
   teleports: int = 0
-  rest_frames: int = 0
   floor: str = ""
   notes: list = dataclasses.field(default_factory=list)
   body: np.ndarray | None = None  # median 16-joint bone lengths (mapped takes), for comparing takes
@@ -169,7 +168,7 @@ def check_take(motion: Motion, joint_map=None, mapping=None) -> TakeReport:
   if r.held_frames:
     r.notes.append(f"{r.held_frames} frames repeat the one before exactly (dropped frames or filled gaps)")
   jumps = find_jumps(motion)
-  r.teleports, r.rest_frames = len(jumps.root), jumps.leading
+  r.teleports = len(jumps.root)
   r.notes += jumps.describe()
   r.floor, floor_notes = _floor(mapped, r.up_axis, motion.fps)
   r.notes += floor_notes

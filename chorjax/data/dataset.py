@@ -129,13 +129,11 @@ def conform(
   mapped as ``chorjax.data.mapping`` decides; the mappings used are put into ``mappings``) and up axis.
   What the user should know goes into ``notes``."""
   from chorjax.data.mapping import map_takes
-  from chorjax.data.rest import drop_leading_rest, drop_rest_note
+  from chorjax.data.rest import drop_leading_rests
 
   out = list(motions)
   if rest and not data_cfg.keep_rest_frames:
-    kept = [drop_leading_rest(m) for m in out]
-    out = [m for m, _ in kept]
-    note = drop_rest_note({m.name: n for m, n in kept if n})
+    out, note = drop_leading_rests(out)
     if note and notes is not None:
       notes.append(note)
   if data_cfg.joints == "mpii16":

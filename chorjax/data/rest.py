@@ -76,8 +76,8 @@ def _steps(positions, root: int | None) -> tuple[np.ndarray, np.ndarray, float]:
   return pose, moved, body
 
 
-def _jumps_in(step: np.ndarray, body: float) -> np.ndarray:
-  return (step > JUMP * np.percentile(step, 99)) & (step > 0.05 * body)
+def _jumps_in(step: np.ndarray, body: float, p99: float) -> np.ndarray:
+  return (step > JUMP * p99) & (step > 0.05 * body)
 
 
 def find_jumps(motion: Motion) -> Jumps:
@@ -86,17 +86,17 @@ def find_jumps(motion: Motion) -> Jumps:
     return Jumps()
   root = motion.skeleton.root if motion.skeleton.bones else None
   pose, moved, body = _steps(motion.positions, root)
-  pose_jump, root_jump = _jumps_in(pose, body), _jumps_in(moved, body)
+  p99 = np.percentile(pose, 99)
+  pose_jump, root_jump = _jumps_in(pose, body, p99), _jumps_in(moved, body, np.percentile(moved, 99))
   lead = 0
   if pose_jump[0]:
     cap = max(round(LEAD_SECONDS * motion.fps), 1)
-    usual = np.percentile(pose[cap:], 99) if len(pose) > 2 * cap else np.percentile(pose, 99)
+    usual = np.percentile(pose[cap:], 99) if len(pose) > 2 * cap else p99
     lead = 1  # the blend out of the rest pose: steps over 2x the usual ones (real motion stays within ~2x)
     while lead < min(cap, len(pose)) and pose[lead] > 2 * usual:
       lead += 1
   jumps = np.flatnonzero(pose_jump[lead:]) + lead
   rest = tuple(int(t) for t in jumps if t + 1 in jumps)
-  p99 = np.percentile(pose, 99)
   return Jumps(
     leading=lead,
     pose=tuple(int(t) + 1 for t in jumps),
@@ -115,12 +115,15 @@ def drop_leading_rest(motion: Motion) -> tuple[Motion, int]:
   return motion.replace(positions=motion.positions[lead:]), lead
 
 
-def drop_rest_note(dropped: dict) -> str | None:
-  """One line for the user: which takes lost a leading rest pose (``{take: frames dropped}``)."""
+def drop_leading_rests(motions, keep_flag: str = "data.keep_rest_frames = true") -> tuple[list[Motion], str | None]:
+  """Every take without its leading rest pose, and one line for the user saying which lost one (None if
+  none did; ``keep_flag`` names the setting that keeps them: training's key, or ``data convert``'s flag)."""
+  kept = [drop_leading_rest(m) for m in motions]
+  dropped = {m.name: n for m, n in kept if n}
   if not dropped:
-    return None
+    return [m for m, _ in kept], None
   names = sorted(dropped)
   takes = names[0] if len(names) == 1 else f"{len(names)} takes ({names[0]}, ...)"
   counts = sorted(set(dropped.values()))
   n = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]}-{counts[-1]}"
-  return f"dropped a leading rest pose ({n} frames) of {takes}; data.keep_rest_frames = true keeps it"
+  return [m for m, _ in kept], f"dropped a leading rest pose ({n} frames) of {takes}; {keep_flag} keeps it"
