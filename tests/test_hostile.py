@@ -144,3 +144,79 @@ def test_a_run_resumes_past_a_torn_metrics_line_and_compare_names_a_damaged_eval
   assert cli.main(["compare", str(w), "-o", str(tmp_path / "r.md")]) == 2
   _one_line(capsys, "r_loss.png: already exists")
   assert (tmp_path / "r_loss.png").read_bytes() == b"my picture"
+
+
+def _bvh_mutations(text: str) -> dict:
+  """Damaged copies of a real BVH, each of which used to be read silently as some other skeleton."""
+  head, motion = text.split("MOTION", 1)
+  close = head.rstrip().rfind("}")
+  return {
+    "extra_brace": (head.rstrip() + "\n}\n" + "MOTION" + motion, "unexpected '}' after the ROOT"),
+    "second_root": (head.rstrip() + "\nROOT Other\n{\n OFFSET 0 0 0\n}\nMOTION" + motion, "'ROOT' after the ROOT"),
+    "junk_after_root": (head[: close + 1] + "\nOOPS\n" + head[close + 1 :] + "MOTION" + motion, "'OOPS' after"),
+    "three_x": (
+      text.replace("CHANNELS 3 Zrotation Yrotation Xrotation", "CHANNELS 3 Xrotation Xrotation Xrotation", 1),
+      "repeated channel",
+    ),
+    "duplicate_name": (text.replace("JOINT LeftKnee", "JOINT LeftHip", 1), "joint name 'LeftHip' is used twice"),
+    "nested_root": (text.replace("JOINT LHipJoint", "ROOT LHipJoint", 1), "inside another joint"),
+    "offset_first": (text.replace("HIERARCHY", "HIERARCHY\nOFFSET 0 0 0", 1), "OFFSET outside a joint"),
+  }
+
+
+@pytest.mark.parametrize(
+  "case", ["extra_brace", "second_root", "junk_after_root", "three_x", "duplicate_name", "nested_root", "offset_first"]
+)
+def test_bvh_structure_is_strict(shared_data, tmp_path, capsys, case):
+  text, said = _bvh_mutations((shared_data / BVH).read_text())[case]
+  path = tmp_path / f"{case}.bvh"
+  path.write_text(text)
+  assert cli.main(["data", "info", str(path)]) == 2
+  _one_line(capsys, f"{case}.bvh:", said)
+
+
+def _asf_amc_mutations(asf: str, amc: str) -> dict:
+  assert re.search(r"^2$", amc, flags=re.M)
+  return {
+    "gradians": (asf.replace("angle deg", "angle gradians"), amc, "angle unit 'gradians'"),
+    "zero_length_unit": (asf.replace("length 0.45", "length 0"), amc, "length unit 0"),
+    "axis_order": (asf.replace("axis 0 0 20  XYZ", "axis 0 0 20  XYY", 1), amc, "axis order 'XYY'"),
+    "dof": (asf.replace("dof rx ry rz", "dof rx rq rz", 1), amc, "unknown or repeated channel"),
+    "bone_twice": (asf.replace("name lfemur", "name lhipjoint", 1), amc, "bone name 'lhipjoint' is used twice"),
+    "frames_out_of_order": (asf, amc.replace("\n2\n", "\n3\n", 1), "frame 3 follows frame 1"),
+    "bone_twice_in_frame": (
+      asf,
+      re.sub(r"^(lowerback .*)$", r"\1\n\1", amc, count=1, flags=re.M),
+      "twice in one frame",
+    ),
+  }
+
+
+@pytest.mark.parametrize(
+  "case",
+  ["gradians", "zero_length_unit", "axis_order", "dof", "bone_twice", "frames_out_of_order", "bone_twice_in_frame"],
+)
+def test_asf_and_amc_structure_is_strict(shared_data, tmp_path, capsys, case):
+  folder = shared_data / "asfamc" / "cmu05"
+  asf, amc, said = _asf_amc_mutations((folder / "moderndance.asf").read_text(), (folder / "md_02.amc").read_text())[
+    case
+  ]
+  (tmp_path / "moderndance.asf").write_text(asf)
+  (tmp_path / "md_02.amc").write_text(amc)
+  assert cli.main(["data", "info", str(tmp_path / "md_02.amc")]) == 2
+  _one_line(capsys, "moderndance.asf:" if amc == (folder / "md_02.amc").read_text() else "md_02.amc:", said)
+
+
+def test_an_npz_header_is_never_trusted_for_an_allocation(tmp_path, capsys):
+  import io
+  import zipfile
+
+  buf = io.BytesIO()  # a header claiming 17.5 TiB over 64 bytes of data: numpy would allocate it first
+  np.lib.format.write_array_header_1_0(
+    buf, {"descr": "<f4", "fortran_order": False, "shape": (1, 100_000_000_000, 16, 3)}
+  )
+  with zipfile.ZipFile(tmp_path / "huge.npz", "w") as z:
+    z.writestr("positions.npy", buf.getvalue() + b"\0" * 64)
+    z.writestr("meta.npy", b"")
+  assert cli.main(["data", "info", str(tmp_path / "huge.npz")]) == 2
+  _one_line(capsys, "huge.npz: positions.npy claims 19,200,000,000,000 bytes")

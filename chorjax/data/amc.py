@@ -42,6 +42,31 @@ def _fixed_axes_matrix(angles, order: str, degrees: bool):
   return euler_to_matrix(a[..., ::-1], order[::-1])
 
 
+_ROOT_CHANNELS = ("tx", "ty", "tz", "rx", "ry", "rz")
+_DOF = (*_ROOT_CHANNELS, "l")
+
+
+def _channels(names: list[str], known, where: str) -> list[str]:
+  """``names`` if every one is a known channel and none repeats, else a one-line error."""
+  if any(n not in known for n in names) or len(set(names)) != len(names):
+    raise UserError(f"{where} {' '.join(names)[:60]!r}: unknown or repeated channel (known: {' '.join(known)})")
+  return names
+
+
+def _three(words: list[str], where: str) -> np.ndarray:
+  """The three numbers after a keyword (``direction 0 1 0``), else a one-line error."""
+  if len(words) < 4:
+    raise UserError(f"{where}: {words[0]} needs three numbers, found {len(words) - 1}")
+  return np.array(parse_numbers(words[1:4], where))
+
+
+def _axis_order(word: str, where: str) -> str:
+  """An Euler axis order such as ``XYZ``: each of x, y, z once."""
+  if sorted(word.lower()) != ["x", "y", "z"]:
+    raise UserError(f"{where}: axis order {word[:20]!r} is not an order of x, y, z")
+  return word.lower()
+
+
 def read_asf(path) -> Asf:
   path = Path(path)
   lines = read_text(path, "ASF", errors="replace").splitlines()
@@ -61,36 +86,44 @@ def read_asf(path) -> Asf:
       if section == "units":
         if words[0] == "length":
           asf.length_unit = parse_numbers(words[1:2], f"{path}:{lineno}")[0]
+          if not asf.length_unit > 0:
+            raise UserError(f"{path}:{lineno}: length unit {asf.length_unit:g}: must be above 0")
         elif words[0] == "angle":
+          if not words[1].lower().startswith(("deg", "rad")):
+            raise UserError(f"{path}:{lineno}: angle unit {words[1][:20]!r}: only deg or rad are known")
           asf.degrees = words[1].lower().startswith("deg")
       elif section == "root":
         if words[0] == "order":
-          asf.root_order = [w.lower() for w in words[1:]]
+          asf.root_order = _channels([w.lower() for w in words[1:]], _ROOT_CHANNELS, f"{path}:{lineno}: root order")
         elif words[0] == "axis":
-          asf.root_axis = words[1].lower()
+          asf.root_axis = _axis_order(words[1], f"{path}:{lineno}")
         elif words[0] == "position":
-          asf.root_position = np.array(parse_numbers(words[1:4], f"{path}:{lineno}"))
+          asf.root_position = _three(words, f"{path}:{lineno}")
         elif words[0] == "orientation":
-          asf.root_orientation = np.array(parse_numbers(words[1:4], f"{path}:{lineno}"))
+          asf.root_orientation = _three(words, f"{path}:{lineno}")
       elif section == "bonedata":
         if words[0] == "begin":
           bone = {"dof": [], "axis": np.zeros(3), "axis_order": "xyz", "line": lineno}
         elif words[0] == "end":
           if bone is None or "name" not in bone:
             raise UserError(f"{path}:{lineno}: bone block without a name")
+          if bone["name"] in asf.bones or bone["name"] == "root":
+            raise UserError(f"{path}:{bone['line']}: bone name {bone['name']!r} is used twice")
           asf.bones[bone["name"]] = bone
           bone = None
         elif bone is not None and words[0] == "name":
           bone["name"] = words[1]
         elif bone is not None and words[0] == "direction":
-          bone["direction"] = np.array(parse_numbers(words[1:4], f"{path}:{lineno}"))
+          bone["direction"] = _three(words, f"{path}:{lineno}")
         elif bone is not None and words[0] == "length":
           bone["length"] = parse_numbers(words[1:2], f"{path}:{lineno}")[0]
+          if bone["length"] < 0:
+            raise UserError(f"{path}:{lineno}: bone length {bone['length']:g} is negative")
         elif bone is not None and words[0] == "axis":
-          bone["axis"] = np.array(parse_numbers(words[1:4], f"{path}:{lineno}"))
-          bone["axis_order"] = words[4].lower() if len(words) > 4 else "xyz"
+          bone["axis"] = _three(words, f"{path}:{lineno}")
+          bone["axis_order"] = _axis_order(words[4], f"{path}:{lineno}") if len(words) > 4 else "xyz"
         elif bone is not None and words[0] == "dof":
-          bone["dof"] = [w.lower() for w in words[1:]]
+          bone["dof"] = _channels([w.lower() for w in words[1:]], _DOF, f"{path}:{lineno}: dof")
       elif section == "hierarchy":
         if words[0] in ("begin", "end"):
           continue
@@ -129,13 +162,16 @@ def read_amc(path, asf_path=None, *, fps: float = 120.0, scale: float = 1.0, uni
   path = Path(path)
   asf = read_asf(asf_path or find_asf(path))
   lines = read_text(path, "AMC", errors="replace").splitlines()
-  frames, starts, current = [], [], None
+  frames, starts, current, number = [], [], None, 0
   for lineno, raw in enumerate(lines, start=1):
     line = raw.strip()
     if not line or line.startswith("#") or line.startswith(":"):
       continue
     words = line.split()
     if len(words) == 1 and words[0].isdigit():
+      if starts and int(words[0]) != number + 1:
+        raise UserError(f"{path}:{lineno}: frame {words[0]} follows frame {number} (AMC frames count up by one)")
+      number = int(words[0])
       current = {}
       frames.append(current)
       starts.append(lineno)
@@ -149,6 +185,8 @@ def read_amc(path, asf_path=None, *, fps: float = 120.0, scale: float = 1.0, uni
     values = parse_numbers(words[1:], f"{path}:{lineno}")
     if len(values) != want:
       raise UserError(f"{path}:{lineno}: {name} has {len(values)} values, its dof list has {want}")
+    if name in current:
+      raise UserError(f"{path}:{lineno}: {name} appears twice in one frame")
     current[name] = values
   if not frames:
     raise UserError(f"{path}: no frames")

@@ -71,8 +71,9 @@ def _parse_hierarchy(path: Path, text: str):
         i += 2
       else:
         need(2)
-        if up == "JOINT" and not stack:
-          raise UserError(f"{path}:{line}: JOINT outside the ROOT's braces")
+        if (up == "JOINT") != bool(stack):
+          where = "outside the ROOT's braces" if stack == [] else "inside another joint (one ROOT per file)"
+          raise UserError(f"{path}:{line}: {tok} {where}")
         j = _Joint(toks[i + 1][1], stack[-1] if stack else None, line)
         i += 2
       joints.append(j)
@@ -81,6 +82,8 @@ def _parse_hierarchy(path: Path, text: str):
         raise UserError(f"{path}:{toks[i][0]}: expected '{{' after {j.name}")
       stack.append(len(joints) - 1)
       i += 1
+    elif up in ("OFFSET", "CHANNELS") and not stack:
+      raise UserError(f"{path}:{line}: {tok} outside a joint")
     elif up == "OFFSET":
       need(4)
       joints[stack[-1]].offset = np.array(parse_numbers([t for _, t in toks[i + 1 : i + 4]], f"{path}:{line}: OFFSET"))
@@ -94,10 +97,12 @@ def _parse_hierarchy(path: Path, text: str):
       need(2 + n)
       names = [t.lower() for _, t in toks[i + 2 : i + 2 + n]]
       bad = [c for c in names if c not in _ROT and c not in _POS]
-      if bad or n not in (3, 6):
+      if bad or n not in (3, 6) or len(set(names)) != n:
         raise UserError(
-          f"{path}:{line}: channel-count mismatch or unknown channel ({n} declared: {' '.join(names)[:60]})"
+          f"{path}:{line}: channel-count mismatch, unknown or repeated channel ({n} declared: {' '.join(names)[:60]})"
         )
+      if joints[stack[-1]].channels:
+        raise UserError(f"{path}:{line}: a second CHANNELS line for {joints[stack[-1]].name}")
       joints[stack[-1]].channels = names
       i += 2 + n
     elif tok == "}":
@@ -111,6 +116,13 @@ def _parse_hierarchy(path: Path, text: str):
       raise UserError(f"{path}:{line}: unexpected {tok[:30]!r} in HIERARCHY")
   if stack or not joints:
     raise UserError(f"{path}:{toks[-1][0]}: truncated HIERARCHY (unclosed braces)")
+  if i < len(toks):  # a second ROOT, a stray brace or junk: the file holds one skeleton, closed once
+    raise UserError(f"{path}:{toks[i][0]}: unexpected {toks[i][1][:30]!r} after the ROOT's closing brace")
+  seen: dict[str, int] = {}
+  for j in joints:
+    if j.name in seen:
+      raise UserError(f"{path}:{j.line}: joint name {j.name!r} is used twice (first on line {seen[j.name]})")
+    seen[j.name] = j.line
   return joints
 
 

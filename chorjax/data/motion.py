@@ -32,6 +32,13 @@ class Skeleton:
     j = len(self.joint_names)
     if len(self.parents) != j or len(self.twins) != j:
       raise ValueError(f"skeleton {self.name}: joint_names, parents and twins must have equal length")
+    for field, low in (("parents", -1), ("twins", 0), ("end_joints", 0), ("feet", 0)):
+      if not all(
+        isinstance(k, (int, np.integer)) and not isinstance(k, bool) and low <= k < j for k in getattr(self, field)
+      ):
+        raise ValueError(f"skeleton {self.name}: {field} must be joint indices ({low}..{j - 1})")
+    if not all(isinstance(n, str) for n in self.joint_names):
+      raise ValueError(f"skeleton {self.name}: joint names must be strings")
     if not any(p < 0 for p in self.parents):
       raise ValueError(f"skeleton {self.name}: needs a root (a joint whose parent is -1)")
     for i, t in enumerate(self.twins):

@@ -33,9 +33,28 @@ def write_npz(
   return atomic_write(path, write, overwrite=overwrite)
 
 
+def _check_claims(path: Path) -> None:
+  """Refuses an ``.npz`` whose arrays' headers claim more bytes than their members hold (a header is never
+  trusted for an allocation: numpy allocates what it says before reading a byte)."""
+  with zipfile.ZipFile(path) as z:
+    for info in z.infolist():
+      if not info.filename.endswith(".npy"):
+        continue
+      with z.open(info) as f:
+        version = np.lib.format.read_magic(f)
+        read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        shape, _, dtype = read(f, max_header_size=10_000)
+        claimed = int(np.prod(shape, dtype=object)) * dtype.itemsize
+      if claimed > info.file_size:
+        raise UserError(
+          f"{path}: {info.filename} claims {claimed:,} bytes of data ({shape}), the file holds {info.file_size:,}"
+        )
+
+
 def read_npz(path) -> list[Motion]:
   path = Path(path)
   try:
+    _check_claims(path)
     with np.load(path, allow_pickle=False) as z:
       pos, meta = z["positions"], json.loads(str(z["meta"]))
   except FileNotFoundError:
