@@ -1,13 +1,16 @@
 """``chorjax calibrate``: the sampling settings a run's dance depends on, chosen on its dancer's takes.
 
 The quickstart's draw is shaped by controls that were set by hand on cmu94 (noise smoothing 0.9, the scale
-temperature 1.0). Another dancer needs others: salsa drawn with cmu94's settings moves at 0.6 of its speed.
-Calibration samples the trained model over a small grid of the two controls that set how much and how
-smoothly it moves, ``noise_smoothing`` (how correlated the drawn noise is over frames: high = smooth and
-slow, low = trembling) and ``sigma_temperature`` (how wide each draw is: how far the dancer goes), and
-keeps the pair whose samples move like the reference takes: movement over half a second (which trembling
-cannot fake) and jitter (the second difference, which over-smoothing pulls under 1) both near the
-reference's, ``|log movement| + |log jitter|`` smallest.
+temperature 1.0, component persistence 6 and crossfade 0.8, feet locked in contact). Another dancer needs
+others: salsa drawn with cmu94's settings moves at 0.6 of its speed, and locking its feet both slows it
+(0.70 -> 0.91 of the speed unlocked) and makes it tremble (jitter 1.40 -> 0.97), measured on one salsa run.
+Calibration samples the trained model over a grid of the controls that set how much and how smoothly it
+moves: ``noise_smoothing`` (how correlated the drawn noise is over frames), ``sigma_temperature`` (how wide
+each draw is), ``persistence`` and ``crossfade`` (how long a mixture component holds, how its switches
+glide) and, for canonical runs, ``foot_lock``. It keeps the setting whose samples move like the reference
+takes on four measures, each / the reference's: movement over half a second (which trembling cannot fake),
+jitter (the second difference, which over-smoothing pulls under 1), mean joint speed and root travel (how
+far the dancer goes): ``|log movement| + |log jitter| + |log speed| + |log root travel|`` smallest.
 
 The reference is the run's TRAINING takes (never the takes it is judged on: tuning on those would be
 tuning on the test); ``--data`` names others. The result goes to ``WORKDIR/calibration.json`` and is the
@@ -28,37 +31,46 @@ from chorjax.errors import UserError, atomic_write
 from chorjax.run import CALIBRATED, calibration_path, read_calibration  # noqa: F401  (re-exported)
 
 GRID = {
-  "noise_smoothing": (0.6, 0.75, 0.85, 0.9, 0.95),
-  "sigma_temperature": (0.8, 0.9, 1.0, 1.15, 1.3, 1.5),
+  "noise_smoothing": (0.6, 0.75, 0.85, 0.9),
+  "sigma_temperature": (0.9, 1.0, 1.2),
+  "persistence": (0.0, 1.5, 6.0),
+  "crossfade": (0.0, 0.8),
+  "foot_lock": (True, False),  # canonical runs only (the others cannot lock feet)
 }
+MEASURES = ("movement", "jitter", "speed", "root_travel")
 
 
-def objective(movement: float, jitter: float) -> float:
-  """How far a sample's movement and jitter (each / the reference's) are from the reference's own."""
-  return abs(np.log(max(movement, 1e-9))) + abs(np.log(max(jitter, 1e-9)))
+def objective(measured: dict) -> float:
+  """How far a sample's ``MEASURES`` (each / the reference's) are from the reference's own."""
+  return float(sum(abs(np.log(max(measured[k], 1e-9))) for k in MEASURES))
 
 
-def measure(samples, reference, root: int, fps: float) -> tuple[float, float]:
-  """``(movement, jitter)`` of samples ``[B, T, J, 3]`` / the reference takes' (y-up or not: both alike)."""
+def measure(samples, reference, root: int, fps: float) -> dict:
+  """``MEASURES`` of samples ``[B, T, J, 3]`` / the reference takes' (y-up or not: both alike)."""
   lag = max(round(0.5 * fps), 1)
   disp, rough = metrics.reference_rates(reference, root, lag)
-  movement = float(np.mean([metrics.displacement(s, root, lag) for s in samples]) / disp)
-  jitter = float(np.mean([metrics.roughness(s) for s in samples]) / rough)
-  return movement, jitter
+  speed = lambda ts: np.mean([metrics.joint_speed(t).mean() for t in ts])
+  travel = lambda ts: np.mean([np.linalg.norm(np.diff(t[:, root], axis=0), axis=-1).mean() for t in ts])
+  return {
+    "movement": float(np.mean([metrics.displacement(s, root, lag) for s in samples]) / disp),
+    "jitter": float(np.mean([metrics.roughness(s) for s in samples]) / rough),
+    "speed": float(speed(samples) / max(speed(reference), 1e-12)),
+    "root_travel": float(travel(samples) / max(travel(reference), 1e-12)),
+  }
 
 
 def search(draw, reference, root: int, fps: float, grid: dict | None = None, log=None) -> tuple[dict, list]:
   """``(best settings, table)``: every combination of ``grid`` drawn by ``draw(settings) -> [B, T, J, 3]``
-  and measured against ``reference``; the table rows are ``(settings, movement, jitter, objective)``."""
+  and measured against ``reference``; the table rows are ``(settings, measures, objective)``."""
   grid = grid or GRID
   table = []
   for values in itertools.product(*grid.values()):
     settings = dict(zip(grid, values))
-    movement, jitter = measure(draw(settings), reference, root, fps)
-    table.append((settings, movement, jitter, objective(movement, jitter)))
+    measured = measure(draw(settings), reference, root, fps)
+    table.append((settings, measured, objective(measured)))
     if log:
-      log(f"  {settings}: movement {movement:.3f}, jitter {jitter:.3f}")
-  best = min(table, key=lambda row: row[3])
+      log(f"  {settings}: " + ", ".join(f"{k.replace('_', ' ')} {v:.3f}" for k, v in measured.items()))
+  best = min(table, key=lambda row: row[2])
   return best[0], table
 
 
@@ -72,13 +84,13 @@ def calibrate(
   grid: dict | None = None,
   log=print,
 ) -> dict:
-  """Chooses and records the run's ``noise_smoothing`` and ``sigma_temperature`` (see the module docstring).
+  """Chooses and records the run's sampling settings (see the module docstring).
 
   Args:
     workdir: a trained run (rnn family).
     data: the reference takes (default: the run's training takes).
     frames, num, seed: each setting draws ``num`` dancers of ``frames`` frames with sampling seed ``seed``.
-    grid: the values tried per control (default ``GRID``).
+    grid: the values tried per control (default ``GRID``; ``foot_lock`` only where the run can lock feet).
     log: where progress lines go.
 
   Returns:
@@ -90,6 +102,7 @@ def calibrate(
   if frames < 60 or num < 1:
     raise UserError(f"--frames {frames} / --num {num}: need at least 60 frames and 1 dancer")
   run = load_run(workdir).generating("calibrate")
+  run.check_drawn(frames * num, f"--frames {frames} x --num {num}")
   if run.is_gan:
     raise UserError(f"{workdir}: a GAN draws whole sequences from noise; there is nothing to calibrate")
   reference, train = read_reference(run, list(data) if data else None)
@@ -103,6 +116,12 @@ def calibrate(
     sampling = run.sampling(**settings)
     return dance(ranged.graphdef, ranged.params, ranged.features, motion, key, frames, sampling)
 
+  if grid is None:
+    grid = (
+      dict(GRID)
+      if run.config.data.representation == "canonical"
+      else {k: v for k, v in GRID.items() if k != "foot_lock"}
+    )
   log(f"calibrating {workdir} on {'the takes given' if data else 'its training takes'} ({len(reference)} takes)")
   positions = [m.positions for m in reference]
   best, table = search(draw, positions, f.skeleton.root, run.fps, grid, log)
@@ -112,9 +131,10 @@ def calibrate(
     "frames": frames,
     "num": num,
     "seed": seed,
-    "table": [{"settings": s, "movement": m, "jitter": j, "objective": o} for s, m, j, o in table],
+    "table": [{"settings": s, **m, "objective": o} for s, m, o in table],
   }
   atomic_write(calibration_path(workdir), lambda p: p.write_text(json.dumps(result, indent=2)))
-  row = min(table, key=lambda r: r[3])
-  log(f"calibrated: {best} (movement {row[1]:.3f}, jitter {row[2]:.3f}); wrote {calibration_path(workdir)}")
+  row = min(table, key=lambda r: r[2])
+  said = ", ".join(f"{k.replace('_', ' ')} {v:.3f}" for k, v in row[1].items())
+  log(f"calibrated: {best} ({said}); wrote {calibration_path(workdir)}")
   return result

@@ -253,6 +253,7 @@ def _sample(args) -> int:
   run = load_run(args.workdir, args.checkpoint).generating("sample")
   if character is not None and run.features.skeleton.name != "mpii16":
     raise UserError(f"--skeleton: {args.workdir} dances on its own skeleton, not the 16 joints it retargets from")
+  run.check_drawn(args.frames * args.num, f"--frames {args.frames} x --num {args.num}")
   pos, settings = sample_dancers(
     run, args.frames, args.num, args.seed, args.prime, args.motion, args.mix, _controls(args)
   )
@@ -289,6 +290,7 @@ def _inbetween(args) -> int:
     raise UserError(
       f"{args.workdir}: not an in-betweening run (train one with model.family = 'inbetween': configs/inbetween.toml)"
     )
+  run.check_drawn(sum(frames) * args.num, f"--frames {' '.join(map(str, frames))} x --num {args.num}")
   data_cfg = run.config.data
   context = read_phrase(args.from_, run.features, data_cfg, flag="--from")
   targets = [read_pose(t, run.features, data_cfg) for t in args.to]
@@ -450,6 +452,8 @@ def _render(args) -> int:
   from chorjax.data.dataset import read_motions, resolve_files
 
   _counts(args, frames=1, every=1, poses=1)
+  if args.poses > MAX_POSES:
+    raise UserError(f"--poses {args.poses}: at most {MAX_POSES} poses in a row")
   out, suffix = _output(args.output, (".png", ".gif", ".mp4", ".html"))
   if args.strip and suffix != ".png":
     raise UserError(f"{out}: --strip draws a PNG")
@@ -480,11 +484,17 @@ def _render(args) -> int:
   return 0
 
 
+MAX_SIDE = 7680
+MAX_POSES = 200  # --strip: poses per row (a row of 200 is already wider than any screen)
+
+
 def _size(text: str) -> tuple[int, int]:
   """``WxH`` -> (W, H), both even and at least 64 (video codecs want even sizes)."""
   w, _, h = text.lower().partition("x")
-  if not (w.isdigit() and h.isdigit()) or int(w) < 64 or int(h) < 64:
-    raise UserError(f"--size {text}: expected WIDTHxHEIGHT in pixels, e.g. 1280x720 (at least 64x64)")
+  if not (w.isdigit() and h.isdigit()) or not (64 <= int(w) <= MAX_SIDE and 64 <= int(h) <= MAX_SIDE):
+    raise UserError(
+      f"--size {text}: expected WIDTHxHEIGHT in pixels, e.g. 1280x720 (each side 64 to {MAX_SIDE}, 8K video's width)"
+    )
   return int(w) // 2 * 2, int(h) // 2 * 2
 
 
@@ -525,6 +535,10 @@ def _metrics(args) -> int:
   from chorjax.errors import atomic_write
   from chorjax.scoring import score_files
 
+  _counts(args, window=4, splits=1)
+  for name, most in (("window", 10_000), ("splits", 1_000)):  # beyond: minutes of work that say nothing more
+    if getattr(args, name) > most:
+      raise UserError(f"--{name} {getattr(args, name)}: at most {most}")
   out = Path(args.output) if args.output else None
   if out is not None:
     _refuse_existing([out], args.force)
@@ -605,7 +619,7 @@ def _add_checkpoint_args(p) -> None:
 
 def _add_sampling_args(p) -> None:
   """Sampling controls shared by `sample` and `eval`; unset ones come from the run's calibration.json
-  (noise smoothing and scale temperature, `chorjax calibrate`), else its [sample] config."""
+  (`chorjax calibrate`), else its [sample] config."""
   p.add_argument(
     "--pi-temperature",
     type=float,
@@ -976,9 +990,10 @@ def _add_calibrate_command(sub) -> None:
   """`chorjax calibrate`."""
   cal = sub.add_parser(
     "calibrate",
-    help="choose the run's noise smoothing and scale temperature on its dancer's takes; the run's default after",
-    description="Samples the run over a grid of noise_smoothing and sigma_temperature and keeps the pair whose "
-    "dance moves like the reference takes (movement over 0.5 s and jitter, each nearest the takes' own). The "
+    help="choose the run's sampling settings on its dancer's takes; the run's default after",
+    description="Samples the run over a grid of noise_smoothing, sigma_temperature, persistence, crossfade and "
+    "(canonical runs) foot_lock, 144 settings, and keeps the one whose dance moves like the reference takes "
+    "(movement over 0.5 s, jitter, joint speed and root travel, together nearest the takes' own). The "
     "reference is the run's training takes: never the takes it is judged on. Writes WORKDIR/calibration.json, "
     "which sample, eval and live then use unless a flag says otherwise.",
   )

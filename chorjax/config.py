@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from chorjax.errors import UserError
+from chorjax.errors import UserError, check_memory
 
 
 def _field(
@@ -600,7 +600,27 @@ def load_config(path: str | Path | Config | None = None, overrides: Sequence[str
       raise UserError(f"override {item!r}: expected SECTION.KEY=VALUE" + suggest(key, valid_keys()))
     section, sub = key.split(".", 1)
     _apply(sections, {section: {sub: value}}, lambda s, k, item=item: f"override {item!r}")
-  return Config(**{s: cls(**sections[s]) for s, cls in _SECTION_CLASSES.items()}, name=plain_name(name, "name"))
+  config = Config(**{s: cls(**sections[s]) for s, cls in _SECTION_CLASSES.items()}, name=plain_name(name, "name"))
+  check_training_size(config)
+  return config
+
+
+FEATURES_GUESS = 256  # pose features per frame, more than any skeleton we read gives (mpii16 canonical: ~50)
+
+
+def check_training_size(config: Config) -> None:
+  """A one-line ``UserError`` naming the keys when training would need more memory than this machine has,
+  estimated from the sizes alone (before anything is allocated): the parameters with Adam's two moments,
+  and the activations a step keeps for its backward pass (about 16 values per unit, layer and frame)."""
+  m, t, d = config.model, config.train, config.data
+  h, layers, inputs = m.hidden_size, m.num_layers, FEATURES_GUESS
+  params = layers * 4 * h * (h + max(h, inputs)) + h * FEATURES_GUESS * (2 * m.num_mixtures + 1)
+  activations = t.batch_size * d.seq_length * layers * h * 16
+  check_memory(
+    4.0 * (3 * params + activations),
+    f"model.hidden_size={h}, model.num_layers={layers}, train.batch_size={t.batch_size}, "
+    f"data.seq_length={d.seq_length}",
+  )
 
 
 def plain_name(name: str, what: str) -> str:

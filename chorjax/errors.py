@@ -138,6 +138,25 @@ def parse_numbers(cells, where: str, columns: bool = False) -> list[float]:
   return values
 
 
+def memory_bytes() -> int:
+  """This machine's physical memory in bytes (what any one allocation must stay under)."""
+  try:
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+  except (ValueError, OSError, AttributeError):
+    return 16 << 30
+
+
+def check_memory(nbytes: float, what: str) -> None:
+  """One-line ``UserError`` naming ``what`` (the flags or keys that set the size) when ``nbytes``, estimated
+  before allocating, is more than half this machine's memory (the other half is the program and its data)."""
+  limit = memory_bytes() / 2
+  if nbytes > limit:
+    raise UserError(
+      f"{what}: needs about {nbytes / 2**30:,.3g} GiB, more than half this machine's memory "
+      f"({limit / 2**30:.3g} GiB is the limit); ask for less"
+    )
+
+
 def check_array(values, where: str) -> None:
   """One-line ``UserError`` naming ``where`` if ``values`` hold a non-finite entry or one beyond
   +-``LARGEST_VALUE`` (binary formats: the text readers check each line with :func:`parse_numbers`)."""

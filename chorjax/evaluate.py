@@ -52,6 +52,8 @@ def evaluate(
     ``data``, novelty against the run's training takes.
   """
   run = load_run(workdir, checkpoint).generating("eval")
+  nseeds = len(seeds) if seeds else 1
+  run.check_drawn(frames * num * nseeds, f"--frames {frames} x --num {num} x {nseeds} seeds")
   sampling = run.sampling(**controls)
   run = run.ranged(sampling)
   feats = run.features

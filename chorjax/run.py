@@ -28,7 +28,7 @@ from flax import nnx
 from chorjax import checkpoint as ckpt
 from chorjax.config import Config, config_from_dict
 from chorjax.data.features import Features
-from chorjax.errors import UserError
+from chorjax.errors import UserError, check_memory
 from chorjax.models import ChorModel, create_model
 from chorjax.models.cvae import TransitionCVAE
 from chorjax.models.gan import GanModel, gan_controls
@@ -243,6 +243,12 @@ class Run:
     controls = self.config.sample.controls(**{**calibrated, **{k: v for k, v in given.items() if v is not None}})
     return gan_controls(controls) if self.is_gan else controls
 
+  def check_drawn(self, frames: int, what: str) -> None:
+    """Refuses a draw of ``frames`` frames in all (frames x dancers) that this machine cannot hold: each
+    frame's features and positions in float64, a few copies on the way out (``errors.check_memory``)."""
+    f = self.features
+    check_memory(frames * (f.dim + f.skeleton.num_joints * 3) * 8 * 6, what)
+
   def ranged(self, sampling: dict) -> Run:
     """This run with the training range and pace that ``sampling`` (``clamp``, ``pace``) holds to, and
     the scale ceiling of ``scale_cap`` (measured on the model's training frames). Runs trained before
@@ -272,7 +278,8 @@ class Run:
     return dataclasses.replace(self, features=f)
 
 
-CALIBRATED = ("noise_smoothing", "sigma_temperature")  # what `chorjax calibrate` chooses
+# what `chorjax calibrate` chooses (runs calibrated before 2026-11-25 hold the first two alone)
+CALIBRATED = ("noise_smoothing", "sigma_temperature", "persistence", "crossfade", "foot_lock")
 
 
 def calibration_path(workdir) -> Path:

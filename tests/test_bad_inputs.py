@@ -273,6 +273,8 @@ SAMPLE_FLAGS = {
   "output-suffix": ["-o", "OUT/x.xyz"],
   "output-dir": ["-o", "OUT"],
   "size-odd": ["--size", "0x0"],
+  "frames-huge": ["--frames", "1000000000"],  # sizes are estimated before allocating: the flag is named
+  "num-huge": ["--num", "10000000"],
 }
 
 
@@ -295,6 +297,7 @@ EVAL_FLAGS = {
   "sigma-inf": ["--sigma-temperature", "inf"],
   "checkpoint-missing": ["--checkpoint", "7"],
   "output-dir": ["-o", "OUT"],
+  "frames-huge": ["--frames", "1000000000"],
 }
 
 
@@ -318,6 +321,25 @@ COMMANDS = {
   "render-missing": lambda t, r: ["render", t / "nowhere.csv", "-o", t / "x.gif"],
   "render-frames-0": lambda t, r: ["render", CSV, "-o", t / "x.gif", "--frames", "0"],
   "render-suffix": lambda t, r: ["render", CSV, "-o", t / "x.doc"],
+  "render-size-huge": lambda t, r: ["render", CSV, "-o", t / "x.mp4", "--size", "100000x100000"],
+  "render-poses-huge": lambda t, r: ["render", CSV, "-o", t / "x.png", "--strip", "--poses", "100000"],
+  "metrics-window-0": lambda t, r: ["metrics", CSV, "--data", "cmu94", "--window", "0"],
+  "metrics-splits-0": lambda t, r: ["metrics", CSV, "--data", "cmu94", "--splits", "0"],
+  "metrics-splits-huge": lambda t, r: ["metrics", CSV, "--data", "cmu94", "--splits", "1000000"],
+  "train-batch-huge": lambda t, r: [
+    "train",
+    "configs/quickstart.toml",
+    "train.batch_size=1000000000",
+    "--workdir",
+    t / "w",
+  ],
+  "train-hidden-huge": lambda t, r: [
+    "train",
+    "configs/quickstart.toml",
+    "model.hidden_size=100000000000000000000",
+    "--workdir",
+    t / "w",
+  ],
   "metrics-missing": lambda t, r: ["metrics", t / "nowhere.csv", "--data", "cmu94"],
   "compare-missing": lambda t, r: ["compare", t / "nowhere", "-o", t / "r.md"],
   "sweep-missing": lambda t, r: ["sweep", t / "nowhere.toml"],

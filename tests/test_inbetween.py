@@ -196,6 +196,9 @@ def test_bad_inbetween_input_is_refused(trained, tmp_path, capsys):
   )
   assert "one count for every --to" in capsys.readouterr().err
   assert cli.main([*base, "--to", f"{TAKE}:10", "--frames", "0"]) == 2
+  capsys.readouterr()
+  assert cli.main([*base, "--to", f"{TAKE}:10", "--frames", "1000000000"]) == 2  # was a native abort
+  assert "--frames 1000000000 x --num 1: needs about" in capsys.readouterr().err
   assert not out.exists()
   assert cli.main(["sample", str(workdir), "-o", str(out)]) == 2
   assert "use `chorjax inbetween`" in capsys.readouterr().err

@@ -1,9 +1,10 @@
-"""The dancers benchmark's "learned" column: each trained benchmark run, kept at its best validation
-checkpoint (train.keep = "best") and calibrated on its own training takes (chorjax calibrate), judged
-like the baseline (held-out takes, 4 sampling seeds x 10,000 frames). The runs are copied: the baseline
-runs stay as trained. Skips finished copies, so it can run beside the sweep and again after it.
+"""The dancers benchmark's "learned" columns: each trained benchmark run, kept at its best validation
+checkpoint (train.keep = "best") and calibrated on its own training takes (chorjax calibrate, as it is
+today), judged like the baseline (held-out takes, 4 sampling seeds x 10,000 frames). The runs are copied:
+the runs they come from stay as they were. Skips finished copies, so it can run beside a sweep and again.
 
-  .venv/bin/python experiments/dancers/learned.py
+  .venv/bin/python experiments/dancers/learned.py                # runs/dancers -> runs/dancers_learned
+  .venv/bin/python experiments/dancers/learned.py runs/dancers_best runs/dancers_cal5 cal5-
   chorjax compare runs/dancers_learned/learned-* -o experiments/dancers/learned_report.md
 """
 
@@ -13,20 +14,19 @@ import subprocess
 import sys
 from pathlib import Path
 
-BASE, OUT = Path("runs/dancers"), Path("runs/dancers_learned")
 CHORJAX = str(Path(sys.executable).with_name("chorjax"))
 
 
-def main() -> None:
-  OUT.mkdir(parents=True, exist_ok=True)
-  for run in sorted(BASE.glob("dancers-*")):
+def main(base: Path = Path("runs/dancers"), out: Path = Path("runs/dancers_learned"), prefix: str = "learned-") -> None:
+  out.mkdir(parents=True, exist_ok=True)
+  for run in sorted(base.glob("*-seed=*")):
     if not (run / "eval" / "metrics.json").exists():
       continue  # not trained and evaluated yet
-    copy = OUT / run.name.replace("dancers-", "learned-", 1)
+    copy = out / (prefix + run.name.split("-", 1)[1])
     if (copy / "eval" / "metrics.json").exists():
       continue
     shutil.rmtree(copy, ignore_errors=True)
-    shutil.copytree(run, copy, ignore=shutil.ignore_patterns("eval", "events.*"))
+    shutil.copytree(run, copy, ignore=shutil.ignore_patterns("eval", "events.*", "calibration.json"))
     config = json.loads((copy / "config.json").read_text())
     config["train"].update(keep="best", calibrate=True)
     config["name"] = copy.name
@@ -54,4 +54,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-  main()
+  main(*(Path(a) for a in sys.argv[1:3]), *sys.argv[3:4])
