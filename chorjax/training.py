@@ -586,6 +586,31 @@ def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=No
   if parallel is not None and family != "rnn":
     raise UserError(f"parallel.data_parallel: not available for the {family} family (model.family = {family!r})")
   is_main = parallel is None or parallel.is_main
+  before = {p.name for p in workdir.iterdir()} if workdir.is_dir() else None
+  try:
+    return _locked_train(cfg, workdir, force, parallel, is_main)
+  except UserError:
+    if is_main:
+      _clean_refused_start(workdir, before)
+    raise
+
+
+def _clean_refused_start(workdir: Path, before: set | None) -> None:
+  """A start refused before any step ran leaves what it found: its own lock, an empty checkpoints/ and a
+  workdir it created go again (``before``: the names the workdir held, None where it did not exist)."""
+  left = {p.name for p in workdir.iterdir()} if workdir.is_dir() else set()
+  if left - (before or set()) - {".lock", "checkpoints"}:
+    return  # something else was written: a run that got further keeps its files
+  ckpts = workdir / "checkpoints"
+  if "checkpoints" not in (before or set()) and ckpts.is_dir() and not any(ckpts.iterdir()):
+    ckpts.rmdir()
+  if ".lock" not in (before or set()):
+    (workdir / ".lock").unlink(missing_ok=True)
+  if before is None and workdir.is_dir() and not any(workdir.iterdir()):
+    workdir.rmdir()
+
+
+def _locked_train(cfg: Config, workdir: Path, force: bool, parallel, is_main: bool) -> dict:
   with workdir_lock(workdir) if is_main else contextlib.nullcontext():
     keep_old_config = _check_saved_config(workdir, cfg, force) and is_main
     ds = load_dataset(cfg.data)

@@ -220,3 +220,13 @@ def test_an_npz_header_is_never_trusted_for_an_allocation(tmp_path, capsys):
     z.writestr("meta.npy", b"")
   assert cli.main(["data", "info", str(tmp_path / "huge.npz")]) == 2
   _one_line(capsys, "huge.npz: positions.npy claims 19,200,000,000,000 bytes")
+
+
+def test_a_refused_start_leaves_no_files_behind(tmp_path, capsys):
+  new, empty = tmp_path / "new", tmp_path / "empty"
+  empty.mkdir()
+  for workdir in (new, empty):
+    for bad in ("data.dataset=nowhere", 'data.val_takes=["nope"]'):
+      assert cli.main(["train", QUICKSTART, "--workdir", str(workdir), *TINY, bad]) == 2
+      _one_line(capsys, "error:")
+  assert not new.exists() and list(empty.iterdir()) == []  # was: .lock (and config.json, checkpoints/)
