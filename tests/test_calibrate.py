@@ -52,7 +52,7 @@ def test_calibrate_records_the_settings_and_the_run_uses_them_unless_told(run_di
   saved = json.loads(calibration_path(run_dir).read_text())
   chosen = saved["settings"]
   assert set(chosen) == set(CALIBRATED) and saved["reference"] == "training takes"  # a canonical run: feet too
-  assert len(saved["table"]) == 144 and "calibrated:" in capsys.readouterr().out
+  assert len(saved["table"]) == 180 and "calibrated:" in capsys.readouterr().out
   assert {"movement", "jitter", "speed", "root_travel", "objective"} <= set(saved["table"][0])
   assert cli.main(args) == 2  # an existing calibration is not replaced without --force
   assert "calibration.json" in capsys.readouterr().err

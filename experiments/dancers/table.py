@@ -3,8 +3,11 @@ takes; and, per dataset, the end of a generated dance beside a held-out take (fi
 
   .venv/bin/python experiments/dancers/table.py > experiments/dancers/table.md
 
-Reads runs/dancers/dancers-* (the recipe as shipped) and runs/dancers_learned/learned-* (the same runs kept
-at their best validation checkpoint and calibrated: experiments/dancers/learned.py).
+Reads runs/dancers/dancers-* (the recipe as shipped), runs/dancers_learned/learned-* (the same runs kept
+at their best validation checkpoint and calibrated: experiments/dancers/learned.py), runs/dancers_best/best-*
+(best.toml: trained with train.keep = "best" and train.calibrate) and runs/dancers_cal5/cal5-* (those runs
+calibrated again with the five controls and four measures of 2026-11-25: learned.py runs/dancers_best
+runs/dancers_cal5 cal5-).
 """
 
 import json
@@ -18,9 +21,10 @@ HERE = Path(__file__).parent
 VARIANTS = {
   "as shipped": Path("runs/dancers"),
   "kept at best of 4 checkpoints + calibrated": Path("runs/dancers_learned"),
-  "train.keep best + train.calibrate": Path("runs/dancers_best"),
+  "train.keep best + train.calibrate (2 controls)": Path("runs/dancers_best"),
+  "train.keep best + calibrate 5 controls, 4 measures": Path("runs/dancers_cal5"),
 }
-SLUG = dict(zip(VARIANTS, ("shipped", "copy_best_calibrated", "keep_best_calibrate")))
+SLUG = dict(zip(VARIANTS, ("shipped", "copy_best_calibrated", "keep_best_calibrate", "keep_best_calibrate5")))
 DATASETS = ("cmu94", "salsa", "martial", "cmu05", "cmu131")
 # (label, value of one evaluation, how a row's worst seed is picked: the one farthest from the bar)
 COLUMNS = [
@@ -39,8 +43,17 @@ COLUMNS = [
 ]
 
 
+def _two_controls(run: Path) -> bool:
+  """Whether a best.toml run was calibrated as best.toml's first pass was (noise smoothing and scale
+  temperature; runs trained after 2026-11-25 calibrated five controls: their row is the cal5 one)."""
+  path = run / "calibration.json"
+  return path.exists() and len(json.loads(path.read_text())["settings"]) == 2
+
+
 def evaluations(root: Path, dataset: str) -> list[tuple[Path, dict]]:
   runs = sorted(d for d in root.glob(f"*-{dataset}-seed=*") if (d / "eval" / "metrics.json").exists())
+  if root == VARIANTS["train.keep best + train.calibrate (2 controls)"]:
+    runs = [d for d in runs if _two_controls(d)]
   return [(d, json.loads((d / "eval" / "metrics.json").read_text())) for d in runs]
 
 
@@ -76,7 +89,10 @@ def strips() -> list[str]:
 
   out = []
   for dataset in DATASETS:
-    runs = {v: next(iter(sorted(r.glob(f"*-{dataset}-seed=0"))), r / "-") for v, r in VARIANTS.items()}
+    runs = {
+      v: next((d for d, _ in evaluations(r, dataset) if d.name.endswith("seed=0")), r / "-")
+      for v, r in VARIANTS.items()
+    }
     runs = {v: r for v, r in runs.items() if (r / "eval" / "sample.npz").exists()}
     if "as shipped" not in runs:
       continue
