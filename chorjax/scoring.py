@@ -47,6 +47,7 @@ import numpy as np
 
 from chorjax import metrics
 from chorjax.data.motion import Skeleton, bone_length_cv
+from chorjax.errors import UserError
 
 
 def spread(values) -> float | dict:
@@ -168,7 +169,10 @@ def _distribution(motions, reference, features, window: int, splits: int, seed: 
     fids.append(metrics.frechet_distance(norm(fa), norm(gen_n)))
     reals.append(metrics.frechet_distance(norm(fa), norm(fb_n)))
   if not fids:
-    raise ValueError(f"too few {window}-frame windows to compare distributions")
+    raise UserError(
+      f"--data: too few {window}-frame windows in the reference takes or the motions to compare distributions "
+      "(longer takes, or a smaller --window)"
+    )
   cap = lambda f: f[rng.choice(len(f), min(len(f), 1000), replace=False)]
   return fids, reals, metrics.diversity(norm(cap(gen))), metrics.diversity(norm(cap(ref_all)))
 
@@ -207,6 +211,21 @@ def _travel_and_train_reference(motions, reference, skeleton, train, unseen, fea
   return out
 
 
+def _check_reference(reference, skeleton: Skeleton, fps: float, size: float) -> None:
+  """One line (naming ``--data``) where the reference takes cannot be measured against: no body (every joint
+  in one point), no motion (a frozen take: movement and jitter are ratios to theirs), or a single frame."""
+  if not all(len(t) >= 2 for t in reference):
+    raise UserError("--data: a reference take holds a single frame: nothing to measure motion against")
+  if not size > 1e-9:
+    raise UserError("--data: the reference takes have no body (every joint at one point): nothing to measure")
+  lag = max(round(0.5 * fps), 1)
+  if max(len(t) for t in reference) <= lag:
+    raise UserError(f"--data: the reference takes are shorter than half a second ({lag} frames): too short to measure")
+  disp, rough = metrics.reference_rates(reference, skeleton.root, lag)
+  if not (disp > 1e-9 * size and rough > 1e-12 * size):
+    raise UserError("--data: the reference takes do not move (frozen): nothing to measure motion against")
+
+
 def score(
   motions,
   reference,
@@ -235,6 +254,7 @@ def score(
     The JSON-ready dict described in the module docstring (plus a few labelled extras).
   """
   size = float(np.mean([metrics.body_size(t, skeleton) for t in reference]))
+  _check_reference(reference, skeleton, fps, size)
   kin = lambda w: metrics.kinetic_features(w / size, fps)
   geo = lambda w: metrics.geometric_features(w, skeleton, size).mean(0)
   fid_k, fid_k_real, div_k, div_k_real = _distribution(motions, reference, kin, window, splits, seed, 1e-10)

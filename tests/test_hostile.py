@@ -13,6 +13,7 @@ from helpers import TINY, tiny_config
 
 from chorjax import cli
 from chorjax.data.bvh import read_bvh
+from chorjax.errors import UserError
 from chorjax.training import train_and_evaluate
 
 BVH = "bvh/cmu131/131_01.bvh"
@@ -230,3 +231,35 @@ def test_a_refused_start_leaves_no_files_behind(tmp_path, capsys):
       assert cli.main(["train", QUICKSTART, "--workdir", str(workdir), *TINY, bad]) == 2
       _one_line(capsys, "error:")
   assert not new.exists() and list(empty.iterdir()) == []  # was: .lock (and config.json, checkpoints/)
+
+
+def _frozen_takes(folder: Path) -> dict:
+  from chorjax.data.dataset import bundled_path
+
+  rows = (bundled_path("cmu94") / "94_01_skeleton_3d.csv").read_text().splitlines()
+  folder.mkdir(exist_ok=True)
+  made = {"frozen": [rows[0]] * 300, "two": rows[:2], "zeros": [",".join(["0"] * 48)] * 300}
+  for name, lines in made.items():
+    (folder / f"{name}.csv").write_text("\n".join(lines) + "\n")
+  return {name: folder / f"{name}.csv" for name in made}
+
+
+def test_degenerate_references_and_takes_are_named_not_divided_by(tmp_path, capsys):
+  from chorjax.data.dataset import bundled_path, dataset_notes, load_dataset
+
+  takes = _frozen_takes(tmp_path / "odd")
+  real = str(bundled_path("cmu94") / "94_01_skeleton_3d.csv")
+  for name, said in (("frozen", "do not move (frozen)"), ("two", "shorter than half a second"), ("zeros", "no body")):
+    assert cli.main(["metrics", real, "--data", str(takes[name])]) == 2  # were ZeroDivisionError / ValueError
+    _one_line(capsys, "--data: the reference takes", said)
+  assert cli.main(["data", "check", str(takes["zeros"])]) == 2
+  _one_line(capsys, "zeros.csv: every joint of every frame at one point")
+  dance = tmp_path / "dance"
+  dance.mkdir()
+  (dance / "94_01.csv").write_text(Path(real).read_text())
+  (dance / "frozen.csv").write_text(takes["frozen"].read_text())
+  cfg = tiny_config(f"data.dataset={dance}", 'data.val_takes=["94_01"]')
+  assert "warning: take frozen does not move" in "\n".join(dataset_notes(load_dataset(cfg.data)))
+  (dance / "94_01.csv").unlink()
+  with pytest.raises(UserError, match="no take moves"):
+    load_dataset(tiny_config(f"data.dataset={dance}", "data.val_takes=[]").data)

@@ -146,6 +146,11 @@ def check_take(motion: Motion, joint_map=None, mapping=None) -> TakeReport:
   if motion.num_frames < 2:
     r.fatal.append(f"{r.path}: {motion.num_frames} frame(s): nothing moves")
     return r
+  if not np.ptp(pos, axis=(0, 1)).max() > 0:
+    r.fatal.append(f"{r.path}: every joint of every frame at one point: no body to read")
+    return r
+  if not np.ptp(pos, axis=0).max() > 0:
+    r.notes.append("does not move: every frame is the same pose (a frozen take teaches nothing)")
   mapped = None
   if motion.skeleton.bones:
     try:

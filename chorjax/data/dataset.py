@@ -217,6 +217,10 @@ def load_dataset(data_cfg) -> Dataset:
   for m in motions:
     if m.num_frames < need:
       raise UserError(f"{m.source}: {m.num_frames} frames, shorter than one window (data.seq_length + 1 = {need})")
+  frozen = [m.name for m in motions if not np.ptp(m.positions, axis=0).max() > 0]
+  if frozen and len(frozen) == len(motions):
+    raise UserError(f"{data_cfg.dataset}: no take moves (every frame of each is one pose): nothing to learn")
+  notes += [f"warning: take {n} does not move (every frame is one pose): remove it unless you mean it" for n in frozen]
   id_map = {n: i for i, n in enumerate(names)}
   val_names = _val_names(names, data_cfg.val_takes)
   train_names = [n for n in names if n not in val_names]
