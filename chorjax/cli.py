@@ -1073,7 +1073,13 @@ def _add_report_commands(sub) -> None:
   )
   sw.set_defaults(func=_sweep)
 
-  cmp_ = sub.add_parser("compare", help="a markdown report comparing evaluated runs, with plots")
+  cmp_ = sub.add_parser(
+    "compare",
+    help="a markdown report comparing evaluated runs, with plots",
+    description="Groups runs that differ only in train.seed (mean ± sd), names a winner per metric only beyond "
+    "the spread, and, where the runs trained on several datasets (data.dataset), gives each dataset its own "
+    "table and winners.",
+  )
   cmp_.add_argument("workdirs", nargs="+", metavar="WORKDIR", help="evaluated run directories (chorjax eval or sweep)")
   cmp_.add_argument("-o", "--output", required=True, metavar="report.md", help="the markdown report to write")
   cmp_.add_argument("--force", action="store_true", help="overwrite the report if it exists")

@@ -183,6 +183,23 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
   assert cli.main(["compare", *map(str, runs), "-o", str(tmp_path / "r3.md")]) == 0
   text = (tmp_path / "r3.md").read_text()
   assert "Evaluation settings differ between runs:" in text and "- t-head=mdn-seed=1: 1 x 300 frames" in text
+  # runs over several datasets: a table and winners per dataset (copies of the MSE runs, told another dataset)
+  import shutil
+
+  others = []
+  for r in runs[2:]:
+    o = tmp_path / "other" / r.name.replace("t-", "o-", 1)
+    shutil.copytree(r, o)
+    cfg = json.loads((o / "config.json").read_text())
+    cfg["data"]["dataset"] = "salsa-takes"
+    (o / "config.json").write_text(json.dumps(cfg))
+    others.append(o)
+  assert cli.main(["compare", *map(str, runs), *map(str, others), "-o", str(tmp_path / "datasets.md")]) == 0
+  text = (tmp_path / "datasets.md").read_text()
+  cmu94, salsa = text.index("## Dataset: cmu94"), text.index("## Dataset: salsa-takes")
+  assert "Runs on 2 datasets" in text and text.count("### Who wins") == 2
+  assert cmu94 < text.index("| t-head=mse | 2 |") < salsa < text.index("| o-head=mse | 2 |")
+  assert "| o-head" not in text[cmu94:salsa] and "| t-head" not in text[salsa : text.index("## What the models")]
   # an evaluation from before loss_takes measured the loss on every --data take: marked, and not ranked
   legacy = runs[2] / "eval" / "metrics.json"
   legacy.write_text(json.dumps({k: v for k, v in json.loads(legacy.read_text()).items() if k != "loss_takes"}))
