@@ -263,3 +263,34 @@ def test_degenerate_references_and_takes_are_named_not_divided_by(tmp_path, caps
   (dance / "94_01.csv").unlink()
   with pytest.raises(UserError, match="no take moves"):
     load_dataset(tiny_config(f"data.dataset={dance}", "data.val_takes=[]").data)
+
+
+def test_a_deep_hierarchy_a_character_with_twin_names_and_one_name_in_two_formats(shared_data, tmp_path, capsys):
+  from chorjax.data.retarget import Character
+
+  lines = [
+    "HIERARCHY",
+    "ROOT r",
+    "{",
+    "OFFSET 0 0 0",
+    "CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation",
+  ]
+  for i in range(3000):  # was a RecursionError
+    lines += [f"JOINT j{i}", "{", "OFFSET 0 1 0", "CHANNELS 3 Zrotation Yrotation Xrotation"]
+  lines += ["End Site", "{", "OFFSET 0 1 0", "}", *["}"] * 3001, "MOTION", "Frames: 2", "Frame Time: 0.033333"]
+  lines += [" ".join(["0"] * (6 + 3 * 3000))] * 2
+  (tmp_path / "deep.bvh").write_text("\n".join(lines) + "\n")
+  assert read_bvh(tmp_path / "deep.bvh").positions.shape == (2, 3002, 3)
+  text = (shared_data / BVH).read_text()  # a character with two joints of one name looped forever in retargeting
+  (tmp_path / "twins.bvh").write_text(text.replace("JOINT LeftKnee", "JOINT LeftHip", 1))
+  with pytest.raises(UserError, match="joint name 'LeftHip' is used twice"):
+    Character(tmp_path / "twins.bvh")
+  both = tmp_path / "both"  # one take's name in two formats: two takes, both read
+  both.mkdir()
+  (both / "t.bvh").write_text(text)
+  from chorjax.data.csv import write_csv
+
+  write_csv(read_bvh(shared_data / BVH), both / "t.csv")
+  assert cli.main(["data", "check", str(both)]) == 0  # was a KeyError: takes were keyed by name
+  out = capsys.readouterr().out
+  assert "t.bvh" in out and "t.csv" in out
