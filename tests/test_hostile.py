@@ -5,6 +5,7 @@ anything unforeseen. Each case: one line, exit 2 (or accepted where the input is
 import json
 import os
 import re
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -294,3 +295,14 @@ def test_a_deep_hierarchy_a_character_with_twin_names_and_one_name_in_two_format
   assert cli.main(["data", "check", str(both)]) == 0  # was a KeyError: takes were keyed by name
   out = capsys.readouterr().out
   assert "t.bvh" in out and "t.csv" in out
+
+
+def test_a_c3d_point_rate_of_zero_is_named(shared_data, tmp_path, capsys):
+  raw = bytearray((shared_data / "c3d" / "ezc3d" / "Qualisys.c3d").read_bytes())
+  at = raw.index(b"\x04\x01RATE", (raw[0] - 1) * 512) + 2 + 4 + 4  # group 1 (POINT): name, next-offset, type, dims
+  assert struct.unpack("<f", raw[at : at + 4]) == (200.0,)
+  raw[at : at + 4] = struct.pack("<f", 0.0)
+  raw[20:24] = struct.pack("<f", 0.0)  # and the header's rate (ezc3d prefers it)
+  (tmp_path / "rate0.c3d").write_bytes(bytes(raw))
+  assert cli.main(["data", "info", str(tmp_path / "rate0.c3d")]) == 2  # was a ZeroDivisionError downstream
+  _one_line(capsys, "rate0.c3d: POINT:RATE", "outside 1-1000 fps")
