@@ -274,8 +274,8 @@ class TrainConfig:
   )
   calibrate: bool = _field(
     False,
-    "after training, choose the sampling's noise_smoothing and sigma_temperature on the training takes "
-    "(`chorjax calibrate`; the end sample is drawn with them)",
+    "after training, choose the sampling's noise_smoothing, sigma_temperature, persistence, crossfade and "
+    "foot_lock on the training takes (`chorjax calibrate`; the end sample is drawn with them)",
     resumable=True,
   )
   feedback: str = _field(
