@@ -77,7 +77,8 @@ try:
 except Exception as e:
   print(json.dumps({"error": (str(e).splitlines() or [type(e).__name__])[0][:120]}))
 """
-TIMEOUT_S = 300
+# seconds the child may take: ezc3d reads a sound file at ~50 MB/s here, a damaged one can spin for minutes
+TIMEOUT_BASE_S, TIMEOUT_PER_MB_S = 20, 2
 
 
 def _memory_ceiling() -> int:
@@ -92,6 +93,7 @@ def _read_isolated(path: Path):
   """``(points [4, M, T], rate, units, labels)`` read by ezc3d in a child process (module docstring)."""
   import json
 
+  timeout = TIMEOUT_BASE_S + TIMEOUT_PER_MB_S * path.stat().st_size / 2**20
   with tempfile.TemporaryDirectory(prefix="chorjax-c3d-") as tmp:
     out = Path(tmp) / "points.npy"
     try:
@@ -99,10 +101,10 @@ def _read_isolated(path: Path):
         [sys.executable, "-I", "-c", _CHILD, str(path), str(out), str(_memory_ceiling())],
         capture_output=True,
         text=True,
-        timeout=TIMEOUT_S,
+        timeout=timeout,
       )
     except subprocess.TimeoutExpired:
-      raise UserError(f"{path}: the C3D reader (ezc3d) took over {TIMEOUT_S} s: a damaged file?") from None
+      raise UserError(f"{path}: the C3D reader (ezc3d) took over {timeout:.0f} s: a damaged file?") from None
     try:
       said = json.loads(done.stdout.strip().splitlines()[-1]) if done.returncode == 0 else {}
     except (ValueError, IndexError):
