@@ -1073,6 +1073,18 @@ def _add_report_commands(sub) -> None:
   )
   sw.set_defaults(func=_sweep)
 
+  _add_compare_command(sub)
+
+
+class _Parser(argparse.ArgumentParser):
+  """Usage errors as one line (``--help`` shows the usage), like every other chorjax error."""
+
+  def error(self, message: str):
+    self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _add_compare_command(sub) -> None:
+  """`chorjax compare`."""
   cmp_ = sub.add_parser(
     "compare",
     help="a markdown report comparing evaluated runs, with plots",
@@ -1084,13 +1096,6 @@ def _add_report_commands(sub) -> None:
   cmp_.add_argument("-o", "--output", required=True, metavar="report.md", help="the markdown report to write")
   cmp_.add_argument("--force", action="store_true", help="overwrite the report if it exists")
   cmp_.set_defaults(func=_compare)
-
-
-class _Parser(argparse.ArgumentParser):
-  """Usage errors as one line (``--help`` shows the usage), like every other chorjax error."""
-
-  def error(self, message: str):
-    self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 def _in_range(low: int, high: int):

@@ -131,6 +131,12 @@ def read_asf(path) -> Asf:
           asf.parent[child] = words[0]
     except (ValueError, IndexError):
       raise UserError(f"{path}:{lineno}: malformed {words[0]!r} line") from None
+  _check_bones(asf, path)
+  return asf
+
+
+def _check_bones(asf: Asf, path: Path) -> None:
+  """Every bone has a direction and a length and a place in the hierarchy; there is at least one."""
   for name, b in asf.bones.items():
     if "direction" not in b or "length" not in b:
       raise UserError(f"{path}:{b['line']}: bone {name!r} lacks a direction or length")
@@ -138,7 +144,6 @@ def read_asf(path) -> Asf:
       raise UserError(f"{path}: bone {name!r} is missing from :hierarchy")
   if not asf.bones:
     raise UserError(f"{path}: no :bonedata")
-  return asf
 
 
 def asf_metres_scale(asf: Asf) -> float:

@@ -90,21 +90,7 @@ def _parse_hierarchy(path: Path, text: str):
       i += 4
     elif up == "CHANNELS":
       need(2)
-      try:
-        n = int(toks[i + 1][1])
-      except ValueError:
-        raise UserError(f"{path}:{line}: CHANNELS needs a count") from None
-      need(2 + n)
-      names = [t.lower() for _, t in toks[i + 2 : i + 2 + n]]
-      bad = [c for c in names if c not in _ROT and c not in _POS]
-      if bad or n not in (3, 6) or len(set(names)) != n:
-        raise UserError(
-          f"{path}:{line}: channel-count mismatch, unknown or repeated channel ({n} declared: {' '.join(names)[:60]})"
-        )
-      if joints[stack[-1]].channels:
-        raise UserError(f"{path}:{line}: a second CHANNELS line for {joints[stack[-1]].name}")
-      joints[stack[-1]].channels = names
-      i += 2 + n
+      i = _read_channels(path, toks, i, joints[stack[-1]])
     elif tok == "}":
       if not stack:
         raise UserError(f"{path}:{line}: unbalanced '}}'")
@@ -116,14 +102,41 @@ def _parse_hierarchy(path: Path, text: str):
       raise UserError(f"{path}:{line}: unexpected {tok[:30]!r} in HIERARCHY")
   if stack or not joints:
     raise UserError(f"{path}:{toks[-1][0]}: truncated HIERARCHY (unclosed braces)")
-  if i < len(toks):  # a second ROOT, a stray brace or junk: the file holds one skeleton, closed once
+  _check_names(path, joints, toks, i)
+  return joints
+
+
+def _read_channels(path: Path, toks, i: int, joint: _Joint) -> int:
+  """Reads ``CHANNELS n name...`` at token ``i`` into ``joint``; returns the next token's index."""
+  line = toks[i][0]
+  try:
+    n = int(toks[i + 1][1])
+  except ValueError:
+    raise UserError(f"{path}:{line}: CHANNELS needs a count") from None
+  if i + 2 + n > len(toks):
+    raise UserError(f"{path}:{toks[-1][0]}: truncated HIERARCHY (unexpected end of file)")
+  names = [t.lower() for _, t in toks[i + 2 : i + 2 + n]]
+  bad = [c for c in names if c not in _ROT and c not in _POS]
+  if bad or n not in (3, 6) or len(set(names)) != n:
+    raise UserError(
+      f"{path}:{line}: channel-count mismatch, unknown or repeated channel ({n} declared: {' '.join(names)[:60]})"
+    )
+  if joint.channels:
+    raise UserError(f"{path}:{line}: a second CHANNELS line for {joint.name}")
+  joint.channels = names
+  return i + 2 + n
+
+
+def _check_names(path: Path, joints, toks, i: int) -> None:
+  """Nothing after the ROOT's closing brace (a second ROOT, a stray brace, junk: one skeleton, closed once)
+  and no joint name twice (retargeting and mapping go by name)."""
+  if i < len(toks):
     raise UserError(f"{path}:{toks[i][0]}: unexpected {toks[i][1][:30]!r} after the ROOT's closing brace")
   seen: dict[str, int] = {}
   for j in joints:
     if j.name in seen:
       raise UserError(f"{path}:{j.line}: joint name {j.name!r} is used twice (first on line {seen[j.name]})")
     seen[j.name] = j.line
-  return joints
 
 
 def _parse_motion(path: Path, text: str, num_channels: int):

@@ -209,18 +209,8 @@ def load_dataset(data_cfg) -> Dataset:
   rest_notes: list[str] = []
   motions = conform(read_takes([data_cfg.dataset], data_cfg), data_cfg, mappings, rest_notes)
   motions, fps, notes = one_rate(motions, data_cfg.seq_length)
-  notes = rest_notes + notes
+  notes = rest_notes + notes + _usable(motions, data_cfg)
   names = [m.name for m in motions]
-  if len(set(names)) != len(names):
-    raise UserError(f"{data_cfg.dataset}: two takes share a name; ids come from file names")
-  need = data_cfg.seq_length + 1
-  for m in motions:
-    if m.num_frames < need:
-      raise UserError(f"{m.source}: {m.num_frames} frames, shorter than one window (data.seq_length + 1 = {need})")
-  frozen = [m.name for m in motions if not np.ptp(m.positions, axis=0).max() > 0]
-  if frozen and len(frozen) == len(motions):
-    raise UserError(f"{data_cfg.dataset}: no take moves (every frame of each is one pose): nothing to learn")
-  notes += [f"warning: take {n} does not move (every frame is one pose): remove it unless you mean it" for n in frozen]
   id_map = {n: i for i, n in enumerate(names)}
   val_names = _val_names(names, data_cfg.val_takes)
   train_names = [n for n in names if n not in val_names]
@@ -273,6 +263,23 @@ def load_dataset(data_cfg) -> Dataset:
     fps,
     tuple(notes),
   )
+
+
+def _usable(motions, data_cfg) -> list[str]:
+  """UserError for takes training cannot use (two of one name, shorter than a window, none that moves); a
+  warning per take that does not move."""
+  names = [m.name for m in motions]
+  if len(set(names)) != len(names):
+    raise UserError(f"{data_cfg.dataset}: two takes share a name; ids come from file names")
+  need = data_cfg.seq_length + 1
+  for m in motions:
+    if m.num_frames < need:
+      raise UserError(f"{m.source}: {m.num_frames} frames, shorter than one window (data.seq_length + 1 = {need})")
+  dataset = data_cfg.dataset
+  frozen = [m.name for m in motions if not np.ptp(m.positions, axis=0).max() > 0]
+  if frozen and len(frozen) == len(motions):
+    raise UserError(f"{dataset}: no take moves (every frame of each is one pose): nothing to learn")
+  return [f"warning: take {n} does not move (every frame is one pose): remove it unless you mean it" for n in frozen]
 
 
 def dataset_notes(ds: Dataset) -> list[str]:
