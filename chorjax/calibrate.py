@@ -51,7 +51,7 @@ def measure(samples, reference, root: int, fps: float) -> dict:
   lag = max(round(0.5 * fps), 1)
   disp, rough = metrics.reference_rates(reference, root, lag)
   speed = lambda ts: np.mean([metrics.joint_speed(t).mean() for t in ts])
-  travel = lambda ts: np.mean([np.linalg.norm(np.diff(t[:, root], axis=0), axis=-1).mean() for t in ts])
+  travel = lambda ts: np.mean([metrics.root_travel(t, root).mean() for t in ts])
   return {
     "movement": float(np.mean([metrics.displacement(s, root, lag) for s in samples]) / disp),
     "jitter": float(np.mean([metrics.roughness(s) for s in samples]) / rough),

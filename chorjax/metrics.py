@@ -40,6 +40,11 @@ def joint_speed(pos_TxJx3) -> np.ndarray:
   return np.linalg.norm(np.diff(pos_TxJx3, axis=0), axis=-1).mean(-1)
 
 
+def root_travel(pos_TxJx3, root: int) -> np.ndarray:
+  """``[T-1]``: the root's path length per frame (``root_travel`` in eval is its mean / the reference's)."""
+  return np.linalg.norm(np.diff(pos_TxJx3[:, root], axis=0), axis=-1)
+
+
 def speed_ratio(pos_TxJx3, data_speed: float) -> float:
   """Mean frame-to-frame joint speed / the data's. Not a measure of freezing: trembling in place is
   fast; see :func:`displacement`."""

@@ -201,7 +201,7 @@ def _novelty(motions, reference, train, unseen, skeleton: Skeleton, size: float,
 def _travel_and_train_reference(motions, reference, skeleton, train, unseen, features, window, splits, seed) -> dict:
   """``root_travel`` (the root's path per frame / the reference's) and, when the reference is held-out takes
   and the training takes are given, ``fid_k_train`` / ``fid_g_train``: the training takes scored as a sample."""
-  travel = lambda p: np.linalg.norm(np.diff(p[:, skeleton.root], axis=0), axis=-1)
+  travel = lambda p: metrics.root_travel(p, skeleton.root)
   ref_travel = float(np.mean(np.concatenate([travel(t) for t in reference])))
   out: dict = {"root_travel": spread([float(travel(m).mean() / max(ref_travel, 1e-12)) for m in motions])}
   for name, feats, floor in (("fid_k_train", features[0], 1e-10), ("fid_g_train", features[1], 0.05)):

@@ -65,3 +65,21 @@ def read_events(event_file: Path) -> tuple[dict, dict]:
       else:
         scalars.setdefault(v.tag, []).append((ev.step, v.simple_value))
   return scalars, images
+
+
+def read_or_refused(path: Path, **kw):
+  """The motions read from ``path``, or None after a one-line ``UserError`` that names the file; whatever is
+  accepted must be finite and hold frames (the property every reader test asserts)."""
+  import numpy as np
+
+  from chorjax.data.dataset import read_motions
+  from chorjax.errors import UserError
+
+  try:
+    motions = read_motions(path, **kw)
+  except UserError as e:
+    assert "\n" not in str(e) and (path.name in str(e) or str(path.parent) in str(e)), str(e)
+    return None
+  for m in motions:
+    assert m.num_frames > 0 and np.isfinite(m.positions).all()
+  return motions

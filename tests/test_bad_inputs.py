@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import tiny_config
+from helpers import read_or_refused, tiny_config
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -476,17 +476,6 @@ def test_a_temporary_file_left_by_a_killed_write_is_cleaned_at_the_next_write(tm
 # ---------------------------------------------------------------- property-based: the readers
 
 
-def _read(path):
-  try:
-    motions = read_motions(path)
-  except UserError as e:
-    assert "\n" not in str(e) and (path.name in str(e) or str(path.parent) in str(e)), str(e)
-    return None
-  for m in motions:  # whatever is accepted is finite and sane
-    assert m.num_frames > 0 and np.isfinite(m.positions).all()
-  return motions
-
-
 SUFFIXES = [".csv", ".bvh", ".npz", ".c3d", ".amc"]
 
 
@@ -497,7 +486,7 @@ def test_random_bytes_are_read_or_refused_in_one_line(tmp_path, data, suffix):
   path.write_bytes(data)
   if suffix == ".amc":
     (tmp_path / "mjackson.asf").write_text(ASF.read_text())
-  _read(path)
+  read_or_refused(path)
 
 
 def _real(suffix) -> bytes:
@@ -527,14 +516,14 @@ def test_mutated_real_files_are_read_or_refused_in_one_line(tmp_path, suffix, ed
   path.write_bytes(data[: max(int(cut * len(data)), 1)])
   if suffix == ".amc":
     (tmp_path / "mjackson.asf").write_text(ASF.read_text())
-  _read(path)
+  read_or_refused(path)
 
 
 def test_a_zip_that_is_not_a_sample_is_refused(tmp_path):
   path = tmp_path / "z.npz"
   with zipfile.ZipFile(path, "w") as z:
     z.writestr("positions.npy", b"garbage")
-  assert _read(path) is None
+  assert read_or_refused(path) is None
 
 
 def test_the_cli_drops_only_orbax_leftovers_among_unraisable_exceptions():

@@ -17,11 +17,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import read_or_refused
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from chorjax.data.dataset import bundled_path, read_motions
-from chorjax.errors import UserError
 
 settings.register_profile(
   "ci", max_examples=40, derandomize=True, deadline=None, suppress_health_check=list(HealthCheck)
@@ -92,18 +92,6 @@ EDITS = st.lists(
   min_size=1,
   max_size=5,
 )
-
-
-def read_or_refused(path: Path, **kw):
-  """The motions read from ``path``, or None after a one-line ``UserError`` that names the file."""
-  try:
-    motions = read_motions(path, **kw)
-  except UserError as e:
-    assert "\n" not in str(e) and (path.name in str(e) or str(path.parent) in str(e)), str(e)
-    return None
-  for m in motions:  # whatever is accepted is finite and sane
-    assert m.num_frames > 0 and np.isfinite(m.positions).all()
-  return motions
 
 
 def _fresh(tmp_path_factory) -> Path:
