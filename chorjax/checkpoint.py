@@ -17,6 +17,7 @@ import contextlib
 import logging
 import shutil
 import time
+import warnings
 from pathlib import Path
 
 import jax
@@ -90,6 +91,7 @@ def wait(manager: ocp.CheckpointManager) -> None:
 def close_quietly(manager: ocp.CheckpointManager) -> None:
   """Waits and closes on the way out of an error (the error that is already on its way is the one to
   report); on success paths :func:`wait` has run before."""
+  _quiet_abandoned_writes()
   with contextlib.suppress(Exception):
     manager.wait_until_finished()
   with contextlib.suppress(Exception):
@@ -103,6 +105,7 @@ def _writing(manager, step: int | None):
     yield
   except Exception as e:  # orbax and tensorstore surface a failed write in several types
     _remove_partial(manager)
+    _quiet_abandoned_writes()
     text = str(e)
     known = (
       "No space left on device",
@@ -114,6 +117,16 @@ def _writing(manager, step: int | None):
     reason = next((k for k in known if k in text), _first_line(e))
     at = f" at step {step}" if step is not None else ""
     raise UserError(f"{manager.directory}: the checkpoint{at} could not be written ({reason})") from None
+
+
+def _quiet_abandoned_writes() -> None:
+  """After a failed write, orbax's unfinished write coroutines are collected un-awaited, some only at exit,
+  and Python warns of each on stderr ("coroutine 'async_serialize_from_host.<locals>.write_fragment' was
+  never awaited"). The failure reaches the user as one line (a UserError), so those warnings are dropped:
+  only for orbax's coroutines, and only once a write has failed."""
+  warnings.filterwarnings(
+    "ignore", message=r"coroutine '.*(serialize|write).*' was never awaited", category=RuntimeWarning
+  )
 
 
 def _remove_partial(manager) -> None:
