@@ -46,17 +46,34 @@ def objective(measured: dict) -> float:
   return float(sum(abs(np.log(max(measured[k], 1e-9))) for k in MEASURES))
 
 
-def measure(samples, reference, root: int, fps: float) -> dict:
-  """``MEASURES`` of samples ``[B, T, J, 3]`` / the reference takes' (y-up or not: both alike)."""
+def reference_rates(reference, root: int, fps: float) -> dict:
+  """The reference takes' own rates, what ``measure`` divides by (computed once per search)."""
   lag = max(round(0.5 * fps), 1)
   disp, rough = metrics.reference_rates(reference, root, lag)
-  speed = lambda ts: np.mean([metrics.joint_speed(t).mean() for t in ts])
-  travel = lambda ts: np.mean([metrics.root_travel(t, root).mean() for t in ts])
   return {
-    "movement": float(np.mean([metrics.displacement(s, root, lag) for s in samples]) / disp),
-    "jitter": float(np.mean([metrics.roughness(s) for s in samples]) / rough),
-    "speed": float(speed(samples) / max(speed(reference), 1e-12)),
-    "root_travel": float(travel(samples) / max(travel(reference), 1e-12)),
+    "lag": lag,
+    "movement": disp,
+    "jitter": rough,
+    "speed": max(_speed(reference), 1e-12),
+    "root_travel": max(_travel(reference, root), 1e-12),
+  }
+
+
+def _speed(takes) -> float:
+  return float(np.mean([metrics.joint_speed(t).mean() for t in takes]))
+
+
+def _travel(takes, root: int) -> float:
+  return float(np.mean([metrics.root_travel(t, root).mean() for t in takes]))
+
+
+def measure(samples, rates: dict, root: int) -> dict:
+  """``MEASURES`` of samples ``[B, T, J, 3]`` / the reference's ``rates`` (y-up or not: both alike)."""
+  return {
+    "movement": float(np.mean([metrics.displacement(s, root, rates["lag"]) for s in samples]) / rates["movement"]),
+    "jitter": float(np.mean([metrics.roughness(s) for s in samples]) / rates["jitter"]),
+    "speed": _speed(samples) / rates["speed"],
+    "root_travel": _travel(samples, root) / rates["root_travel"],
   }
 
 
@@ -64,10 +81,11 @@ def search(draw, reference, root: int, fps: float, grid: dict | None = None, log
   """``(best settings, table)``: every combination of ``grid`` drawn by ``draw(settings) -> [B, T, J, 3]``
   and measured against ``reference``; the table rows are ``(settings, measures, objective)``."""
   grid = grid or GRID
+  rates = reference_rates(reference, root, fps)
   table = []
   for values in itertools.product(*grid.values()):
     settings = dict(zip(grid, values))
-    measured = measure(draw(settings), reference, root, fps)
+    measured = measure(draw(settings), rates, root)
     table.append((settings, measured, objective(measured)))
     if log:
       log(f"  {settings}: " + ", ".join(f"{k.replace('_', ' ')} {v:.3f}" for k, v in measured.items()))

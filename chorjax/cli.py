@@ -247,13 +247,13 @@ def _sample(args) -> int:
 
   _counts(args, frames=1, num=1)
   out, _ = _output(args.output, (".csv", ".npz", ".bvh", ".html"))
-  paths = _sample_paths(out, args.num)
-  _refuse_existing(paths, args.force)  # the files really written (OUT_k.csv for several dancers)
   character = _character(args.skeleton, out)
   run = load_run(args.workdir, args.checkpoint).generating("sample")
   if character is not None and run.features.skeleton.name != "mpii16":
     raise UserError(f"--skeleton: {args.workdir} dances on its own skeleton, not the 16 joints it retargets from")
-  run.check_drawn(args.frames * args.num, f"--frames {args.frames} x --num {args.num}")
+  run.check_drawn(args.frames * args.num, f"--frames {args.frames} x --num {args.num}")  # before naming 10^7 files
+  paths = _sample_paths(out, args.num)
+  _refuse_existing(paths, args.force)  # the files really written (OUT_k.csv for several dancers)
   pos, settings = sample_dancers(
     run, args.frames, args.num, args.seed, args.prime, args.motion, args.mix, _controls(args)
   )

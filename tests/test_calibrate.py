@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from helpers import QUICKSTART_SAMPLING, tiny_config
 
-from chorjax import cli
+from chorjax import calibrate, cli
 from chorjax.calibrate import calibration_path, search
 from chorjax.data.npz import read_npz
 from chorjax.run import CALIBRATED, load_run
@@ -15,6 +15,21 @@ from chorjax.sample import dance
 from chorjax.training import train_and_evaluate
 
 GRID = {"noise_smoothing": (0.6, 0.75, 0.85, 0.95), "sigma_temperature": (0.8, 0.9, 1.0, 1.15, 1.3, 1.5)}
+# What the commands below search: every control of the shipped grid, two values of two (the whole grid,
+# 180 draws, would take most of a minute for what these tests check).
+SMALL = {
+  "noise_smoothing": (0.75, 0.9),
+  "sigma_temperature": (1.0,),
+  "persistence": (0.0,),
+  "crossfade": (0.8,),
+  "foot_lock": (True, False),
+}
+
+
+@pytest.fixture
+def small_grid(monkeypatch):
+  assert set(SMALL) == set(calibrate.GRID) == set(CALIBRATED)
+  monkeypatch.setattr(calibrate, "GRID", SMALL)
 
 
 @pytest.fixture(scope="module")
@@ -46,13 +61,13 @@ def test_calibration_recovers_the_settings_that_drew_the_reference(run_dir, true
   assert len(table) == 24 and min(o for *_, o in table) < 0.2  # four measures within ~5% of the reference's
 
 
-def test_calibrate_records_the_settings_and_the_run_uses_them_unless_told(run_dir, tmp_path, capsys):
+def test_calibrate_records_the_settings_and_the_run_uses_them_unless_told(run_dir, tmp_path, capsys, small_grid):
   args = ["calibrate", str(run_dir), "--frames", "200", "--num", "2"]
   assert cli.main(args) == 0
   saved = json.loads(calibration_path(run_dir).read_text())
   chosen = saved["settings"]
   assert set(chosen) == set(CALIBRATED) and saved["reference"] == "training takes"  # a canonical run: feet too
-  assert len(saved["table"]) == 180 and "calibrated:" in capsys.readouterr().out
+  assert len(saved["table"]) == 4 and "calibrated:" in capsys.readouterr().out
   assert {"movement", "jitter", "speed", "root_travel", "objective"} <= set(saved["table"][0])
   assert cli.main(args) == 2  # an existing calibration is not replaced without --force
   assert "calibration.json" in capsys.readouterr().err
@@ -69,7 +84,7 @@ def test_calibrate_records_the_settings_and_the_run_uses_them_unless_told(run_di
   calibration_path(run_dir).unlink()
 
 
-def test_a_run_keeps_its_best_checkpoint_and_calibrates_it_when_told(tmp_path):
+def test_a_run_keeps_its_best_checkpoint_and_calibrates_it_when_told(tmp_path, small_grid):
   """train.keep = "best": sample, eval, calibrate and live default to the checkpoint with the lowest
   validation loss (lr 0.3 makes this tiny run's held-out loss rise at the end); train.calibrate: the
   settings are chosen after training, on that checkpoint, and the end sample is drawn with them."""
