@@ -368,6 +368,7 @@ METRIC_KEYS = (
   "div_g",
   "pfc",
   "foot_sliding",
+  "airborne",
   "novelty",
   "speed",
   "root_travel",
@@ -592,7 +593,9 @@ def _controls(args) -> dict:
     "greedy": True if args.greedy else None,
     "rigid_bones": args.rigid_bones,
     "foot_lock": args.foot_lock,
+    "ground": args.ground,
     "clamp": args.clamp,
+    "clamp_steps": args.clamp_steps,
   }
 
 
@@ -615,6 +618,16 @@ def _add_checkpoint_args(p) -> None:
     "(default kept: its train.keep, the latest unless set to best)",
   )
   p.add_argument("--force", action="store_true", help="overwrite the output if it exists")
+
+
+# The on/off sampling controls: --FLAG / --no-FLAG (sample, eval).
+SWITCHES = (
+  ("rigid-bones", "decode with the training takes' bone lengths"),
+  ("foot-lock", "canonical runs: feet in contact do not slide"),
+  ("ground", "canonical runs: feet in contact stand on the floor, no floating"),
+  ("clamp", "clip every generated frame to the training features' range"),
+  ("clamp-steps", "clip every frame's change to the training frames' changes"),
+)
 
 
 def _add_sampling_args(p) -> None:
@@ -663,21 +676,9 @@ def _add_sampling_args(p) -> None:
     help="hold the MDN scales at most at their Q quantile on the training frames, 0 <= Q < 1, 0 = off "
     "(default: the run's sample.scale_cap)",
   )
-  p.add_argument(
-    "--rigid-bones",
-    action=argparse.BooleanOptionalAction,
-    help="decode with the training takes' bone lengths (default: the run's sample.rigid_bones)",
-  )
-  p.add_argument(
-    "--foot-lock",
-    action=argparse.BooleanOptionalAction,
-    help="canonical runs: feet in contact do not slide (default: the run's sample.foot_lock)",
-  )
-  p.add_argument(
-    "--clamp",
-    action=argparse.BooleanOptionalAction,
-    help="clip every generated frame to the training features' range (default: the run's sample.clamp)",
-  )
+  for flag, what in SWITCHES:
+    key = flag.replace("-", "_")
+    p.add_argument(f"--{flag}", action=argparse.BooleanOptionalAction, help=f"{what} (default: the run's sample.{key})")
   p.add_argument("--seed", type=int, default=0, help="sampling seed: the same seed draws the same dance (default 0)")
   _add_checkpoint_args(p)
 

@@ -347,11 +347,24 @@ class SampleConfig:
     "travels by what its legs do",
     resumable=True,
   )
+  ground: bool = _field(
+    False,
+    "canonical features: a foot the model says is in contact with the floor stands on it (the body is moved "
+    "up or down to the training takes' floor, smoothly): no floating, no feet sunk into the floor",
+    resumable=True,
+  )
   clamp: bool = _field(
     False,
     "every generated frame is clipped, feature by feature, to the range the training frames span before "
     "it is fed back: no root speed, pose or joint velocity beyond what the data shows (the model is never "
     "fed a frame unlike its training inputs)",
+    resumable=True,
+  )
+  clamp_steps: bool = _field(
+    False,
+    "every generated frame's change from the previous one is clipped, feature by feature, to the range of "
+    "the training frames' changes: no pose, height or speed that jumps in one frame further than the data "
+    "ever does (a mixture component that flickers for a frame)",
     resumable=True,
   )
   pace: float = _field(
@@ -378,7 +391,7 @@ class SampleConfig:
     """How to draw and decode a dance (``sample.dance``): each of ``CONTROLS`` as given, where given and
     not None, else this config's."""
     out = {k: getattr(self, k) if given.get(k) is None else given[k] for k in self.CONTROLS}
-    flags = ("greedy", "rigid_bones", "foot_lock", "clamp")
+    flags = ("greedy", "rigid_bones", "foot_lock", "ground", "clamp", "clamp_steps")
     return {**out, **{k: bool(out[k]) for k in flags}}
 
   CONTROLS = (
@@ -392,7 +405,9 @@ class SampleConfig:
     "scale_cap",
     "rigid_bones",
     "foot_lock",
+    "ground",
     "clamp",
+    "clamp_steps",
   )
 
 

@@ -202,6 +202,7 @@ COLUMNS = [
   ("root_step_max", "root step max", "min"),
   ("foot_sliding", "foot slide", "data:data_foot_sliding"),
   ("pfc", "PFC", "data:data_pfc"),
+  ("airborne", "airborne", "data:airborne_real"),
   ("fid_k", "FID_k / real", "real"),
   ("fid_g", "FID_g / real", "real"),
   ("fid_k", "FID_k / train takes'", "train"),

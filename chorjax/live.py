@@ -62,11 +62,11 @@ class Stream:
   """
 
   def __init__(self, run, sampling: dict, weights_M, seed: int, chunk: int):
-    from chorjax.sample import draw_controls
+    from chorjax.sample import decoding, draw_controls
 
     self.run, self.features, self.chunk = run, run.features, chunk
     self.draw = draw_controls(run.features, sampling)
-    self.decoding = {"rigid": sampling["rigid_bones"], "lock_feet": sampling["foot_lock"]}
+    self.decoding = decoding(sampling)
     self.weights = np.asarray(weights_M, np.float32)
     self.key, self.count = jax.random.key(seed), 0
     self.keep = run.config.data.seq_length  # frames a re-prime teacher-forces

@@ -250,12 +250,18 @@ class Run:
     check_memory(frames * (f.dim + f.skeleton.num_joints * 3) * 8 * 6, what)
 
   def ranged(self, sampling: dict) -> Run:
-    """This run with the training range and pace that ``sampling`` (``clamp``, ``pace``) holds to, and
-    the scale ceiling of ``scale_cap`` (measured on the model's training frames). Runs trained before
-    the range and pace were recorded get them from their training data; both read the training data,
-    which must still give the very normalization the run was trained with."""
+    """This run with the training range, per-frame changes and pace that ``sampling`` (``clamp``,
+    ``clamp_steps``, ``pace``) holds to, the floor ``ground`` stands on, and the scale ceiling of ``scale_cap``
+    (measured on the model's training frames). Runs trained before those were recorded get them from their
+    training data; both read the training data, which must still give the very normalization the run was
+    trained with."""
     f = self.features
-    needs = (sampling.get("clamp") and f.low is None) or (sampling.get("pace") and f.pace is None)
+    needs = (
+      (sampling.get("clamp") and f.low is None)
+      or (sampling.get("pace") and f.pace is None)
+      or (sampling.get("ground") and f.floor is None and f.representation == "canonical")
+      or (sampling.get("clamp_steps") and f.step_low is None)
+    )
     if not needs and not sampling.get("scale_cap"):
       return self
     from chorjax.data.dataset import load_dataset
@@ -272,7 +278,8 @@ class Run:
     same = fresh.dim == f.dim and close(fresh.mean, f.mean) and close(fresh.std, f.std)
     if not same:
       raise UserError(f"{self.workdir}: sampling needs {what} from its training data, which changed")
-    stats = {k: getattr(fresh, k) for k in (*Features.RANGES, "pace_lag", "pace")} if needs else {}
+    keys = (*Features.RANGES, *Features.STEPS, "pace_lag", "pace", "floor")
+    stats = {k: getattr(fresh, k) for k in keys} if needs else {}
     f = dataclasses.replace(f, **stats)
     f = with_ceiling(f, self.graphdef, self.params, ds.train, self.config.data.seq_length, sampling)
     return dataclasses.replace(self, features=f)

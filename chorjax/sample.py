@@ -65,7 +65,9 @@ def generate(
     persistence: added to the log-weight of the previous frame's mixture component.
     crossfade: a change of component glides: the jump between the means decays by this factor per frame.
     bounds: optional ``(low [D], high [D])``: every drawn frame is clipped to them before it is fed back
-      and returned (``Features.low``/``high``: the training range; ``sample.clamp``).
+      and returned (``Features.low``/``high``: the training range; ``sample.clamp``); with
+      ``(step_low [D], step_high [D])`` after them, its change from the previous frame is clipped to those
+      first (``sample.clamp_steps``; the first frame's change counts from the mean pose or the prime's last frame).
     pace, pace_lag, pace_target: the pace governor (0 = off; :func:`_generate_smoothly`); ``pace_target``
       is ``(the training pace over pace_lag frames, [D] weights that average the pose features)``.
     scale_cap: optional ``[S]`` ceiling on the MDN scales (``run.scale_ceiling``; ``sample.scale_cap``).
@@ -81,7 +83,7 @@ def generate(
     def body(c, k):
       carry, x = c
       carry, out = model.step(carry, x)
-      x = _clip(model.sample(out, k, pi_temperature, sigma_temperature, greedy), bounds)
+      x = _clip(model.sample(out, k, pi_temperature, sigma_temperature, greedy), bounds, x)
       return (carry, x), x
 
     _, xs_NxBxD = jax.lax.scan(body, (carry, x0), jax.random.split(key, num_frames), unroll=UNROLL)
@@ -115,8 +117,14 @@ def _draw_args(pi_temperature, sigma_temperature, persistence, crossfade, scale_
   }
 
 
-def _clip(x_BxD, bounds):
-  return x_BxD if bounds is None else jnp.clip(x_BxD, *bounds)
+def _clip(x_BxD, bounds, previous_BxD=None):
+  """``x`` held to ``bounds``: ``(low, high)``, or ``(low, high, step_low, step_high)`` where its change from
+  ``previous`` is held to the steps first (``sample.clamp_steps``)."""
+  if bounds is None:
+    return x_BxD
+  if len(bounds) == 4 and previous_BxD is not None:
+    x_BxD = previous_BxD + jnp.clip(x_BxD - previous_BxD, bounds[2], bounds[3])
+  return jnp.clip(x_BxD, bounds[0], bounds[1])
 
 
 def _generate_smoothly(
@@ -149,15 +157,15 @@ def _smooth_scan(model, state, key, num_frames: int, noise_smoothing: float, con
   keep = 1.0 - 1.0 / (10 * lag)  # the running pace forgets over about ten lags (5 s)
 
   def body(c, k):
-    carry, x, noise, drawn, (recent, at, own) = c
-    carry, out = model.step(carry, x)
+    carry, previous, noise, drawn, (recent, at, own) = c
+    carry, out = model.step(carry, previous)
     k_comp, k_noise = jax.random.split(k)
     noise, eps_BxD = smooth_noise(noise, k_noise, noise_smoothing)
     sigma = controls["sigma_temperature"]
     if pacing:
       sigma = sigma * jnp.clip((ref / jnp.maximum(own, 1e-6)) ** gain, 0.5, 2.0)[:, None]
     x, drawn = model.draw(out, k_comp, eps_BxD, drawn, **{**controls, "sigma_temperature": sigma})
-    x = _clip(x, bounds)
+    x = _clip(x, bounds, previous)
     if pacing:
       own = keep * own + (1 - keep) * (jnp.abs(x - recent[at]) @ weights)
       recent, at = recent.at[at].set(x), (at + 1) % lag
@@ -194,12 +202,17 @@ def dance(graphdef, params, features, motion, key, num_frames: int, controls: di
     z = generate_sequences(
       graphdef, params, key, num=int(np.shape(motion)[0]), num_frames=num_frames, projection=projection, bounds=bounds
     )
-    return np.asarray(features.decode(z, rigid=controls["rigid_bones"], lock_feet=controls["foot_lock"]))
+    return np.asarray(features.decode(z, **decoding(controls)))
   drawn = draw_controls(features, controls)
   z = generate(graphdef, params, motion, key, num_frames=num_frames, prime_BxPxD=prime_BxPxD, **drawn)
   if prime_BxPxD is not None:
     z = np.concatenate([prime_BxPxD, np.asarray(z)], axis=1)
-  return np.asarray(features.decode(z, rigid=controls["rigid_bones"], lock_feet=controls["foot_lock"]))
+  return np.asarray(features.decode(z, **decoding(controls)))
+
+
+def decoding(controls: dict) -> dict:
+  """``Features.decode``'s keyword arguments for ``controls`` (``SampleConfig.controls``)."""
+  return {"rigid": controls["rigid_bones"], "lock_feet": controls["foot_lock"], "ground": controls.get("ground", False)}
 
 
 def draw_controls(features, controls: dict) -> dict:
@@ -207,16 +220,30 @@ def draw_controls(features, controls: dict) -> dict:
   ones left out, the training range (``clamp``) and pace target (``pace``) filled in from ``features``.
   Raises UserError if the run cannot do what is asked (checked before generating, not after)."""
   try:
-    features.check_decode(controls["rigid_bones"], controls["foot_lock"], controls["clamp"], controls["pace"])
+    features.check_decode(
+      controls["rigid_bones"],
+      controls["foot_lock"],
+      controls["clamp"],
+      controls["pace"],
+      controls.get("ground", False),
+      controls.get("clamp_steps", False),
+    )
     if controls.get("scale_cap") and features.scale_ceiling is None:
       raise ValueError("scale_cap: the run's scale ceiling was not measured (Run.ranged, run.with_ceiling)")
   except ValueError as e:
     raise UserError(str(e)) from None
-  drawn = {k: v for k, v in controls.items() if k not in ("rigid_bones", "foot_lock", "clamp", "scale_cap")}
+  decoded = ("rigid_bones", "foot_lock", "ground", "clamp", "clamp_steps", "scale_cap")
+  drawn = {k: v for k, v in controls.items() if k not in decoded}
   if controls.get("scale_cap"):
     drawn["scale_cap"] = features.scale_ceiling
   if controls["clamp"]:
     drawn["bounds"] = tuple(getattr(features, k) for k in features.RANGES)
+  if controls.get("clamp_steps"):
+    span = drawn.get("bounds") or (
+      np.full(features.dim, -np.inf, np.float32),
+      np.full(features.dim, np.inf, np.float32),
+    )
+    drawn["bounds"] = (*span, *(getattr(features, k) for k in features.STEPS))
   if controls["pace"]:
     weights = np.zeros(features.dim, np.float32)
     weights[features.pose_channels] = 1.0 / len(features.pose_channels)

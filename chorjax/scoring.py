@@ -36,6 +36,8 @@ Keys (a value, or ``{"mean", "sd"}`` over several motions or reference splits):
 * ``div_k`` / ``div_g``: mean pairwise distance between the motions' normalized window features.
 * ``pfc``: EDGE's physical foot contact score; ``foot_sliding``: horizontal foot speed in contact
   (both in body sizes per second; ``data_pfc`` and ``data_foot_sliding`` are the reference's).
+* ``airborne``: the fraction of frames with every foot more than 0.1 body sizes above the floor (floating,
+  or a jump); ``airborne_real``: the reference takes' own (real dance: under 1%).
 * ``novelty``: RMS joint distance (body sizes) from each motion window to its nearest window of the
   training takes (``chorjax metrics``: of the reference); ``novelty_real``: the same for real takes
   that are not training takes (``chorjax metrics``: each reference take against the others).
@@ -283,6 +285,8 @@ def score(
     "data_pfc": float(np.mean([metrics.pfc(t, skeleton, fps, size) for t in reference])),
     "foot_sliding": spread([metrics.foot_sliding(m, skeleton, fps, size) for m in motions]),
     "data_foot_sliding": float(np.mean([metrics.foot_sliding(t, skeleton, fps, size) for t in reference])),
+    "airborne": spread([metrics.airborne(m, skeleton, size) for m in motions]),
+    "airborne_real": float(np.mean([metrics.airborne(t, skeleton, size) for t in reference])),
     **_novelty(motions, reference, train, unseen, skeleton, size, window),
     "speed_ratio": speeds,  # the name before `speed`, kept for older readers; NOT a freeze measure
     "speed": speeds,

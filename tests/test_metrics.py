@@ -367,3 +367,16 @@ def test_the_training_takes_are_the_reference_held_out_figures_are_held_against(
   frozen = np.repeat(unseen[0][:1], 600, axis=0)
   still = score([frozen], unseen, MPII16, 30.0, splits=5)
   assert still["speed"] == 0.0 and still["root_travel"] == 0.0
+
+
+def test_airborne_is_near_zero_for_real_dance_and_counts_the_frames_a_dancer_floats(takes):
+  size = M.body_size(takes["94_10_skeleton_3d"], MPII16)
+  for name, take in takes.items():
+    assert M.airborne(take, MPII16, size) < 0.01, name  # real dance keeps a foot on the floor
+  take = takes["94_10_skeleton_3d"].copy()
+  lifted = np.zeros(len(take), bool)
+  lifted[100:300] = True  # 200 frames carried 0.2 body sizes up: floating
+  take[lifted, :, 1] += 0.2 * size
+  assert M.airborne(take, MPII16, size) == pytest.approx(lifted.mean(), abs=0.01)
+  r = _score(take, takes)
+  assert r["airborne"] == pytest.approx(lifted.mean(), abs=0.01) and r["airborne_real"] < 0.01

@@ -410,6 +410,36 @@ def test_clamp_keeps_every_frame_in_the_training_range(loaded, run_dir, tmp_path
   assert json.loads(str(np.load(out)["meta"]))["settings"]["clamp"] is True
 
 
+def test_clamp_steps_holds_every_change_to_the_training_changes(loaded, run_dir, tmp_path):
+  import dataclasses
+
+  from chorjax.sample import draw_controls
+
+  f = loaded.features
+  train = [x for _, x in load_dataset(loaded.config.data).train]
+  steps = np.concatenate([np.diff(x, axis=0) for x in train])
+  np.testing.assert_array_equal(f.step_low, steps.min(0))
+  np.testing.assert_array_equal(f.step_high, steps.max(0))
+  w = jnp.tile(as_weights(jnp.array([3]), 10), (4, 1))
+  wide = {"pi_temperature": 1.0, "sigma_temperature": 3.0, "noise_smoothing": 0.5}
+  gen = lambda **kw: np.asarray(generate(loaded.graphdef, loaded.params, w, jax.random.key(0), num_frames=200, **kw))
+  controls = loaded.sampling(clamp=True, clamp_steps=True)
+  bounds = draw_controls(f, controls)["bounds"]
+  assert len(bounds) == 4
+  free, held = gen(**wide, bounds=bounds[:2]), gen(**wide, bounds=bounds)
+  change = lambda z: np.diff(z, axis=1)
+  tol = 1e-5
+  assert ((change(free) < f.step_low - tol) | (change(free) > f.step_high + tol)).any()  # a wide draw jumps ...
+  assert ((change(held) >= f.step_low - tol) & (change(held) <= f.step_high + tol)).all()  # ... a held one never
+  assert ((held >= f.low) & (held <= f.high)).all() and np.abs(change(held)).mean() > 0  # in range, still moving
+  # a run that records no steps measures them on its training takes
+  old = dataclasses.replace(loaded, features=dataclasses.replace(f, **dict.fromkeys(f.STEPS)))
+  np.testing.assert_array_equal(old.ranged({"clamp_steps": True}).features.step_high, f.step_high)
+  out = tmp_path / "s.npz"
+  assert cli.main(["sample", str(run_dir), "-o", str(out), "--frames", "100", "--clamp-steps"]) == 0
+  assert json.loads(str(np.load(out)["meta"]))["settings"]["clamp_steps"] is True
+
+
 def test_pace_governor_drives_the_dancer_towards_the_training_pace(loaded, run_dir, tmp_path):
   f = loaded.features
   lag = f.pace_lag
@@ -468,8 +498,9 @@ def test_scale_cap_holds_draws_to_the_scales_the_model_predicts_on_its_data(load
   assert "scale_cap" in capsys.readouterr().err
 
 
-def test_foot_lock_needs_the_canonical_representation(run_dir, tmp_path, capsys):
-  assert cli.main(["sample", str(run_dir), "-o", str(tmp_path / "s.csv"), "--foot-lock"]) == 2
+@pytest.mark.parametrize("flag", ["--foot-lock", "--ground"])
+def test_foot_lock_and_ground_need_the_canonical_representation(run_dir, tmp_path, capsys, flag):
+  assert cli.main(["sample", str(run_dir), "-o", str(tmp_path / "s.csv"), flag]) == 2
   err = capsys.readouterr().err
   assert err.count("\n") == 1 and "canonical" in err and not (tmp_path / "s.csv").exists()
 

@@ -207,3 +207,35 @@ def test_a_swinging_foot_called_planted_does_not_drag_the_body():
   contacts = np.ones((3, len(SK.feet)), np.float32)
   np.testing.assert_allclose(tf.lock_feet(pos, contacts, SK.feet, max_step=0.1), pos)
   assert np.asarray(tf.lock_feet(pos, contacts, SK.feet))[2, SK.root, 0] != 0.0  # uncapped, it would
+
+
+@pytest.mark.parametrize("take", TAKES[:3], ids=lambda m: m.name)
+def test_grounded_feet_stand_on_the_floor_and_a_jump_keeps_its_height(take):
+  from chorjax.data.features import floor_height, leg_length
+
+  canon = np.asarray(_features("canonical", take).canonical(take.positions), np.float64)
+  contacts = np.asarray(tf.foot_contacts(canon, SK.feet, leg_length(canon, SK)))
+  floor = floor_height([canon], SK)
+  lowest = lambda p: p[:, list(SK.feet), 1].min(-1)
+  # the take itself: its feet in contact are on its floor already, so grounding hardly moves it
+  same = np.asarray(tf.ground_feet(canon, contacts, SK.feet, floor))
+  assert np.abs(same - canon).max() < 0.1 * leg_length(canon, SK)
+  np.testing.assert_allclose(same[..., [0, 2]], canon[..., [0, 2]], atol=1e-5)  # the path over the floor: kept
+  # floating: 200 frames carried up half a leg; where a foot is in contact it comes back down
+  leg = leg_length(canon, SK)
+  up = canon.copy()
+  up[100:300, :, 1] += 0.5 * leg
+  grounded = np.asarray(tf.ground_feet(up, contacts, SK.feet, floor))
+  touching = (contacts[100:300] > 0.5).any(-1)
+  assert touching.mean() > 0.5
+  inner = slice(103, 297)  # the smoothing window blends the first and last frames of the lift
+  err = np.abs(grounded[inner] - same[inner])[..., 1].max(-1)[(contacts[inner] > 0.5).any(-1)]
+  assert np.mean(err < 1e-4 * leg) > 0.9 and err.max() < 0.05 * leg  # back on the floor (eased near a lift-off)
+  poses = lambda p: p - p[:, SK.root : SK.root + 1]
+  np.testing.assert_allclose(poses(grounded), poses(up), atol=1e-5)  # poses and bones untouched
+  assert np.abs(np.diff(grounded[:, SK.root, 1] - up[:, SK.root, 1])).max() < 0.25 * leg  # eased, not a jump cut
+  # a jump (no foot in contact) keeps its height: the shift before it fades, the dancer is not pulled down
+  air = np.zeros_like(contacts)
+  jumped = np.asarray(tf.ground_feet(up, air, SK.feet, floor))
+  np.testing.assert_allclose(jumped, up, atol=1e-6)
+  assert lowest(grounded).std() < lowest(up).std()

@@ -15,7 +15,7 @@ import numpy as np
 
 from chorjax.data import transforms
 from chorjax.data.csv import read_csv
-from chorjax.data.features import Features, feature_dim
+from chorjax.data.features import Features, feature_dim, floor_height
 from chorjax.data.motion import Motion, bone_lengths
 from chorjax.data.skeletons import get_skeleton
 from chorjax.errors import UserError
@@ -229,7 +229,8 @@ def load_dataset(data_cfg) -> Dataset:
   canon = [np.asarray(proto.canonical(by_name[n].positions)) for n in train_names]
   lengths = np.zeros(skeleton.num_joints, np.float32)
   lengths[[c for _, c in skeleton.bones]] = np.concatenate([bone_lengths(c, skeleton) for c in canon]).mean(0)
-  proto = dataclasses.replace(proto, lengths=lengths)
+  floor = floor_height(canon, skeleton) if data_cfg.representation == "canonical" else None
+  proto = dataclasses.replace(proto, lengths=lengths, floor=floor)
 
   def canon_versions(m: Motion) -> list[np.ndarray]:
     canon = np.asarray(proto.canonical(m.positions))
@@ -303,14 +304,24 @@ def dataset_notes(ds: Dataset) -> list[str]:
 
 
 def _generation_stats(features: Features, train, fps: float) -> Features:
-  """What generation may hold to: the range the encoded training frames span (``sample.clamp``) and
-  their pace, how far the pose features move in half a second (``sample.pace``)."""
+  """What generation may hold to: the range the encoded training frames span (``sample.clamp``), the range
+  of their changes from one frame to the next (``sample.clamp_steps``) and their pace, how far the pose
+  features move in half a second (``sample.pace``)."""
   every = np.concatenate([x for _, x in train])
   lag = max(round(0.5 * fps), 1)
   pose = features.pose_channels
   moved = [np.abs(x[lag:, pose] - x[:-lag, pose]).mean(-1) for _, x in train if len(x) > lag]
   pace = float(np.concatenate(moved).mean())
-  return dataclasses.replace(features, low=every.min(0), high=every.max(0), pace_lag=lag, pace=pace)
+  steps = np.concatenate([np.diff(x, axis=0) for _, x in train if len(x) > 1])
+  return dataclasses.replace(
+    features,
+    low=every.min(0),
+    high=every.max(0),
+    step_low=steps.min(0),
+    step_high=steps.max(0),
+    pace_lag=lag,
+    pace=pace,
+  )
 
 
 class WindowSampler:

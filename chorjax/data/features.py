@@ -37,6 +37,11 @@ class Features:
     pace_lag, pace: how far the training frames' pose moves in ``pace_lag`` frames (half a second): the
       mean absolute change of the normalized ``pose_channels`` over that lag; generation can hold its
       own pace to it (``sample.pace``).
+    step_low, step_high: ``[D]`` the smallest and largest change of each normalized feature from one frame
+      to the next over the training split; generation can hold each frame's change to them
+      (``sample.clamp_steps``).
+    floor: the height of the floor in the training takes (y-up, scaled: the median height of the lowest
+      foot; canonical runs), where ``decode(z, ground=True)`` puts feet in contact.
     scale_ceiling: ``[S]`` the model's own MDN scale ceiling for ``sample.scale_cap`` (measured on the
       training frames when sampling asks for it, ``run.with_ceiling``; not saved with the run).
 
@@ -58,6 +63,9 @@ class Features:
   high: np.ndarray | None = None
   pace_lag: int | None = None
   pace: float | None = None
+  floor: float | None = None
+  step_low: np.ndarray | None = None
+  step_high: np.ndarray | None = None
   scale_ceiling: np.ndarray | None = None
 
   @property
@@ -93,30 +101,37 @@ class Features:
     """Data-space positions ``[..., T, J, 3]`` -> normalized features ``[..., T, D]``."""
     return transforms.normalize(self.represent(self.canonical(pos_TxJx3)), self.mean, self.std)
 
-  def decode(self, z_TxD, place=None, rigid: bool = False, lock_feet: bool = False):
+  def decode(self, z_TxD, place=None, rigid: bool = False, lock_feet: bool = False, ground: bool = False):
     """Normalized features ``[..., T, D]`` -> data-space positions ``[..., T, J, 3]`` (``place``: the
     first frame's ``(heading, x, z)`` for the representations that integrate the root's motion;
     ``rigid``: every bone at the training takes' mean length, see ``transforms.rigid_bones``;
-    ``lock_feet``: feet the features call in contact do not slide, see ``transforms.lock_feet``)."""
-    self.check_decode(rigid, lock_feet)
+    ``lock_feet``: feet the features call in contact do not slide, see ``transforms.lock_feet``;
+    ``ground``: feet the features call in contact stand on the training floor, see ``transforms.ground_feet``)."""
+    self.check_decode(rigid, lock_feet, ground=ground)
     rep = transforms.denormalize(z_TxD, self.mean, self.std)
     pos = _unrepresent(rep, self, place)
     if rigid:
       pos = transforms.rigid_bones(pos, self.skeleton.parents, self.lengths)
+    feet = self.skeleton.feet
+    contacts = rep[..., -len(feet) :]  # canonical features end with the feet's contacts (ground, lock_feet)
+    if ground:
+      assert self.floor is not None  # check_decode
+      pos = transforms.ground_feet(pos, contacts, feet, self.floor)
     if lock_feet:
       leg = leg_length(np.asarray(pos).reshape(-1, *pos.shape[-2:]), self.skeleton)
-      contacts = rep[..., -len(self.skeleton.feet) :]
-      pos = transforms.lock_feet(pos, contacts, self.skeleton.feet, max_step=0.05 * leg)  # foot_contacts' speed
+      pos = transforms.lock_feet(pos, contacts, feet, max_step=0.05 * leg)  # foot_contacts' speed
     return self.uncanonical(pos)
 
-  def decode_after(self, z_TxD, last_z_D, last_pos_Jx3, rigid: bool = False, lock_feet: bool = False):
+  def decode_after(
+    self, z_TxD, last_z_D, last_pos_Jx3, rigid: bool = False, lock_feet: bool = False, ground: bool = False
+  ):
     """Frames that follow one already decoded (normalized ``last_z_D``, at data-space ``last_pos_Jx3``)
     -> data-space positions ``[T, J, 3]`` that continue from it: decoded with that frame as their frame
     0, then turned about the up axis and moved over the floor (the representations that integrate the
     root's motion) so that frame 0 lands where it was. A stream decodes chunk by chunk this way
     (``chorjax live``); the other representations place every frame themselves."""
     z = np.concatenate([np.asarray(last_z_D)[None], np.asarray(z_TxD)], 0)
-    pos = self.canonical(self.decode(z, rigid=rigid, lock_feet=lock_feet))
+    pos = self.canonical(self.decode(z, rigid=rigid, lock_feet=lock_feet, ground=ground))
     if self.representation in ("canonical", "directions"):
       target = self.canonical(np.asarray(last_pos_Jx3))
       turn = 0.0
@@ -127,17 +142,31 @@ class Features:
       pos = transforms.rotate_y(pos - floor(pos[0]), turn) + floor(target)
     return np.asarray(self.uncanonical(pos[1:]), np.float32)
 
-  def check_decode(self, rigid: bool = False, lock_feet: bool = False, clamp: bool = False, pace: float = 0) -> None:
+  def check_decode(
+    self,
+    rigid: bool = False,
+    lock_feet: bool = False,
+    clamp: bool = False,
+    pace: float = 0,
+    ground: bool = False,
+    clamp_steps: bool = False,
+  ) -> None:
     """Raises ValueError if :meth:`decode` (or generation clipped to the training range: ``clamp``)
     cannot do what is asked (callers check before long work)."""
     if clamp and any(getattr(self, k) is None for k in self.RANGES):
       raise ValueError("clamp: this run records no training range (trained before the option existed)")
+    if clamp_steps and any(getattr(self, k) is None for k in self.STEPS):
+      raise ValueError("clamp_steps: this run records no training steps (Run.ranged measures them on its takes)")
     if pace and self.pace is None:
       raise ValueError("pace: this run records no training pace (trained before the option existed)")
     if rigid and self.lengths is None:
       raise ValueError("rigid_bones: this run records no bone lengths (trained before the option existed)")
     if lock_feet and self.representation != "canonical":
       raise ValueError(f"foot_lock: needs data.representation = canonical (this run: {self.representation})")
+    if ground and self.representation != "canonical":
+      raise ValueError(f"ground: needs data.representation = canonical (this run: {self.representation})")
+    if ground and self.floor is None:
+      raise ValueError("ground: this run records no floor height (Run.ranged measures it on the training takes)")
 
   def to_dict(self) -> dict:
     return {
@@ -151,10 +180,11 @@ class Features:
     }
 
   def _optional(self) -> dict:
-    ranges = {k: getattr(self, k) for k in self.RANGES}
-    return {"lengths": self.lengths, **ranges, "pace_lag": self.pace_lag, "pace": self.pace}
+    ranges = {k: getattr(self, k) for k in (*self.RANGES, *self.STEPS)}
+    return {"lengths": self.lengths, **ranges, "pace_lag": self.pace_lag, "pace": self.pace, "floor": self.floor}
 
   RANGES = ("low", "high")
+  STEPS = ("step_low", "step_high")
 
   @classmethod
   def from_dict(cls, d: dict) -> Features:
@@ -165,10 +195,29 @@ class Features:
       float(d["scale"]),
       np.asarray(d["mean"], np.float32),
       np.asarray(d["std"], np.float32),
-      **{k: None if d.get(k) is None else np.asarray(d[k], np.float32) for k in ("lengths", *cls.RANGES)},
+      **{k: None if d.get(k) is None else np.asarray(d[k], np.float32) for k in ("lengths", *cls.RANGES, *cls.STEPS)},
       pace_lag=None if d.get("pace_lag") is None else int(d["pace_lag"]),
       pace=None if d.get("pace") is None else float(d["pace"]),
+      floor=None if d.get("floor") is None else float(d["floor"]),
     )
+
+
+def floor_height(canon_takes, skeleton: Skeleton) -> float:
+  """The floor of y-up takes: the median height of each frame's lowest foot (``Features.floor``)."""
+  feet = list(skeleton.feet)
+  return float(np.median(np.concatenate([np.asarray(c)[:, feet, 1].min(-1) for c in canon_takes])))
+
+
+def principal_axes(frames_NxD) -> np.ndarray:
+  """``[D, D]`` orthogonal: the principal axes of the frames (columns, most variance first, each signed so
+  that its largest entry is positive): the MDN's coordinates under ``model.mdn_basis = "pca"``."""
+  x = np.asarray(frames_NxD, np.float64)
+  if x.ndim != 2 or len(x) < 2:
+    raise ValueError(f"principal_axes: need [N >= 2, D] frames, got {x.shape}")
+  variance, axes = np.linalg.eigh(np.cov(x, rowvar=False))
+  axes = axes[:, np.argsort(variance)[::-1]]
+  signs = np.sign(axes[np.abs(axes).argmax(0), np.arange(axes.shape[1])])
+  return (axes * np.where(signs == 0, 1.0, signs)).astype(np.float32)
 
 
 def feature_dim(skeleton: Skeleton, representation: str) -> int:

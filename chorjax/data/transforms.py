@@ -311,6 +311,32 @@ def lock_feet(pos_xTxJx3, contacts_xTxF, feet: Sequence[int], max_step: float = 
   return pos_xTxJx3 + jnp.concatenate([jnp.zeros_like(back[..., :1, :]), back], -2)[..., None, :]
 
 
+def ground_feet(pos_xTxJx3, contacts_xTxF, feet: Sequence[int], floor: float, hold: float = 0.9, width: int = 2):
+  """The dance moved up or down so that a foot in contact stands on the floor (y-up positions): at each frame
+  where feet are in contact (> 0.5) the body is shifted by ``floor`` minus the lowest such foot's height;
+  frames without contact (a jump, a swing) keep the last shift, fading by ``hold`` per frame, and the shift
+  is averaged over ``2 * width + 1`` frames so that it never jumps. Poses, bone lengths and the horizontal
+  path are unchanged. A model whose feet float above (or sink into) the floor where it says they touch it
+  dances on the floor."""
+  y = pos_xTxJx3[..., jnp.asarray(feet), 1]
+  on = contacts_xTxF > 0.5
+  touching = on.any(-1)
+  target = jnp.where(touching, floor - jnp.min(jnp.where(on, y, jnp.inf), -1), 0.0)
+
+  def step(previous, frame):
+    want, touch = frame
+    shift = jnp.where(touch, want, hold * previous)
+    return shift, shift
+
+  time_first = lambda a: jnp.moveaxis(a, -1, 0)
+  _, shift = jax.lax.scan(step, jnp.zeros(target.shape[:-1], target.dtype), (time_first(target), time_first(touching)))
+  shift = jnp.moveaxis(shift, 0, -1)
+  n = shift.shape[-1]
+  padded = jnp.pad(shift, [(0, 0)] * (shift.ndim - 1) + [(width, width)], mode="edge")
+  eased = jnp.mean(jnp.stack([padded[..., i : i + n] for i in range(2 * width + 1)]), 0)
+  return pos_xTxJx3 + eased[..., None, None] * jnp.array([0.0, 1.0, 0.0])
+
+
 def _build(root_pos, dirs_xJx3, parents: Sequence[int], lengths_J):
   """Joint positions from the root's and, per joint, the direction of its bone (renormalized)."""
   root = int(np.flatnonzero(np.asarray(parents) < 0)[0])
