@@ -112,6 +112,14 @@ class ModelConfig:
   mdn_scale: str = _field(
     "diagonal", "MDN scales: one per dim, or one per component (chor-rnn)", choices=("diagonal", "isotropic")
   )
+  mdn_basis: str = _field(
+    "features",
+    "the coordinates the MDN's diagonal Gaussians live in: 'features' (each normalized feature: a draw's noise "
+    "is independent per feature) or 'pca' (the principal axes of the training frames' features, fixed at the "
+    "start of training and saved with the run: a draw varies the pose along directions the data varies "
+    "together; the likelihood is the same quantity, the basis is a rotation)",
+    choices=("features", "pca"),
+  )
   min_scale: float = _field(1e-3, "floor of MDN scales (normalized units)", minimum=0.0)
   dropout: float = _field(0.0, "dropout rate between layers (same mask at every time step)", minimum=0.0, below=1.0)
   forget_bias: float = _field(1.0, "initial forget-gate bias of (LN-)LSTM cells (notebook: 5.0)")
@@ -128,6 +136,8 @@ class ModelConfig:
   )
 
   def __post_init__(self):
+    if self.mdn_basis == "pca" and self.head != "mdn":
+      raise UserError(f"key 'model.mdn_basis': 'pca' is the MDN head's basis; here model.head is {self.head!r}")
     if self.lstm_kernel == "cudnn" and (self.family, self.cell) != ("rnn", "lstm"):
       raise UserError(
         f"key 'model.lstm_kernel': 'cudnn' runs the rnn family's plain LSTM only (model.family = 'rnn', "

@@ -105,11 +105,17 @@ def create_optimizer(
   if o.name == "adam":
     opt = optax.adam(schedule, b1=o.b1, b2=o.b2)
   elif o.name == "adamw":
-    opt = optax.adamw(schedule, b1=o.b1, b2=o.b2, weight_decay=o.weight_decay)
+    opt = optax.adamw(schedule, b1=o.b1, b2=o.b2, weight_decay=o.weight_decay, mask=_decayed)
   else:
     opt = optax.amsgrad(schedule, b1=o.b1, b2=o.b2)
   chain = [optax.clip_by_global_norm(o.clip_norm)] if o.clip_norm > 0 else []
   return optax.chain(*chain, opt), schedule
+
+
+def _decayed(params):
+  """Weight decay's mask: every parameter but a fixed basis (``model.mdn_basis``), which is never trained."""
+  is_basis = lambda path: any(getattr(k, "key", None) == "basis" for k in path)
+  return jax.tree_util.tree_map_with_path(lambda path, _: not is_basis(path), params)
 
 
 def build_model(
@@ -146,11 +152,19 @@ def step_key(key, step):
   return jax.random.fold_in(key, step)
 
 
-def create_train_state(cfg: Config, dim: int, num_motions: int) -> tuple[dict, StepSpec]:
-  """``({params, opt_state, step}, spec)`` for a fresh run of ``cfg`` (the rnn family) on ``dim`` features."""
+def create_train_state(cfg: Config, dim: int, num_motions: int, basis=None) -> tuple[dict, StepSpec]:
+  """``({params, opt_state, step}, spec)`` for a fresh run of ``cfg`` (the rnn family) on ``dim`` features;
+  ``basis``: the MDN's ``[D, D]`` coordinates where ``model.mdn_basis = "pca"`` (``features.principal_axes``
+  of the training frames)."""
   model = create_model(cfg.model, dim, num_motions, cfg.train.seed)
   graphdef, params = nnx.split(model, nnx.Param)
   params = nnx.to_pure_dict(params)
+  if cfg.model.mdn_basis == "pca":
+    if basis is None or np.shape(basis) != (dim, dim):
+      raise ValueError(
+        f"model.mdn_basis = 'pca' needs a [{dim}, {dim}] basis, got {basis if basis is None else np.shape(basis)}"
+      )
+    params["head"]["basis"] = jnp.asarray(basis, jnp.float32)
   tx, schedule = create_optimizer(cfg)
   state = {"params": params, "opt_state": tx.init(params), "step": jnp.zeros((), jnp.int32)}
   return state, StepSpec(graphdef, tx, schedule, cfg.train.input_noise, cfg.model.dropout, Feedback.of(cfg))

@@ -37,6 +37,7 @@ from chorjax import checkpoint as ckpt
 from chorjax import inbetween
 from chorjax.config import Config, config_diff, config_from_dict, resumable_keys
 from chorjax.data.dataset import Dataset, WindowSampler, dataset_notes, eval_windows, load_dataset
+from chorjax.data.features import principal_axes
 from chorjax.errors import Interrupted, UserError, atomic_write
 from chorjax.gan import check_gan, create_gan_state, gan_train_step
 from chorjax.models import motion_weight_vector
@@ -644,7 +645,8 @@ def _restore_or_init(cfg: Config, workdir: Path, ds: Dataset, manager, parallel)
   elif cfg.model.family == "inbetween":
     state, spec = inbetween.create_inbetween_state(cfg, ds.features)
   else:
-    state, spec = create_train_state(cfg, ds.features.dim, ds.num_motions)
+    basis = principal_axes(np.concatenate([z for _, z in ds.train])) if cfg.model.mdn_basis == "pca" else None
+    state, spec = create_train_state(cfg, ds.features.dim, ds.num_motions, basis)
   steps = sorted(manager.all_steps(), reverse=True)
   damaged = []
   for start in steps:

@@ -107,6 +107,13 @@ class MDNHead(nnx.Module):
   """Mixture density network over the whole D-dim frame (Graves 2013; chor-rnn).
 
   Loss = negative log-likelihood per frame (summed over the D coordinates, averaged over frames).
+
+  With ``basis`` (``model.mdn_basis = "pca"``) the mixture lives in rotated coordinates ``u = x @ B``
+  (``B``: ``[D, D]`` orthogonal, the training frames' principal axes, set once before training by
+  ``run.create_train_state`` and never trained): each component is still diagonal there, so a full
+  covariance in feature space with the data's own axes. ``params`` and the scales ``scale_cap`` holds are
+  in those coordinates; what ``loss``, ``sample``, ``draw`` and ``mean`` take and return are features, as
+  without it. A rotation keeps the likelihood: the NLL is the same quantity either way.
   """
 
   def __init__(
@@ -117,10 +124,25 @@ class MDNHead(nnx.Module):
     num_mixtures: int = 8,
     isotropic: bool = False,
     min_scale: float = 1e-3,
+    basis: bool = False,
     rngs: nnx.Rngs,
   ):
     self.dim, self.num_mixtures, self.isotropic, self.min_scale = dim, num_mixtures, isotropic, min_scale
     self.out = nnx.Linear(hidden, self.num_outputs, rngs=rngs)
+    self.basis = nnx.Param(jnp.eye(dim)) if basis else None  # a Param so checkpoints carry it; never trained
+
+  def _rotation(self):
+    return None if self.basis is None else jax.lax.stop_gradient(self.basis[...])
+
+  def to_basis(self, x_xD):
+    """Features -> the mixture's coordinates."""
+    b = self._rotation()
+    return x_xD if b is None else x_xD @ b
+
+  def from_basis(self, u_xD):
+    """The mixture's coordinates -> features."""
+    b = self._rotation()
+    return u_xD if b is None else u_xD @ b.T
 
   @property
   def num_outputs(self) -> int:
@@ -135,14 +157,15 @@ class MDNHead(nnx.Module):
 
   def loss(self, out_xP, target_xD):
     logpi, mu, scale = self.params(out_xP)
-    nll = -jnp.mean(mdn_log_prob(logpi, mu, scale, target_xD))
-    # The MSE of the mixture mean: comparable with the MSE head.
+    target = self.to_basis(target_xD)
+    nll = -jnp.mean(mdn_log_prob(logpi, mu, scale, target))
+    # The MSE of the mixture mean: comparable with the MSE head (a rotation keeps it).
     mean = jnp.sum(jnp.exp(logpi)[..., None] * mu, axis=-2)
-    return nll, {"nll": nll, "mse": jnp.mean(jnp.square(mean - target_xD)), "min_scale": jnp.min(scale)}
+    return nll, {"nll": nll, "mse": jnp.mean(jnp.square(mean - target)), "min_scale": jnp.min(scale)}
 
   def sample(self, out_BxP, key, pi_temperature=1.0, sigma_temperature=1.0, greedy=False):
     logpi, mu, scale = self.params(out_BxP)
-    return mdn_sample(key, logpi, mu, scale, pi_temperature, sigma_temperature, greedy)
+    return self.from_basis(mdn_sample(key, logpi, mu, scale, pi_temperature, sigma_temperature, greedy))
 
   def draw(
     self,
@@ -162,7 +185,8 @@ class MDNHead(nnx.Module):
     ``persistence`` is added to the previous component's log-weight. ``crossfade``: when the component
     changes, the jump between the two components' means is carried into the frame and decays by this
     factor per frame (0 = off), so a switch is a short glide, not a cut. ``scale_cap`` (``[S]`` or None):
-    the components' scales are held at most at it. Returns ``(frame, state)``.
+    the components' scales are held at most at it. ``noise_BxD``, the offset and ``scale_cap`` are in the
+    mixture's coordinates (``basis``); the frame is features. Returns ``(frame, state)``.
     """
     previous_B, offset_BxD = state
     logpi, mu, scale = self.params(out_BxP)
@@ -173,9 +197,9 @@ class MDNHead(nnx.Module):
     mean_of = lambda c: jnp.take_along_axis(mu, jnp.maximum(c, 0)[:, None, None], axis=1)[:, 0]
     switched = ((comp != previous_B) & (previous_B >= 0))[:, None]
     offset_BxD = crossfade * (offset_BxD + jnp.where(switched, mean_of(previous_B) - mean_of(comp), 0.0))
-    return x + offset_BxD, (comp, offset_BxD)
+    return self.from_basis(x + offset_BxD), (comp, offset_BxD)
 
   def mean(self, out_xP):
     """The mixture's mean frame."""
     logpi, mu, _ = self.params(out_xP)
-    return jnp.sum(jnp.exp(logpi)[..., None] * mu, axis=-2)
+    return self.from_basis(jnp.sum(jnp.exp(logpi)[..., None] * mu, axis=-2))

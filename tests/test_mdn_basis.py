@@ -1,0 +1,90 @@
+"""``model.mdn_basis = "pca"``: the MDN's diagonal Gaussians in the training frames' principal axes."""
+
+import dataclasses
+
+import jax
+import numpy as np
+import pytest
+from flax import nnx
+from helpers import QUICKSTART_SAMPLING, tiny_config
+from scipy.stats import multivariate_normal
+
+from chorjax.config import load_config
+from chorjax.data.dataset import load_dataset
+from chorjax.data.features import principal_axes
+from chorjax.errors import UserError
+from chorjax.models.heads import MDNHead
+from chorjax.run import load_run
+from chorjax.sample import sample_dancers
+from chorjax.training import train_and_evaluate
+
+
+def test_principal_axes_find_the_direction_the_data_varies_along():
+  rng = np.random.default_rng(0)
+  t = rng.normal(size=5000)
+  x = np.stack([t + 0.05 * rng.normal(size=5000), t + 0.05 * rng.normal(size=5000), 0.3 * rng.normal(size=5000)], 1)
+  b = principal_axes(x)
+  np.testing.assert_allclose(b.T @ b, np.eye(3), atol=1e-6)  # a rotation
+  np.testing.assert_allclose(b[:, 0], [0.5**0.5, 0.5**0.5, 0.0], atol=0.01)  # x0 and x1 move together
+  np.testing.assert_allclose(np.abs(b[:, 1]), [0.0, 0.0, 1.0], atol=0.01)  # then x2
+  v = (x @ b).var(0)
+  assert v[0] > v[1] > v[2]
+  with pytest.raises(ValueError, match="frames"):
+    principal_axes(x[:1])
+
+
+def _head_with_basis(d, k, seed):
+  head = MDNHead(8, d, num_mixtures=k, basis=True, rngs=nnx.Rngs(seed))
+  q, _ = np.linalg.qr(np.random.default_rng(seed).normal(size=(d, d)))
+  head.basis[...] = q.astype(np.float32)
+  return head, q
+
+
+def test_the_rotated_mixture_is_a_full_covariance_gaussian_in_feature_space():
+  """One component, diagonal scales s in the basis B: the NLL of a feature frame x is that of
+  N(B mu, B diag(s^2) B^T), and draws have that covariance."""
+  d = 5
+  head, q = _head_with_basis(d, 1, 0)
+  out = np.random.default_rng(1).normal(size=(3, head.num_outputs)).astype(np.float32)
+  x = np.random.default_rng(2).normal(size=(3, d)).astype(np.float32)
+  _, mu, scale = (np.asarray(a, np.float64) for a in head.params(out))
+  for i in range(3):
+    full = multivariate_normal(q @ mu[i, 0], q @ np.diag(scale[i, 0] ** 2) @ q.T)
+    nll = float(head.loss(out[i : i + 1], x[i : i + 1])[0])
+    assert nll == pytest.approx(-full.logpdf(x[i]), rel=1e-4)
+  np.testing.assert_allclose(head.mean(out), mu[:, 0] @ q.T, atol=1e-5)
+  many = np.repeat(out[:1], 40_000, 0)
+  draws = np.asarray(head.sample(many, jax.random.key(0)), np.float64)
+  want = q @ np.diag(scale[0, 0] ** 2) @ q.T
+  np.testing.assert_allclose(np.cov(draws, rowvar=False), want, atol=0.05 * np.abs(want).max())
+
+
+def test_a_pca_run_fixes_its_basis_from_its_training_frames_and_never_trains_it(tmp_path):
+  w = tmp_path / "run"
+  cfg = tiny_config(
+    "train.num_steps=6",
+    "log.tensorboard=false",
+    "model.mdn_basis=pca",
+    "optim.name=adamw",
+    "optim.weight_decay=0.5",  # would shrink a trained basis
+    *QUICKSTART_SAMPLING,
+  )
+  train_and_evaluate(cfg, w)
+  ds = load_dataset(cfg.data)
+  want = principal_axes(np.concatenate([z for _, z in ds.train]))
+  run = load_run(w)
+  np.testing.assert_allclose(np.asarray(run.params["head"]["basis"]), want, atol=1e-6)
+  pos, _ = sample_dancers(run, 40, 2, 0)
+  assert pos.shape[:2] == (2, 40) and np.isfinite(pos).all()
+  # sample.ground stands on the floor the run recorded; a run recorded without one measures it on its takes
+  assert run.features.floor == pytest.approx(ds.features.floor) and ds.features.floor is not None
+  older = dataclasses.replace(run, features=dataclasses.replace(run.features, floor=None))
+  for r in (run, older):
+    grounded, settings = sample_dancers(r, 40, 2, 0, controls={"ground": True})
+    assert settings["ground"] and np.isfinite(grounded).all()
+    np.testing.assert_allclose(grounded[..., [0, 2]], pos[..., [0, 2]], atol=1e-4)  # only heights move
+
+
+def test_a_pca_basis_needs_the_mdn_head():
+  with pytest.raises(UserError, match=r"model\.mdn_basis"):
+    load_config("configs/quickstart.toml", ["model.mdn_basis=pca", "model.head=mse"])
