@@ -5,6 +5,7 @@ the runs they come from stay as they were. Skips finished copies, so it can run 
 
   .venv/bin/python experiments/dancers/learned.py                # runs/dancers -> runs/dancers_learned
   .venv/bin/python experiments/dancers/learned.py runs/dancers_best runs/dancers_cal5 cal5-
+  .venv/bin/python experiments/dancers/learned.py runs/dancers_pca runs/dancers_ground ground- sample.ground=true
   chorjax compare runs/dancers_learned/learned-* -o experiments/dancers/learned_report.md
 """
 
@@ -17,7 +18,11 @@ from pathlib import Path
 CHORJAX = str(Path(sys.executable).with_name("chorjax"))
 
 
-def main(base: Path = Path("runs/dancers"), out: Path = Path("runs/dancers_learned"), prefix: str = "learned-") -> None:
+def main(
+  base: Path = Path("runs/dancers"), out: Path = Path("runs/dancers_learned"), prefix: str = "learned-", sets=()
+) -> None:
+  """Copies of ``base``'s evaluated runs in ``out``, named ``prefix`` + the point, with ``sets`` (``SECTION.KEY=
+  true|false|number``) changed in their config, calibrated and evaluated."""
   out.mkdir(parents=True, exist_ok=True)
   for run in sorted(base.glob("*-seed=*")):
     if not (run / "eval" / "metrics.json").exists():
@@ -29,6 +34,10 @@ def main(base: Path = Path("runs/dancers"), out: Path = Path("runs/dancers_learn
     shutil.copytree(run, copy, ignore=shutil.ignore_patterns("eval", "events.*", "calibration.json"))
     config = json.loads((copy / "config.json").read_text())
     config["train"].update(keep="best", calibrate=True)
+    for assignment in sets:
+      key, value = assignment.split("=", 1)
+      section, name = key.split(".")
+      config[section][name] = json.loads(value)
     config["name"] = copy.name
     (copy / "config.json").write_text(json.dumps(config, indent=2))
     subprocess.run([CHORJAX, "calibrate", str(copy)], check=True)
@@ -54,4 +63,4 @@ def main(base: Path = Path("runs/dancers"), out: Path = Path("runs/dancers_learn
 
 
 if __name__ == "__main__":
-  main(*(Path(a) for a in sys.argv[1:3]), *sys.argv[3:4])
+  main(*(Path(a) for a in sys.argv[1:3]), *sys.argv[3:4], sets=sys.argv[4:])

@@ -3,11 +3,15 @@ takes; and, per dataset, the end of a generated dance beside a held-out take (fi
 
   .venv/bin/python experiments/dancers/table.py > experiments/dancers/table.md
 
-Reads runs/dancers/dancers-* (the recipe as shipped), runs/dancers_learned/learned-* (the same runs kept
-at their best validation checkpoint and calibrated: experiments/dancers/learned.py), runs/dancers_best/best-*
-(best.toml: trained with train.keep = "best" and train.calibrate) and runs/dancers_cal5/cal5-* (those runs
-calibrated again with the five controls and four measures of 2026-11-25: learned.py runs/dancers_best
-runs/dancers_cal5 cal5-).
+Reads (VARIANTS): runs/dancers/dancers-* (the quickstart recipe as shipped), runs/dancers_learned/learned-*
+(the same runs kept at their best validation checkpoint and calibrated: experiments/dancers/learned.py),
+runs/dancers_best/best-* (best.toml: trained with train.keep = "best" and train.calibrate), runs/dancers_cal5/
+cal5-* (those runs calibrated again with five controls and four measures: learned.py runs/dancers_best
+runs/dancers_cal5 cal5-), runs/dancers_pca/pca-* (pca.toml: the same with the MDN in the principal axes),
+runs/dancers_pca_wide/wide-* (those calibrated again with scale temperatures 0.7 and 0.8 added to the grid),
+runs/dancers_ground/ground-* (copies of the pca runs evaluated with --ground, their calibration kept) and
+runs/dancers_steps/steps-* (the same with --ground --clamp-steps; experiments/dancers/README.md says how) and
+runs/dancers_pcag/pcag-* (pca_ground.toml: trained and calibrated with sample.ground and sample.clamp_steps on).
 """
 
 import json
@@ -23,8 +27,29 @@ VARIANTS = {
   "kept at best of 4 checkpoints + calibrated": Path("runs/dancers_learned"),
   "train.keep best + train.calibrate (2 controls)": Path("runs/dancers_best"),
   "train.keep best + calibrate 5 controls, 4 measures": Path("runs/dancers_cal5"),
+  "the same + model.mdn_basis = pca": Path("runs/dancers_pca"),
+  "pca, calibrated with scale temperature 0.7-1.2": Path("runs/dancers_pca_wide"),
+  "pca + --ground (the pca calibration)": Path("runs/dancers_ground"),
+  "pca + --ground --clamp-steps": Path("runs/dancers_steps"),
+  "pca_ground.toml (ground, clamp_steps on while calibrating)": Path("runs/dancers_pcag"),
 }
-SLUG = dict(zip(VARIANTS, ("shipped", "copy_best_calibrated", "keep_best_calibrate", "keep_best_calibrate5")))
+SLUG = dict(
+  zip(
+    VARIANTS,
+    (
+      "shipped",
+      "copy_best_calibrated",
+      "keep_best_calibrate",
+      "keep_best_calibrate5",
+      "pca",
+      "pca_wide",
+      "pca_ground",
+      "pca_steps",
+    ),
+  )
+)
+# the variants whose end frames are drawn beside a real take (the others' strips from earlier reports stay)
+STRIPS = ("as shipped", "train.keep best + calibrate 5 controls, 4 measures", "pca + --ground --clamp-steps")
 DATASETS = ("cmu94", "salsa", "martial", "cmu05", "cmu131")
 # (label, value of one evaluation, how a row's worst seed is picked: the one farthest from the bar)
 COLUMNS = [
@@ -40,6 +65,7 @@ COLUMNS = [
   ("FID_k / train takes'", lambda e: mean_of(e["fid_k"]) / mean_of(e["fid_k_train"]), max),
   ("FID_g / train takes'", lambda e: mean_of(e["fid_g"]) / mean_of(e["fid_g_train"]), max),
   ("novelty / held-out takes'", lambda e: mean_of(e["novelty"]) / mean_of(e["novelty_real"]), min),
+  ("airborne, % of frames", lambda e: 100 * mean_of(e["airborne"]) if "airborne" in e else None, max),
 ]
 
 
@@ -58,6 +84,8 @@ def evaluations(root: Path, dataset: str) -> list[tuple[Path, dict]]:
 
 
 def cell(values, worst) -> str:
+  if any(x is None for x in values):
+    return "-"  # evaluated before the measure existed
   v = np.asarray(values)
   return f"{v.mean():.2f} ± {v.std(ddof=1):.2f} ({worst(list(v)):.2f})" if len(v) > 1 else f"{v[0]:.2f}"
 
@@ -92,6 +120,7 @@ def strips() -> list[str]:
     runs = {
       v: next((d for d, _ in evaluations(r, dataset) if d.name.endswith("seed=0")), r / "-")
       for v, r in VARIANTS.items()
+      if v in STRIPS
     }
     runs = {v: r for v, r in runs.items() if (r / "eval" / "sample.npz").exists()}
     if "as shipped" not in runs:
