@@ -76,3 +76,38 @@ def test_eval_windows_cover_the_held_out_take(ds):
   assert w["inputs"].shape == ((740 - 1) // 20, 20, 48)
   assert (w["motion_ids"] == 9).all()
   assert eval_windows(ds.val, 20, max_windows=5)["inputs"].shape[0] == 5
+
+
+def test_the_dancers_benchmark_holds_out_whole_takes_partners_together_and_nothing_leaks(shared_data):
+  """The salsa split of experiments/dancers/sweep.toml: both partners of a take are held out together, and
+  no held-out frame, nor its left/right mirror, is among the training frames (the mirror augmentation is
+  applied to the training takes only)."""
+  from pathlib import Path
+
+  from chorjax.experiments import load_sweep, sweep_points
+
+  root = Path(__file__).resolve().parents[1]
+  sweep = load_sweep(root / "experiments" / "dancers" / "sweep.toml")
+  (overrides,) = [o for name, o in sweep_points(sweep) if name == "dancers-salsa-seed=0"]
+  overrides += [f"data.dataset='{shared_data / 'aclstm' / 'salsa'}'"]
+  ds = load_dataset(load_config(root / "experiments" / "dancers" / sweep["base"], overrides).data)
+  held = set(ds.val_names)
+  assert held == {"12", "27", "14", "29"} and not held & set(ds.train_names)
+  assert all(f"{int(n) + 15 if int(n) <= 15 else int(n) - 15:02d}" in held for n in held)  # NN and NN+15 dance together
+  assert len(ds.train) == 2 * len(ds.train_names)  # the quickstart mirrors every training take
+
+  f = ds.features
+  canon = lambda z: np.asarray(f.canonical(f.decode(z)))
+  mirrored = lambda z: np.asarray(f.encode(f.uncanonical(transforms.mirror(canon(z), f.skeleton.twins))))
+  train = np.concatenate([x for _, x in ds.train]).astype(np.float64)
+
+  def nearest(q):  # each frame's distance to its nearest training frame
+    q = np.asarray(q, np.float64)
+    d2 = (q**2).sum(1)[:, None] + (train**2).sum(1)[None] - 2 * q @ train.T
+    return np.sqrt(np.maximum(d2.min(1), 0.0))
+
+  val = [x for _, x in ds.val]
+  assert nearest(np.concatenate(val)).min() > 0.1  # 0.8 here; a copied frame would be ~1e-4 away
+  assert nearest(np.concatenate([mirrored(x) for x in val])).min() > 0.1
+  _, first = ds.train[0]  # ... as a training take's own mirror, kept in training, is
+  assert nearest(mirrored(first)).max() < 0.01
