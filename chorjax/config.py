@@ -117,7 +117,7 @@ class ModelConfig:
     "the coordinates the MDN's diagonal Gaussians live in: 'features' (each normalized feature: a draw's noise "
     "is independent per feature) or 'pca' (the principal axes of the training frames' features, fixed at the "
     "start of training and saved with the run: a draw varies the pose along directions the data varies "
-    "together; the likelihood is the same quantity, the basis is a rotation)",
+    "together; the likelihood is the same quantity, the basis is a rotation); an MSE head ignores it",
     choices=("features", "pca"),
   )
   min_scale: float = _field(1e-3, "floor of MDN scales (normalized units)", minimum=0.0)
@@ -135,9 +135,12 @@ class ModelConfig:
     choices=("fused", "cudnn"),
   )
 
+  @property
+  def pca_basis(self) -> bool:
+    """Whether the MDN lives in the training frames' principal axes (an MSE head has no basis)."""
+    return self.head == "mdn" and self.mdn_basis == "pca"
+
   def __post_init__(self):
-    if self.mdn_basis == "pca" and self.head != "mdn":
-      raise UserError(f"key 'model.mdn_basis': 'pca' is the MDN head's basis; here model.head is {self.head!r}")
     if self.lstm_kernel == "cudnn" and (self.family, self.cell) != ("rnn", "lstm"):
       raise UserError(
         f"key 'model.lstm_kernel': 'cudnn' runs the rnn family's plain LSTM only (model.family = 'rnn', "
@@ -626,8 +629,20 @@ def load_config(path: str | Path | Config | None = None, overrides: Sequence[str
     section, sub = key.split(".", 1)
     _apply(sections, {section: {sub: value}}, lambda s, k, item=item: f"override {item!r}")
   config = Config(**{s: cls(**sections[s]) for s, cls in _SECTION_CLASSES.items()}, name=plain_name(name, "name"))
+  check_combinations(config)
   check_training_size(config)
   return config
+
+
+def check_combinations(config: Config) -> None:
+  """Keys that make sense alone but not together, refused when a config is loaded (before any training;
+  runs already saved with them still load: their sampling says so when asked)."""
+  rep = config.data.representation
+  for key in ("foot_lock", "ground"):
+    if getattr(config.sample, key) and rep != "canonical":
+      raise UserError(
+        f"key 'sample.{key}': needs data.representation = 'canonical' (here {rep!r}); set sample.{key}=false"
+      )
 
 
 FEATURES_GUESS = 256  # pose features per frame, more than any skeleton we read gives (mpii16 canonical: ~50)

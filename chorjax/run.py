@@ -159,7 +159,7 @@ def create_train_state(cfg: Config, dim: int, num_motions: int, basis=None) -> t
   model = create_model(cfg.model, dim, num_motions, cfg.train.seed)
   graphdef, params = nnx.split(model, nnx.Param)
   params = nnx.to_pure_dict(params)
-  if cfg.model.mdn_basis == "pca":
+  if cfg.model.pca_basis:
     if basis is None or np.shape(basis) != (dim, dim):
       raise ValueError(
         f"model.mdn_basis = 'pca' needs a [{dim}, {dim}] basis, got {basis if basis is None else np.shape(basis)}"

@@ -645,7 +645,7 @@ def _restore_or_init(cfg: Config, workdir: Path, ds: Dataset, manager, parallel)
   elif cfg.model.family == "inbetween":
     state, spec = inbetween.create_inbetween_state(cfg, ds.features)
   else:
-    basis = principal_axes(np.concatenate([z for _, z in ds.train])) if cfg.model.mdn_basis == "pca" else None
+    basis = principal_axes(np.concatenate([z for _, z in ds.train])) if cfg.model.pca_basis else None
     state, spec = create_train_state(cfg, ds.features.dim, ds.num_motions, basis)
   steps = sorted(manager.all_steps(), reverse=True)
   damaged = []

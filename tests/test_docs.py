@@ -72,3 +72,17 @@ def test_the_readme_sweep_file_is_a_valid_sweep(tmp_path):
   assert len(points) == 2 * 3 * 1
   for _, overrides in points:
     load_config(tmp_path / "configs" / "quickstart.toml", overrides)
+
+
+def test_every_experiment_sweep_loads_every_point():
+  """The sweep files in experiments/ start from configs that change (the quickstart above all): each of their
+  points must still be a valid config, or the experiment cannot be rerun as its README says."""
+  from chorjax.config import load_config
+  from chorjax.experiments import load_sweep, sweep_points
+
+  sweeps = [load_sweep(f) | {"file": f} for f in sorted(ROOT.glob("experiments/*/*.toml"))]
+  sweeps = [s for s in sweeps if "base" in s]
+  assert len(sweeps) >= 8
+  for sweep in sweeps:
+    for _, overrides in sweep_points(sweep):
+      load_config(sweep["file"].parent / sweep["base"], overrides)

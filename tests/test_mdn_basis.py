@@ -6,7 +6,7 @@ import jax
 import numpy as np
 import pytest
 from flax import nnx
-from helpers import QUICKSTART_SAMPLING, tiny_config
+from helpers import QUICKSTART_SAMPLING, TINY, tiny_config
 from scipy.stats import multivariate_normal
 
 from chorjax.config import load_config
@@ -85,6 +85,19 @@ def test_a_pca_run_fixes_its_basis_from_its_training_frames_and_never_trains_it(
     np.testing.assert_allclose(grounded[..., [0, 2]], pos[..., [0, 2]], atol=1e-4)  # only heights move
 
 
-def test_a_pca_basis_needs_the_mdn_head():
-  with pytest.raises(UserError, match=r"model\.mdn_basis"):
-    load_config("configs/quickstart.toml", ["model.mdn_basis=pca", "model.head=mse"])
+def test_an_mse_head_ignores_the_quickstarts_basis_and_trains(tmp_path):
+  """The quickstart with `model.head=mse` (the MDN-vs-MSE comparison): the basis is the MDN's, so an MSE head
+  has none (as it has no mixtures), and trains."""
+  cfg = load_config("configs/quickstart.toml", ["model.head=mse", *TINY, "train.calibrate=false"])
+  assert cfg.model.mdn_basis == "pca" and not cfg.model.pca_basis
+  train_and_evaluate(cfg, tmp_path / "w")
+  assert "basis" not in load_run(tmp_path / "w").params["head"]
+
+
+@pytest.mark.parametrize("key", ["foot_lock", "ground"])
+def test_feet_controls_on_other_features_are_refused_before_training(key):
+  """`sample.foot_lock` and `sample.ground` need canonical features: the quickstart with another representation
+  is one line naming the key when the config loads, not a failure after training."""
+  with pytest.raises(UserError, match=rf"key 'sample\.{key}'.*canonical.*'directions'"):
+    other = "ground" if key == "foot_lock" else "foot_lock"
+    load_config("configs/quickstart.toml", ["data.representation=directions", f"sample.{other}=false"])

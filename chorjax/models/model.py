@@ -41,7 +41,7 @@ class ChorModel(nnx.Module):
         num_mixtures=cfg.num_mixtures,
         isotropic=cfg.mdn_scale == "isotropic",
         min_scale=cfg.min_scale,
-        basis=cfg.mdn_basis == "pca",
+        basis=cfg.pca_basis,
         rngs=rngs,
       )
     else:
