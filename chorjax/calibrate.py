@@ -41,6 +41,20 @@ GRID = {
 MEASURES = ("movement", "jitter", "speed", "root_travel")
 
 
+DRAWN = ("noise_smoothing", "sigma_temperature", "persistence", "crossfade")  # what an MSE head ignores
+
+
+def default_grid(config) -> dict:
+  """``GRID`` less what ``config``'s run cannot use: ``foot_lock`` needs canonical features, and an MSE head
+  draws no noise (its frame is its prediction), so only ``foot_lock`` can change its dance."""
+  grid = dict(GRID)
+  if config.data.representation != "canonical":
+    del grid["foot_lock"]
+  if config.model.head == "mse":
+    grid = {k: v for k, v in grid.items() if k not in DRAWN}
+  return grid
+
+
 def objective(measured: dict) -> float:
   """How far a sample's ``MEASURES`` (each / the reference's) are from the reference's own."""
   return float(sum(abs(np.log(max(measured[k], 1e-9))) for k in MEASURES))
@@ -136,11 +150,9 @@ def calibrate(
     return dance(ranged.graphdef, ranged.params, ranged.features, motion, key, frames, sampling)
 
   if grid is None:
-    grid = (
-      dict(GRID)
-      if run.config.data.representation == "canonical"
-      else {k: v for k, v in GRID.items() if k != "foot_lock"}
-    )
+    grid = default_grid(run.config)
+    if not grid:
+      raise UserError(f"{workdir}: an MSE head on {run.config.data.representation} features draws nothing to calibrate")
   log(f"calibrating {workdir} on {'the takes given' if data else 'its training takes'} ({len(reference)} takes)")
   positions = [m.positions for m in reference]
   best, table = search(draw, positions, f.skeleton.root, run.fps, grid, log)

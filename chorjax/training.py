@@ -35,6 +35,7 @@ from flax import nnx
 
 from chorjax import checkpoint as ckpt
 from chorjax import inbetween
+from chorjax.calibrate import default_grid
 from chorjax.config import Config, config_diff, config_from_dict, resumable_keys
 from chorjax.data.dataset import Dataset, WindowSampler, dataset_notes, eval_windows, load_dataset
 from chorjax.data.features import principal_axes
@@ -732,7 +733,7 @@ def _train(
 
   loop.on_stop = save_now
   samples: dict = {}
-  calibrating = is_main and total > 0 and cfg.train.calibrate and cfg.model.family == "rnn"
+  calibrating = is_main and total > 0 and cfg.train.calibrate and cfg.model.family == "rnn" and bool(default_grid(cfg))
   if is_main and cfg.sample.frames > 0 and total > 0 and not calibrating:
     loop.end_hooks.append(
       lambda loop: samples.update(write_end_sample(workdir, spec.graphdef, host_params(loop.state["params"]), ds, cfg))

@@ -113,3 +113,15 @@ def test_a_run_keeps_its_best_checkpoint_and_calibrates_it_when_told(tmp_path, s
   config["train"]["keep"] = "last"
   (w / "config.json").write_text(json.dumps(config))
   assert load_run(w).step == 40  # keep = "last": the latest
+
+
+def test_an_mse_head_calibrates_only_what_can_change_its_dance():
+  """An MSE head draws no noise (its frame is its prediction): of the calibrated controls only foot_lock
+  can change its dance, and on non-canonical features nothing can (training then skips calibration)."""
+  from chorjax.calibrate import default_grid
+  from chorjax.config import load_config
+
+  assert set(default_grid(load_config("configs/quickstart.toml"))) == set(CALIBRATED)
+  assert default_grid(load_config("configs/quickstart.toml", ["model.head=mse"])) == {"foot_lock": (True, False)}
+  assert default_grid(load_config(None, ["model.head=mse", "data.representation=directions"])) == {}
+  assert "foot_lock" not in default_grid(load_config(None, ["data.representation=directions"]))

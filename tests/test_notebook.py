@@ -31,6 +31,7 @@ def test_the_notebook_runs_and_its_export_plays_the_dancer(tmp_path, monkeypatch
 
   overrides = [o for o in TINY if not o.startswith("log.progress")] + [
     "train.num_steps=3",
+    "train.calibrate=false",  # five tiny calibrations would add minutes; tests/test_calibrate.py has its own
     "log.tensorboard=false",
     "sample.frames=20",
   ]
