@@ -169,7 +169,21 @@ def run_sweep(path, log=print, shard: tuple[int, int] = (0, 1)) -> list[Path]:
         log(f"{name}: evaluating")
         kw = {k: v for k, v in ev.items() if k != "data"}
         write_metrics(evaluate(workdir, ev.get("data", [cfg.data.dataset]), **kw), metrics_path(workdir))
+    _release_compiled()
   return workdirs
+
+
+def _release_compiled() -> None:
+  """Drops the programs a point compiled. A sweep is one process: every point's training, calibration (~30
+  programs) and evaluation compile anew, and each compiled program holds its own memory mappings, so after
+  about ten points the kernel's limit on a process's mappings (vm.max_map_count, 65,530) was reached and
+  LLVM failed ("Unable to allocate section memory") with most of the memory free."""
+  import gc
+
+  import jax
+
+  jax.clear_caches()
+  gc.collect()
 
 
 def _train_points(points, log) -> None:
