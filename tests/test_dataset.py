@@ -111,3 +111,13 @@ def test_the_dancers_benchmark_holds_out_whole_takes_partners_together_and_nothi
   assert nearest(np.concatenate([mirrored(x) for x in val])).min() > 0.1
   _, first = ds.train[0]  # ... as a training take's own mirror, kept in training, is
   assert nearest(mirrored(first)).max() < 0.01
+
+
+def test_training_on_a_few_minutes_of_motion_says_what_to_expect():
+  from chorjax.data.dataset import dataset_notes
+
+  assert not [n for n in dataset_notes(load_dataset(load_config(None).data)) if "minutes of training" in n]
+  two = load_dataset(load_config(None, [f"data.val_takes={list(range(2, 10))}"]).data)  # 2 takes trained on
+  (note,) = [n for n in dataset_notes(two) if "minutes of training motion" in n]
+  minutes = sum(len(m.positions) for m in two.motions if m.name in two.train_names) / two.fps / 60
+  assert note.startswith(f"note: {minutes:.1f} minutes") and 0.5 < minutes < 1.5
