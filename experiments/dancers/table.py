@@ -2,19 +2,23 @@
 takes; and, per dataset, the end of a generated dance beside a held-out take (filmstrips).
 
   .venv/bin/python experiments/dancers/table.py > experiments/dancers/table.md
+  .venv/bin/python experiments/dancers/table.py --readme    # the README's table (the quickstart per dataset)
 
-Reads (VARIANTS): runs/dancers/dancers-* (the quickstart recipe as shipped), runs/dancers_learned/learned-*
-(the same runs kept at their best validation checkpoint and calibrated: experiments/dancers/learned.py),
-runs/dancers_best/best-* (best.toml: trained with train.keep = "best" and train.calibrate), runs/dancers_cal5/
-cal5-* (those runs calibrated again with five controls and four measures: learned.py runs/dancers_best
-runs/dancers_cal5 cal5-), runs/dancers_pca/pca-* (pca.toml: the same with the MDN in the principal axes),
-runs/dancers_pca_wide/wide-* (those calibrated again with scale temperatures 0.7 and 0.8 added to the grid),
-runs/dancers_ground/ground-* (copies of the pca runs evaluated with --ground, their calibration kept) and
-runs/dancers_steps/steps-* (the same with --ground --clamp-steps; experiments/dancers/README.md says how) and
-runs/dancers_pcag/pcag-* (pca_ground.toml: trained and calibrated with sample.ground and sample.clamp_steps on).
+Reads (VARIANTS), whichever are on this machine: runs/dancers/dancers-* (sweep.toml: the quickstart as it is
+now), and the variants measured on the way there (their runs were on the machine of 2026-11-25; their rows are
+in table_2026-11-25.md): runs/dancers_learned/learned-* (the old quickstart's runs kept at their best validation
+checkpoint and calibrated: experiments/dancers/learned.py), runs/dancers_best/best-* (best.toml),
+runs/dancers_cal5/cal5-* (those calibrated again with five controls and four measures: learned.py
+runs/dancers_best runs/dancers_cal5 cal5-), runs/dancers_pca/pca-* (pca.toml), runs/dancers_pca_wide/wide-*
+(those calibrated with scale temperatures 0.7 and 0.8 added), runs/dancers_ground/ground-* and
+runs/dancers_steps/steps-* (copies of the pca runs evaluated with --ground, and --ground --clamp-steps;
+experiments/dancers/README.md says how); and runs/dancers_w128/w128-* (window128.toml: windows of 128 frames).
+Each evaluated run's small files (config, calibration, metrics log, eval metrics) are copied to results/, and
+the table falls back to them where a variant's runs are not on this machine.
 """
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -22,8 +26,10 @@ import numpy as np
 from chorjax.scoring import mean_of
 
 HERE = Path(__file__).parent
+RESULTS = HERE / "results"  # each run's small files, kept in the repository (runs/ is not)
+KEPT = ("config.json", "calibration.json", "metrics.jsonl", "eval/metrics.json")
 VARIANTS = {
-  "as shipped": Path("runs/dancers"),
+  "quickstart": Path("runs/dancers"),
   "kept at best of 4 checkpoints + calibrated": Path("runs/dancers_learned"),
   "train.keep best + train.calibrate (2 controls)": Path("runs/dancers_best"),
   "train.keep best + calibrate 5 controls, 4 measures": Path("runs/dancers_cal5"),
@@ -31,13 +37,13 @@ VARIANTS = {
   "pca, calibrated with scale temperature 0.7-1.2": Path("runs/dancers_pca_wide"),
   "pca + --ground (the pca calibration)": Path("runs/dancers_ground"),
   "pca + --ground --clamp-steps": Path("runs/dancers_steps"),
-  "pca_ground.toml (ground, clamp_steps on while calibrating)": Path("runs/dancers_pcag"),
+  "quickstart, windows of 128 frames at batch 16": Path("runs/dancers_w128"),
 }
 SLUG = dict(
   zip(
     VARIANTS,
     (
-      "shipped",
+      "quickstart",
       "copy_best_calibrated",
       "keep_best_calibrate",
       "keep_best_calibrate5",
@@ -45,11 +51,12 @@ SLUG = dict(
       "pca_wide",
       "pca_ground",
       "pca_steps",
+      "w128",
     ),
   )
 )
 # the variants whose end frames are drawn beside a real take (the others' strips from earlier reports stay)
-STRIPS = ("as shipped", "train.keep best + calibrate 5 controls, 4 measures", "pca + --ground --clamp-steps")
+STRIPS = ("quickstart", "train.keep best + calibrate 5 controls, 4 measures", "pca + --ground --clamp-steps")
 DATASETS = ("cmu94", "salsa", "martial", "cmu05", "cmu131")
 # (label, value of one evaluation, how a row's worst seed is picked: the one farthest from the bar)
 COLUMNS = [
@@ -76,7 +83,21 @@ def _two_controls(run: Path) -> bool:
   return path.exists() and len(json.loads(path.read_text())["settings"]) == 2
 
 
+def save_results() -> None:
+  """Copies the small files of every evaluated run of every variant on this machine to
+  ``RESULTS/<variant folder>/<run>`` (what ``evaluations`` reads where the runs are not on the machine)."""
+  for root in VARIANTS.values():
+    for run in sorted(root.glob("*-seed=*")):
+      if (run / "eval" / "metrics.json").exists():
+        for name in KEPT:
+          if (run / name).exists():
+            (RESULTS / root.name / run.name / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(run / name, RESULTS / root.name / run.name / name)
+
+
 def evaluations(root: Path, dataset: str) -> list[tuple[Path, dict]]:
+  if not root.is_dir():
+    root = RESULTS / root.name
   runs = sorted(d for d in root.glob(f"*-{dataset}-seed=*") if (d / "eval" / "metrics.json").exists())
   if root == VARIANTS["train.keep best + train.calibrate (2 controls)"]:
     runs = [d for d in runs if _two_controls(d)]
@@ -90,10 +111,96 @@ def cell(values, worst) -> str:
   return f"{v.mean():.2f} ± {v.std(ddof=1):.2f} ({worst(list(v)):.2f})" if len(v) > 1 else f"{v[0]:.2f}"
 
 
+def real_takes(run: Path) -> tuple[list, list, object, float]:
+  """``(training takes, held-out takes, skeleton, fps)`` of a run, y-up, read as its training read them
+  (from its config.json alone: no checkpoint needed)."""
+  from chorjax.config import config_from_dict
+  from chorjax.data.dataset import conform, load_dataset, read_takes
+  from chorjax.data.transforms import to_y_up
+
+  cfg = config_from_dict(json.loads((run / "config.json").read_text())).data
+  ds = load_dataset(cfg)
+  every = {m.name: m for m in conform(read_takes([cfg.dataset], cfg), cfg)}
+  y_up = lambda names: [np.asarray(to_y_up(every[n].positions, ds.features.up_axis)) for n in names]
+  return y_up(ds.train_names), y_up(ds.val_names), ds.features.skeleton, ds.fps
+
+
+def real_row(dataset: str) -> str | None:
+  """The dataset's training takes scored as if they were a sample against its held-out takes: what real
+  dance by this dancer scores on each column (FID ratios are 1 by construction; novelty has no meaning)."""
+  from chorjax.scoring import score
+
+  evs = evaluations(VARIANTS["quickstart"], dataset)
+  if not evs:
+    return None
+  train, held, skeleton, fps = real_takes(evs[0][0])
+  e = score(train, held, skeleton, fps, train=train)
+  e["fid_k_train"], e["fid_g_train"] = e["fid_k"], e["fid_g"]
+  cells = [cell([f(e)], worst) if "novelty" not in label else "-" for label, f, worst in COLUMNS]
+  return f"| {dataset} | real: the training takes as a sample | - | " + " | ".join(cells) + " | - |"
+
+
+README_COLUMNS = [
+  ("calmest / busiest 1,000 frames", None),
+  ("jitter", lambda e: mean_of(e["jitter"])),
+  ("speed", lambda e: mean_of(e["speed"])),
+  ("root travel", lambda e: mean_of(e["root_travel"])),
+  ("largest root step", lambda e: mean_of(e["root_step_max"])),
+  ("FID_k / train takes'", lambda e: mean_of(e["fid_k"]) / mean_of(e["fid_k_train"])),
+  ("FID_g / train takes'", lambda e: mean_of(e["fid_g"]) / mean_of(e["fid_g_train"])),
+  ("airborne %", lambda e: 100 * mean_of(e["airborne"])),
+]
+
+
+def _spread(values) -> str:
+  """``mean (lowest-highest)`` over the training seeds."""
+  v = np.asarray(values)
+  return f"{v.mean():.2f} ({v.min():.2f}-{v.max():.2f})" if len(v) > 1 else f"{v[0]:.2f}"
+
+
+def _seconds(run: Path) -> float:
+  """Training + calibration wall time of a run on this machine (config.json written -> calibration.json)."""
+  return (run / "calibration.json").stat().st_mtime - (run / "config.json").stat().st_mtime
+
+
+def readme_table() -> list[str]:
+  """The README's table: per dataset, real dance and the quickstart (mean and range over training seeds)."""
+  from chorjax.scoring import score
+
+  head = ["dataset (motion trained on)", "", *[c[0] for c in README_COLUMNS], "train + calibrate"]
+  lines = ["| " + " | ".join(head) + " |", "|---" * len(head) + "|"]
+  for dataset in DATASETS:
+    evs = evaluations(VARIANTS["quickstart"], dataset)
+    if not evs:
+      continue
+    train, held, skeleton, fps = real_takes(evs[0][0])
+    e = score(train, held, skeleton, fps, train=train)
+    e["fid_k_train"], e["fid_g_train"] = e["fid_k"], e["fid_g"]
+    minutes = sum(map(len, train)) / fps / 60
+    name = f"{dataset} ({len(train)} takes, {minutes:.1f} min)"
+
+    def seg(es):  # the calmest segment's mean (lowest) / the busiest's mean (highest) over the seeds
+      low, high = [np.array([mean_of(x[k]) for x in es]) for k in ("movement_min", "movement_max")]
+      if len(es) == 1:
+        return f"{low[0]:.2f} / {high[0]:.2f}"
+      return f"{low.mean():.2f} ({low.min():.2f}) / {high.mean():.2f} ({high.max():.2f})"
+
+    real = [seg([e])] + [f"{f(e):.2f}" for _, f in README_COLUMNS[1:]]
+    lines.append(f"| {name} | real | " + " | ".join(real) + " | |")
+    runs = [d for d, _ in evs]
+    cells = [seg([x for _, x in evs])] + [_spread([f(x) for _, x in evs]) for _, f in README_COLUMNS[1:]]
+    live = all((d / "calibration.json").exists() and d.is_relative_to(Path("runs")) for d in runs)
+    took = f"{min(map(_seconds, runs)) / 60:.1f}-{max(map(_seconds, runs)) / 60:.1f} min" if live else ""
+    lines.append(f"| | quickstart, {len(evs)} seeds | " + " | ".join(cells) + f" | {took} |")
+  return lines
+
+
 def table() -> list[str]:
   head = ["dataset", "recipe", "runs", *[c[0] for c in COLUMNS], "held-out NLL kept - best"]
   lines = ["| " + " | ".join(head) + " |", "|---" * len(head) + "|"]
   for dataset in DATASETS:
+    real = real_row(dataset)
+    lines += [real] if real else []
     for variant, root in VARIANTS.items():
       evs = evaluations(root, dataset)
       if not evs:
@@ -109,7 +216,7 @@ def table() -> list[str]:
 
 
 def strips() -> list[str]:
-  """Per dataset: the end of the first evaluated dancer of seed 0 (as shipped, and best + calibrated)
+  """Per dataset: the end of the first evaluated dancer of seed 0 (of each variant in ``STRIPS`` run here)
   beside a held-out take, as training read it."""
   from chorjax.data.npz import read_npz
   from chorjax.render.plot import plot_strip
@@ -123,7 +230,7 @@ def strips() -> list[str]:
       if v in STRIPS
     }
     runs = {v: r for v, r in runs.items() if (r / "eval" / "sample.npz").exists()}
-    if "as shipped" not in runs:
+    if "quickstart" not in runs:
       continue
     out += [f"### {dataset}", ""]
     for variant, run in runs.items():
@@ -132,7 +239,7 @@ def strips() -> list[str]:
       png = HERE / f"strip_{dataset}_{SLUG[variant]}.png"
       plot_strip(end, png, every=10, poses=12)
       out += [f"![{dataset} {variant}]({png.name})", ""]
-    real = read_reference(load_run(runs["as shipped"]), ["held-out"])[0][0]
+    real = read_reference(load_run(runs["quickstart"]), ["held-out"])[0][0]
     png = HERE / f"strip_{dataset}_real.png"
     plot_strip(real.replace(name=f"{dataset} held-out take {real.name}"), png, every=10, poses=12)
     out += [f"![{dataset} real]({png.name})", ""]
@@ -140,4 +247,10 @@ def strips() -> list[str]:
 
 
 if __name__ == "__main__":
+  import sys
+
+  save_results()
+  if sys.argv[1:] == ["--readme"]:
+    print("\n".join(readme_table()))
+    sys.exit()
   print("\n".join(table() + [""] + strips()))
