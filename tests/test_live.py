@@ -217,7 +217,10 @@ def test_live_server_end_to_end(live_run, tmp_path):
     took = time.monotonic() - t0
     osc_stop.set()
     silent.close()
-  assert code == 0 and took < 2.0, (code, took, proc.stderr.read() if proc.stderr else "")
+  # a watcher that never reads must not hold up the stop: held up, the stop waits websockets' default close
+  # timeout (10 s; live.CLOSE_TIMEOUT is 0.5 s). A bound, not a speed target: 2.2 s were seen while a
+  # training sweep shared the two cores with the suite.
+  assert code == 0 and took < 6.0, (code, took, proc.stderr.read() if proc.stderr else "")
   assert any(addr == "/chorjax/frame" and len(v) == 48 for addr, v in osc_frames)
   rec = read_npz(record)[0].positions
   assert len(rec) >= max(received) + 1  # every frame sent is in the recording
