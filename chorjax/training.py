@@ -520,7 +520,13 @@ def figure_hook(writer, graphdef, host_params, ds: Dataset, cfg: Config):
   return draw
 
 
-def _calibrate_and_sample(workdir: Path, ds: Dataset, cfg: Config) -> dict:
+def calibrates(cfg: Config) -> bool:
+  """Whether training ends by calibrating (``train.calibrate``; the rnn family, where a control can change
+  the dance)."""
+  return cfg.train.calibrate and cfg.model.family == "rnn" and bool(default_grid(cfg))
+
+
+def calibrate_and_sample(workdir: Path, ds: Dataset, cfg: Config) -> dict:
   """``train.calibrate``: ``chorjax calibrate`` on the kept checkpoint, then the end sample drawn with it."""
   from chorjax.calibrate import calibrate
   from chorjax.run import load_run
@@ -733,7 +739,7 @@ def _train(
 
   loop.on_stop = save_now
   samples: dict = {}
-  calibrating = is_main and total > 0 and cfg.train.calibrate and cfg.model.family == "rnn" and bool(default_grid(cfg))
+  calibrating = is_main and total > 0 and calibrates(cfg)
   if is_main and cfg.sample.frames > 0 and total > 0 and not calibrating:
     loop.end_hooks.append(
       lambda loop: samples.update(write_end_sample(workdir, spec.graphdef, host_params(loop.state["params"]), ds, cfg))
@@ -742,7 +748,7 @@ def _train(
     loop.stop = stop if parallel is None else agreed_stop(stop)
     loop.run()
   if calibrating and loop.step >= total:  # finished, not stopped: settings for the checkpoint the run keeps
-    samples.update(_calibrate_and_sample(workdir, ds, cfg))
+    samples.update(calibrate_and_sample(workdir, ds, cfg))
   summary = {
     "start_step": start,
     "final_step": loop.step,

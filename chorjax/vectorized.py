@@ -46,6 +46,8 @@ from chorjax.training import (
   _train_step,
   _truncate_metrics,
   _write_config,
+  calibrate_and_sample,
+  calibrates,
   eval_step,
   stop_on_signals,
   workdir_lock,
@@ -226,9 +228,12 @@ def _run(cfgs, workdirs, ds, managers, restored, stack) -> list[dict]:
   loop.on_stop = save_now
   samples: list[dict] = [{} for _ in cfgs]
 
-  def end_samples(_: Loop) -> None:
+  def end_samples(_: Loop) -> None:  # each point as it would end alone: calibrated (train.calibrate), then drawn
     for k, (c, w) in enumerate(zip(cfgs, workdirs)):
-      if c.sample.frames > 0 and c.train.num_steps > 0:
+      if calibrates(c):
+        if c.train.num_steps > 0 and loop.step >= c.train.num_steps:  # finished, not stopped
+          samples[k] = calibrate_and_sample(w, ds, c)
+      elif c.sample.frames > 0 and c.train.num_steps > 0:
         samples[k] = write_end_sample(w, spec.graphdef, _take(loop.state["params"], k), ds, c)
 
   loop.end_hooks.append(end_samples)

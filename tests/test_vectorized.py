@@ -77,3 +77,19 @@ def test_what_cannot_be_vectorized_is_named(tmp_path):
     ["s-head=mdn-seed=0", "s-head=mdn-seed=1", "s-head=mdn-seed=2"],
     ["s-head=mse-seed=0", "s-head=mse-seed=1", "s-head=mse-seed=2"],
   ]
+
+
+def test_points_trained_together_are_calibrated_as_each_would_be_alone(tmp_path, monkeypatch):
+  """`train.calibrate` (the quickstart's): every point of a vectorized run chooses its own sampling settings on
+  its training takes and draws its end sample with them, as it would trained alone (a 2-setting grid here)."""
+  from chorjax import calibrate
+
+  monkeypatch.setattr(calibrate, "GRID", {**{k: v[:1] for k, v in calibrate.GRID.items()}, "foot_lock": (True, False)})
+  overrides = [*BASE, "train.calibrate=true", "data.representation=canonical", "sample.frames=20"]
+  cfgs = [tiny_config(*overrides, *p) for p in POINTS]
+  train_vectorized(cfgs, [tmp_path / "v0", tmp_path / "v1"])
+  for k in range(2):
+    saved = json.loads((tmp_path / f"v{k}" / "calibration.json").read_text())
+    assert len(saved["table"]) == 2 and set(saved["settings"]) == set(calibrate.GRID)
+    assert load_run(tmp_path / f"v{k}").sampling()["foot_lock"] == saved["settings"]["foot_lock"]
+    assert (tmp_path / f"v{k}" / "samples" / "sample.csv").exists()
