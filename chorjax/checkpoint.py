@@ -123,7 +123,7 @@ def _quiet_abandoned_writes() -> None:
   """After a failed write, orbax's unfinished write coroutines are collected un-awaited, some only at exit,
   and Python warns of each on stderr ("coroutine 'async_serialize_from_host.<locals>.write_fragment' was
   never awaited"). The failure reaches the user as one line (a UserError), so those warnings are dropped:
-  only for orbax's coroutines, and only once a write has failed."""
+  only for orbax's coroutines, and only once a write has failed or a run is closing on an error."""
   warnings.filterwarnings(
     "ignore", message=r"coroutine '.*(serialize|write).*' was never awaited", category=RuntimeWarning
   )

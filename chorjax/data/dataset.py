@@ -298,7 +298,8 @@ def dataset_notes(ds: Dataset) -> list[str]:
     takes = names[0] if len(names) == 1 else f"{names[0]} and {len(names) - 1} more"
     out.append(f"joints of {takes} mapped {how}")
   out += ds.notes
-  minutes = sum(len(m.positions) for m in ds.motions if m.name in set(ds.train_names)) / ds.fps / 60
+  trained = set(ds.train_names)
+  minutes = sum(len(m.positions) for m in ds.motions if m.name in trained) / ds.fps / 60
   if minutes < SMALL_DATA_MINUTES:
     out.append(
       f"note: {minutes:.1f} minutes of training motion: on the dancers benchmark, sets under "

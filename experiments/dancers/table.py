@@ -125,17 +125,24 @@ def real_takes(run: Path) -> tuple[list, list, object, float]:
   return y_up(ds.train_names), y_up(ds.val_names), ds.features.skeleton, ds.fps
 
 
+def real_scores(run: Path) -> tuple[dict, tuple[int, float]]:
+  """The run's training takes scored as a sample against its held-out takes (FID over themselves, so the
+  FID ratios are 1), and ``(how many training takes, their minutes)``."""
+  from chorjax.scoring import score
+
+  train, held, skeleton, fps = real_takes(run)
+  e = score(train, held, skeleton, fps, train=train)
+  e["fid_k_train"], e["fid_g_train"] = e["fid_k"], e["fid_g"]
+  return e, (len(train), sum(map(len, train)) / fps / 60)
+
+
 def real_row(dataset: str) -> str | None:
   """The dataset's training takes scored as if they were a sample against its held-out takes: what real
   dance by this dancer scores on each column (FID ratios are 1 by construction; novelty has no meaning)."""
-  from chorjax.scoring import score
-
   evs = evaluations(VARIANTS["quickstart"], dataset)
   if not evs:
     return None
-  train, held, skeleton, fps = real_takes(evs[0][0])
-  e = score(train, held, skeleton, fps, train=train)
-  e["fid_k_train"], e["fid_g_train"] = e["fid_k"], e["fid_g"]
+  e, _ = real_scores(evs[0][0])
   cells = [cell([f(e)], worst) if "novelty" not in label else "-" for label, f, worst in COLUMNS]
   return f"| {dataset} | real: the training takes as a sample | - | " + " | ".join(cells) + " | - |"
 
@@ -165,19 +172,14 @@ def _seconds(run: Path) -> float:
 
 def readme_table() -> list[str]:
   """The README's table: per dataset, real dance and the quickstart (mean and range over training seeds)."""
-  from chorjax.scoring import score
-
   head = ["dataset (motion trained on)", "", *[c[0] for c in README_COLUMNS], "train + calibrate"]
   lines = ["| " + " | ".join(head) + " |", "|---" * len(head) + "|"]
   for dataset in DATASETS:
     evs = evaluations(VARIANTS["quickstart"], dataset)
     if not evs:
       continue
-    train, held, skeleton, fps = real_takes(evs[0][0])
-    e = score(train, held, skeleton, fps, train=train)
-    e["fid_k_train"], e["fid_g_train"] = e["fid_k"], e["fid_g"]
-    minutes = sum(map(len, train)) / fps / 60
-    name = f"{dataset} ({len(train)} takes, {minutes:.1f} min)"
+    e, (takes, minutes) = real_scores(evs[0][0])
+    name = f"{dataset} ({takes} takes, {minutes:.1f} min)"
 
     def seg(es):  # the calmest segment's mean (lowest) / the busiest's mean (highest) over the seeds
       low, high = [np.array([mean_of(x[k]) for x in es]) for k in ("movement_min", "movement_max")]
