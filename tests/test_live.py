@@ -183,8 +183,10 @@ def test_live_server_end_to_end(live_run, tmp_path):
         *(json.dumps({"prime": phrase[:n]}) for n in (3, 5, 7, 9, 13, 17, 25)),  # lengths never seen before
       ):
         ws.send(message)
+      # 7 prime lengths never seen before compile on the way: the deadline only guards against a hang (18 of 20
+      # frames came in 6 s while a sweep and a calibration shared the two cores with the suite)
       start, after = time.monotonic(), 0
-      while time.monotonic() - start < 6.0 and (len(replies) < 17 or after < FPS):
+      while time.monotonic() - start < 30.0 and (len(replies) < 17 or after < FPS):
         msg = json.loads(ws.recv())
         if "frame" in msg:
           received[msg["frame"]] = np.asarray(msg["positions"])
