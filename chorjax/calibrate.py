@@ -11,7 +11,11 @@ each draw is), ``persistence`` and ``crossfade`` (how long a mixture component h
 glide) and, for canonical runs, ``foot_lock``. It keeps the setting whose samples move like the reference
 takes on four measures, each / the reference's: movement over half a second (which trembling cannot fake),
 jitter (the second difference, which over-smoothing pulls under 1), mean joint speed and root travel (how
-far the dancer goes): ``|log movement| + |log jitter| + |log speed| + |log root travel|`` smallest.
+far the dancer goes), and whose poses go together as the reference's do: ``poses``, the geometric FID
+(``chorjax eval``'s FID_g, windows of 2 s) of the sample against the reference over the reference's own
+(one half of its takes against the other). The objective, smallest wins: ``|log movement| + |log jitter| +
+|log speed| + |log root travel| + max(log poses, 0)`` (poses nearer than another stretch of the same dance
+is no fault).
 
 The reference is the run's TRAINING takes (never the takes it is judged on: tuning on those would be
 tuning on the test); ``--data`` names others. The result goes to ``WORKDIR/calibration.json`` and is the
@@ -27,7 +31,8 @@ from collections.abc import Sequence
 import jax
 import numpy as np
 
-from chorjax import metrics
+from chorjax import metrics, scoring
+from chorjax.data.transforms import to_y_up
 from chorjax.errors import UserError, atomic_write
 from chorjax.run import CALIBRATED, calibration_path, read_calibration  # noqa: F401  (re-exported)
 
@@ -38,7 +43,8 @@ GRID = {
   "crossfade": (0.0, 0.8),
   "foot_lock": (True, False),  # canonical runs only (the others cannot lock feet)
 }
-MEASURES = ("movement", "jitter", "speed", "root_travel")
+RATES = ("movement", "jitter", "speed", "root_travel")
+MEASURES = (*RATES, "poses")
 
 
 DRAWN = ("noise_smoothing", "sigma_temperature", "persistence", "crossfade")  # what an MSE head ignores
@@ -56,12 +62,15 @@ def default_grid(config) -> dict:
 
 
 def objective(measured: dict) -> float:
-  """How far a sample's ``MEASURES`` (each / the reference's) are from the reference's own."""
-  return float(sum(abs(np.log(max(measured[k], 1e-9))) for k in MEASURES))
+  """How far a sample's ``MEASURES`` (each / the reference's) are from the reference's own; ``poses`` counts
+  only above 1 (and not in tables recorded before it was measured)."""
+  rates = sum(abs(np.log(max(measured[k], 1e-9))) for k in RATES)
+  return float(rates + max(np.log(max(measured.get("poses", 1.0), 1e-9)), 0.0))
 
 
-def reference_rates(reference, root: int, fps: float) -> dict:
-  """The reference takes' own rates, what ``measure`` divides by (computed once per search)."""
+def reference_rates(reference, skeleton, fps: float) -> dict:
+  """The reference takes' own rates and pose windows, what ``measure`` compares with (once per search)."""
+  root = skeleton.root
   lag = max(round(0.5 * fps), 1)
   disp, rough = metrics.reference_rates(reference, root, lag)
   return {
@@ -70,6 +79,7 @@ def reference_rates(reference, root: int, fps: float) -> dict:
     "jitter": rough,
     "speed": max(_speed(reference), 1e-12),
     "root_travel": max(_travel(reference, root), 1e-12),
+    "poses": scoring.PoseDistribution(reference, skeleton, fps),
   }
 
 
@@ -82,24 +92,26 @@ def _travel(takes, root: int) -> float:
 
 
 def measure(samples, rates: dict, root: int) -> dict:
-  """``MEASURES`` of samples ``[B, T, J, 3]`` / the reference's ``rates`` (y-up or not: both alike)."""
+  """``MEASURES`` of samples ``[B, T, J, 3]`` (y-up) / the reference's ``rates`` (``reference_rates``)."""
   return {
     "movement": float(np.mean([metrics.displacement(s, root, rates["lag"]) for s in samples]) / rates["movement"]),
     "jitter": float(np.mean([metrics.roughness(s) for s in samples]) / rates["jitter"]),
     "speed": _speed(samples) / rates["speed"],
     "root_travel": _travel(samples, root) / rates["root_travel"],
+    "poses": rates["poses"].ratio(list(samples)),
   }
 
 
-def search(draw, reference, root: int, fps: float, grid: dict | None = None, log=None) -> tuple[dict, list]:
+def search(draw, reference, skeleton, fps: float, grid: dict | None = None, log=None) -> tuple[dict, list]:
   """``(best settings, table)``: every combination of ``grid`` drawn by ``draw(settings) -> [B, T, J, 3]``
-  and measured against ``reference``; the table rows are ``(settings, measures, objective)``."""
+  (y-up) and measured against ``reference`` (takes of ``skeleton``); the table rows are ``(settings, measures,
+  objective)``."""
   grid = grid or GRID
-  rates = reference_rates(reference, root, fps)
+  rates = reference_rates(reference, skeleton, fps)
   table = []
   for values in itertools.product(*grid.values()):
     settings = dict(zip(grid, values))
-    measured = measure(draw(settings), rates, root)
+    measured = measure(draw(settings), rates, skeleton.root)
     table.append((settings, measured, objective(measured)))
     if log:
       log(f"  {settings}: " + ", ".join(f"{k.replace('_', ' ')} {v:.3f}" for k, v in measured.items()))
@@ -145,17 +157,19 @@ def calibrate(
   key = jax.random.key(seed)
   ranged = run.ranged(run.sampling())  # the grid's controls leave the range, pace and scale ceiling alone
 
+  y_up = lambda pos: np.asarray(to_y_up(pos, f.up_axis))  # what the measures (the pose questions) expect
+
   def draw(settings):
     sampling = run.sampling(**settings)
-    return dance(ranged.graphdef, ranged.params, ranged.features, motion, key, frames, sampling)
+    return y_up(dance(ranged.graphdef, ranged.params, ranged.features, motion, key, frames, sampling))
 
   if grid is None:
     grid = default_grid(run.config)
     if not grid:
       raise UserError(f"{workdir}: an MSE head on {run.config.data.representation} features draws nothing to calibrate")
   log(f"calibrating {workdir} on {'the takes given' if data else 'its training takes'} ({len(reference)} takes)")
-  positions = [m.positions for m in reference]
-  best, table = search(draw, positions, f.skeleton.root, run.fps, grid, log)
+  positions = [y_up(m.positions) for m in reference]
+  best, table = search(draw, positions, f.skeleton, run.fps, grid, log)
   result = {
     "settings": best,
     "reference": list(data) if data else "training takes",

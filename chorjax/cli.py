@@ -995,7 +995,8 @@ def _add_calibrate_command(sub) -> None:
     description="Samples the run over a grid of noise_smoothing, sigma_temperature, persistence, crossfade and "
     "(canonical runs) foot_lock, 180 settings (an MSE head draws no noise: foot_lock alone), and keeps the one "
     "whose dance moves like the reference takes "
-    "(movement over 0.5 s, jitter, joint speed and root travel, together nearest the takes' own). The "
+    "(movement over 0.5 s, jitter, joint speed and root travel, together nearest the takes' own) and whose "
+    "poses go together as theirs do (the geometric FID over the takes' own, counted above 1). The "
     "reference is the run's training takes: never the takes it is judged on. Writes WORKDIR/calibration.json, "
     "which sample, eval and live then use unless a flag says otherwise.",
   )

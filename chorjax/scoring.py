@@ -145,17 +145,26 @@ def _halves(reference, rng) -> tuple:
   return [0], [1]
 
 
-def _distribution(motions, reference, features, window: int, splits: int, seed: int, std_floor: float) -> tuple:
-  """``(fid values, fid_real values, div, div_real)`` under the resampling scheme in the module doc.
-
-  Features are normalized by the reference windows' mean and std, the std floored at ``std_floor``: a
-  feature the reference never varies (a pose it never takes) must not divide by zero.
-  """
+def _reference_rows(reference, features, window: int) -> tuple:
+  """``(feature rows of each of the reference's pieces, of all its windows)``: what every split draws from."""
   hop = max(window // 4, 1)
-  piece_rows = [_window_rows([p], window, hop, features) for p in _pieces(reference)]  # once, not per split
+  piece_rows = [_window_rows([p], window, hop, features) for p in _pieces(reference)]
   ref_all = _stack(
     [r for rows in piece_rows for r in rows] if len(reference) >= 2 else _window_rows(reference, window, hop, features)
   )
+  return piece_rows, ref_all
+
+
+def _distribution(
+  motions, reference, features, window: int, splits: int, seed: int, std_floor: float, rows=None
+) -> tuple:
+  """``(fid values, fid_real values, div, div_real)`` under the resampling scheme in the module doc.
+
+  Features are normalized by the reference windows' mean and std, the std floored at ``std_floor``: a
+  feature the reference never varies (a pose it never takes) must not divide by zero. ``rows``: the
+  reference's ``_reference_rows``, where they were measured before.
+  """
+  piece_rows, ref_all = rows or _reference_rows(reference, features, window)
   gen = _stack(_window_rows(motions, window, max(window // 2, 1), features))
   mean, std = ref_all.mean(0), np.maximum(ref_all.std(0), std_floor)
   norm = lambda f: (f - mean) / std
@@ -177,6 +186,25 @@ def _distribution(motions, reference, features, window: int, splits: int, seed: 
     )
   cap = lambda f: f[rng.choice(len(f), min(len(f), 1000), replace=False)]
   return fids, reals, metrics.diversity(norm(cap(gen))), metrics.diversity(norm(cap(ref_all)))
+
+
+class PoseDistribution:
+  """The geometric FID (``fid_g``) of motions against fixed reference takes over the reference's own (one half
+  of its takes against the other, or a single take's halves; mean over ``splits``): what ``chorjax calibrate``
+  holds a sample's poses to. The reference's windows are measured once."""
+
+  def __init__(self, reference, skeleton: Skeleton, fps: float, window: int = 60, splits: int = 4, seed: int = 0):
+    del fps  # the pose questions are per frame: the same at any rate
+    self.reference, self.window, self.splits, self.seed = list(reference), window, splits, seed
+    size = float(np.mean([metrics.body_size(t, skeleton) for t in self.reference]))
+    self.features = lambda w: metrics.geometric_features(w, skeleton, size).mean(0)
+    self.rows = _reference_rows(self.reference, self.features, window)
+
+  def ratio(self, motions) -> float:
+    """FID_g of ``motions`` (``[T, J, 3]`` each, y-up, at least ``window`` frames) / the reference's own."""
+    args = (self.features, self.window, self.splits, self.seed, 0.05, self.rows)
+    fids, reals, *_ = _distribution(motions, self.reference, *args)
+    return float(np.mean(fids) / max(np.mean(reals), 1e-9))
 
 
 def _novelty(motions, reference, train, unseen, skeleton: Skeleton, size: float, window: int) -> dict:

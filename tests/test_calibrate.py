@@ -10,6 +10,7 @@ from helpers import QUICKSTART_SAMPLING, tiny_config
 from chorjax import calibrate, cli
 from chorjax.calibrate import calibration_path, search
 from chorjax.data.npz import read_npz
+from chorjax.data.transforms import to_y_up
 from chorjax.run import CALIBRATED, load_run
 from chorjax.sample import dance
 from chorjax.training import train_and_evaluate
@@ -51,12 +52,13 @@ def test_calibration_recovers_the_settings_that_drew_the_reference(run_dir, true
     def draw(settings):
       s = run.sampling(**settings)
       r = run.ranged(s)
-      return dance(r.graphdef, r.params, r.features, np.arange(4) % 2, jax.random.key(seed), 400, s)
+      pos = dance(r.graphdef, r.params, r.features, np.arange(4) % 2, jax.random.key(seed), 400, s)
+      return np.asarray(to_y_up(pos, r.features.up_axis))
 
     return draw
 
   reference = list(drawer(1)(true))
-  best, table = search(drawer(0), reference, run.features.skeleton.root, run.fps, GRID)
+  best, table = search(drawer(0), reference, run.features.skeleton, run.fps, GRID)
   assert best == true
   assert len(table) == 24 and min(o for *_, o in table) < 0.2  # four measures within ~5% of the reference's
 
@@ -68,7 +70,7 @@ def test_calibrate_records_the_settings_and_the_run_uses_them_unless_told(run_di
   chosen = saved["settings"]
   assert set(chosen) == set(CALIBRATED) and saved["reference"] == "training takes"  # a canonical run: feet too
   assert len(saved["table"]) == 4 and "calibrated:" in capsys.readouterr().out
-  assert {"movement", "jitter", "speed", "root_travel", "objective"} <= set(saved["table"][0])
+  assert {"movement", "jitter", "speed", "root_travel", "poses", "objective"} <= set(saved["table"][0])
   assert cli.main(args) == 2  # an existing calibration is not replaced without --force
   assert "calibration.json" in capsys.readouterr().err
   out = tmp_path / "s.npz"
@@ -125,3 +127,20 @@ def test_an_mse_head_calibrates_only_what_can_change_its_dance():
   assert default_grid(load_config("configs/quickstart.toml", ["model.head=mse"])) == {"foot_lock": (True, False)}
   assert default_grid(load_config(None, ["model.head=mse", "data.representation=directions"])) == {}
   assert "foot_lock" not in default_grid(load_config(None, ["data.representation=directions"]))
+
+
+def test_the_pose_measure_holds_real_takes_near_one_and_a_frozen_dancer_far_from_it():
+  """``poses`` on real cmu94 takes: the held-out takes score near the training takes' own halves; a dancer
+  frozen in one of their poses scores far worse; the training takes themselves score nearest."""
+  from chorjax.data.dataset import load_dataset
+  from chorjax.scoring import PoseDistribution
+
+  ds = load_dataset(tiny_config().data)
+  y_up = lambda m: np.asarray(to_y_up(m.positions, ds.features.up_axis))
+  train = [y_up(m) for m in ds.motions if m.name in ds.train_names]
+  held = [y_up(m) for m in ds.motions if m.name in ds.val_names]
+  poses = PoseDistribution(train, ds.features.skeleton, ds.fps)
+  real = poses.ratio(held)
+  assert 0.5 < real < 2.0
+  assert poses.ratio([np.repeat(held[0][:1], 600, 0)]) > 2 * real  # one pose, held
+  assert poses.ratio(train) < real  # the training takes themselves are nearest
