@@ -79,7 +79,7 @@ def reference_rates(reference, skeleton, fps: float) -> dict:
     "jitter": rough,
     "speed": max(_speed(reference), 1e-12),
     "root_travel": max(_travel(reference, root), 1e-12),
-    "poses": scoring.PoseDistribution(reference, skeleton, fps),
+    "poses": scoring.PoseDistribution(reference, skeleton),
   }
 
 

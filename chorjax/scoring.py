@@ -124,6 +124,16 @@ def _window_rows(takes, window: int, hop: int, features) -> list:
   return [features(w) for t in takes for w in metrics.windows(t, window, hop)]
 
 
+# geometric features are fractions of a window's frames: a std below 5% of the frames is noise
+GEO_STD_FLOOR = 0.05
+
+
+def _pose_features(skeleton: Skeleton, size: float):
+  """A window ``[W, J, 3]`` (y-up) -> the fraction of its frames answering yes to each pose question (FID_g's
+  features)."""
+  return lambda w: metrics.geometric_features(w, skeleton, size).mean(0)
+
+
 def _stack(rows) -> np.ndarray:
   return np.stack(rows) if rows else np.zeros((0, 0))
 
@@ -193,16 +203,15 @@ class PoseDistribution:
   of its takes against the other, or a single take's halves; mean over ``splits``): what ``chorjax calibrate``
   holds a sample's poses to. The reference's windows are measured once."""
 
-  def __init__(self, reference, skeleton: Skeleton, fps: float, window: int = 60, splits: int = 4, seed: int = 0):
-    del fps  # the pose questions are per frame: the same at any rate
+  def __init__(self, reference, skeleton: Skeleton, window: int = 60, splits: int = 4, seed: int = 0):
     self.reference, self.window, self.splits, self.seed = list(reference), window, splits, seed
     size = float(np.mean([metrics.body_size(t, skeleton) for t in self.reference]))
-    self.features = lambda w: metrics.geometric_features(w, skeleton, size).mean(0)
+    self.features = _pose_features(skeleton, size)
     self.rows = _reference_rows(self.reference, self.features, window)
 
   def ratio(self, motions) -> float:
     """FID_g of ``motions`` (``[T, J, 3]`` each, y-up, at least ``window`` frames) / the reference's own."""
-    args = (self.features, self.window, self.splits, self.seed, 0.05, self.rows)
+    args = (self.features, self.window, self.splits, self.seed, GEO_STD_FLOOR, self.rows)
     fids, reals, *_ = _distribution(motions, self.reference, *args)
     return float(np.mean(fids) / max(np.mean(reals), 1e-9))
 
@@ -234,7 +243,7 @@ def _travel_and_train_reference(motions, reference, skeleton, train, unseen, fea
   travel = lambda p: metrics.root_travel(p, skeleton.root)
   ref_travel = float(np.mean(np.concatenate([travel(t) for t in reference])))
   out: dict = {"root_travel": spread([float(travel(m).mean() / max(ref_travel, 1e-12)) for m in motions])}
-  for name, feats, floor in (("fid_k_train", features[0], 1e-10), ("fid_g_train", features[1], 0.05)):
+  for name, feats, floor in (("fid_k_train", features[0], 1e-10), ("fid_g_train", features[1], GEO_STD_FLOOR)):
     out[name] = (
       spread(_distribution(train, reference, feats, window, splits, seed, floor)[0]) if train and unseen else None
     )
@@ -286,10 +295,9 @@ def score(
   size = float(np.mean([metrics.body_size(t, skeleton) for t in reference]))
   _check_reference(reference, skeleton, fps, size)
   kin = lambda w: metrics.kinetic_features(w / size, fps)
-  geo = lambda w: metrics.geometric_features(w, skeleton, size).mean(0)
+  geo = _pose_features(skeleton, size)
   fid_k, fid_k_real, div_k, div_k_real = _distribution(motions, reference, kin, window, splits, seed, 1e-10)
-  # geometric features are fractions of a window's frames: a std below 5% of the frames is noise
-  fid_g, fid_g_real, div_g, div_g_real = _distribution(motions, reference, geo, window, splits, seed, 0.05)
+  fid_g, fid_g_real, div_g, div_g_real = _distribution(motions, reference, geo, window, splits, seed, GEO_STD_FLOOR)
   speed = float(np.mean(np.concatenate([metrics.joint_speed(t) for t in reference])))
   speeds = spread([metrics.speed_ratio(m, speed) for m in motions])
   moving, steps = (

@@ -139,7 +139,7 @@ def test_the_pose_measure_holds_real_takes_near_one_and_a_frozen_dancer_far_from
   y_up = lambda m: np.asarray(to_y_up(m.positions, ds.features.up_axis))
   train = [y_up(m) for m in ds.motions if m.name in ds.train_names]
   held = [y_up(m) for m in ds.motions if m.name in ds.val_names]
-  poses = PoseDistribution(train, ds.features.skeleton, ds.fps)
+  poses = PoseDistribution(train, ds.features.skeleton)
   real = poses.ratio(held)
   assert 0.5 < real < 2.0
   assert poses.ratio([np.repeat(held[0][:1], 600, 0)]) > 2 * real  # one pose, held
