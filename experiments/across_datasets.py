@@ -1,0 +1,120 @@
+"""The comparisons users run, on every dataset of the dancers benchmark (issue 38): one table per measure, a
+row per configuration, a column per dataset; every figure on the dataset's held-out takes, mean (lowest-
+highest) over the training seeds.
+
+  .venv/bin/python experiments/across_datasets.py > experiments/across_datasets.md
+
+Reads, whichever are on this machine, the runs of experiments/dancers/sweep.toml as calibrated with the poses
+measure (runs/dancers_poses), experiments/rnn_types/dancers.toml, experiments/mdn_vs_mse/dancers.toml,
+experiments/families/dancers.toml and experiments/aclstm/ (its CPU runs in runs/aclstm_cpu). Each evaluated
+run's small files are copied beside its experiment (``results/``), and the table falls back to them where
+the runs are not on this machine.
+"""
+
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from chorjax.scoring import mean_of
+
+HERE = Path(__file__).parent
+KEPT = ("config.json", "calibration.json", "metrics.jsonl", "eval/metrics.json")
+DATASETS = ("cmu94", "salsa", "martial", "cmu05", "cmu131")
+# (label, runs folder, the folder its results are kept in, what a run's name holds besides dataset and seed)
+CONFIGS = [
+  ("LN-LSTM, MDN (the quickstart)", "runs/dancers_poses", "dancers/results/dancers_poses", ""),
+  ("LSTM, MDN", "runs/rnn_types_dancers", "rnn_types/results/rnn_types_dancers", "cell=lstm-"),
+  ("GRU, MDN", "runs/rnn_types_dancers", "rnn_types/results/rnn_types_dancers", "cell=gru-"),
+  ("LN-LSTM, MSE (the quickstart's twin)", "runs/mdn_vs_mse_dancers", "mdn_vs_mse/results/mdn_vs_mse_dancers", ""),
+  ("LSTM-GAN (experiments/families)", "runs/families_dancers", "families/results/families_dancers", ""),
+  ("acLSTM, 3 x 1024 LSTM, MSE: 6 min on 2 CPU cores", "runs/aclstm_cpu", "aclstm/results/cpu", ""),
+  ("acLSTM, 3 x 1024 LSTM, MSE: 4.5-6 min on an H200", "runs/aclstm_gpu", "aclstm/results/gpu", ""),
+]
+
+
+def novelty(e: dict) -> float:
+  return mean_of(e["novelty"]) / mean_of(e["novelty_real"])
+
+
+# (label, value of one evaluation, the direction that is better: 'one' = nearer 1 on a log scale, 'low', 'high')
+MEASURES = [
+  ("FID_k / the training takes'", lambda e: mean_of(e["fid_k"]) / mean_of(e["fid_k_train"]), "low"),
+  ("FID_g / the training takes'", lambda e: mean_of(e["fid_g"]) / mean_of(e["fid_g_train"]), "low"),
+  (
+    "movement, worst 1,000-frame segment (1 = the held-out takes')",
+    lambda e: min(mean_of(e["movement_min"]), 2 - mean_of(e["movement_max"])),
+    "one",
+  ),
+  ("jitter (1 = the held-out takes')", lambda e: mean_of(e["jitter"]), "one"),
+  ("mean joint speed (1 = the held-out takes')", lambda e: mean_of(e["speed"]), "one"),
+  ("novelty / the held-out takes' (under 0.8: copying)", novelty, "high"),
+]
+
+
+def runs_of(runs: str, kept: str, holds: str, dataset: str) -> list[Path]:
+  """The evaluated runs of one configuration on one dataset: on this machine, else their kept results."""
+  for root in (Path(runs), HERE / kept):
+    found = sorted(d for d in root.glob(f"*-{dataset}-{holds}seed=*") if (d / "eval" / "metrics.json").exists())
+    if found:
+      return found
+  return []
+
+
+def save_results() -> None:
+  """Copies the small files of every evaluated run on this machine beside its experiment."""
+  for _, runs, kept, holds in CONFIGS:
+    for dataset in DATASETS:
+      for run in runs_of(runs, kept, holds, dataset):
+        if run.is_relative_to(HERE):
+          continue
+        for name in KEPT:
+          if (run / name).exists():
+            (HERE / kept / run.name / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(run / name, HERE / kept / run.name / name)
+
+
+def spread(values: list[float]) -> str:
+  v = np.asarray(values)
+  return f"{v.mean():.2f} ({v.min():.2f}-{v.max():.2f})" if len(v) > 1 else f"{v[0]:.2f} (1 seed)"
+
+
+def winner(cells: dict[str, list[float]], better: str) -> str | None:
+  """The configuration whose every seed beats every seed of every other one with 3 seeds (None if the
+  spreads overlap): a winner named only beyond the spread."""
+  key = {"low": lambda x: x, "high": lambda x: -x, "one": lambda x: abs(np.log(x))}[better]
+  full = {label: [key(x) for x in v] for label, v in cells.items() if len(v) >= 3}
+  for label, v in full.items():
+    if len(full) > 1 and all(max(v) < min(w) for other, w in full.items() if other != label):
+      return label
+  return None
+
+
+def tables() -> list[str]:
+  evaluated = {
+    (label, dataset): [json.loads((d / "eval" / "metrics.json").read_text()) for d in runs_of(*where, dataset)]
+    for label, *where in CONFIGS
+    for dataset in DATASETS
+  }
+  datasets = [d for d in DATASETS if any(evaluated[label, d] for label, *_ in CONFIGS)]
+  out = []
+  for title, f, better in MEASURES:
+    out += [f"### {title}", "", "| configuration | " + " | ".join(datasets) + " |", "|---" * (len(datasets) + 1) + "|"]
+    for label, *_ in CONFIGS:
+      cells = [spread([f(e) for e in evaluated[label, d]]) if evaluated[label, d] else "" for d in datasets]
+      if any(cells):
+        out.append(f"| {label} | " + " | ".join(cells) + " |")
+    wins = []
+    for d in datasets:
+      w = winner({label: [f(e) for e in evaluated[label, d]] for label, *_ in CONFIGS}, better)
+      full = sum(len(evaluated[label, d]) >= 3 for label, *_ in CONFIGS)
+      wins.append(w or ("spreads overlap" if full > 1 else "-"))
+    out += ["| beyond the spread (3 seeds each) | " + " | ".join(wins) + " |", ""]
+  return out
+
+
+if __name__ == "__main__":
+  save_results()
+  print("\n".join(tables()), file=sys.stdout)
