@@ -41,21 +41,22 @@ METRICS = (
 
 
 def held_out(run) -> dict[str, list[np.ndarray]]:
-  """Canonical positions of the held-out takes, by set: cmu94's validation take, then the other dancers."""
+  """Canonical positions of the held-out takes, by set: the run's validation takes (cmu94's 94_10 for
+  configs/inbetween.toml), then the other dancers."""
   ds = load_dataset(run.config.data)
-  sets = {"cmu94 " + ", ".join(ds.val_names): ib.held_out_takes(ds)}
+  sets = {f"{Path(run.config.data.dataset).name} " + ", ".join(ds.val_names): ib.held_out_takes(ds)}
   size, f = ib.Space.of(run.features).size, run.features
   feet = list(f.skeleton.feet)
   floor = lambda takes: np.percentile(np.concatenate([t[:, feet, 1] for t in takes]), 5)
-  cmu94_floor = floor(ib.training_takes(ds, ()))
+  train_floor = floor(ib.training_takes(ds, ()))
   for folder in OTHERS:
     if not Path(folder).is_dir():
       print(f"warning: {folder} not found: evaluated without it", file=sys.stderr)
       continue
     takes = [to_rate(m, ds.fps) for m in conform(read_takes([folder], run.config.data), run.config.data)]
     canon = [np.asarray(f.canonical(m.positions), np.float32) for m in takes]
-    canon = [c * (size / leg_length(c, f.skeleton)) for c in canon]  # cmu94's body size
-    lift = np.array([0.0, cmu94_floor - floor(canon), 0.0], np.float32)  # on cmu94's floor (its y origin differs)
+    canon = [c * (size / leg_length(c, f.skeleton)) for c in canon]  # the run's body size
+    lift = np.array([0.0, train_floor - floor(canon), 0.0], np.float32)  # on its training floor
     sets[Path(folder).name] = [c + lift for c in canon]
   return sets
 
