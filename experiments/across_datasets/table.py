@@ -2,13 +2,15 @@
 row per configuration, a column per dataset; every figure on the dataset's held-out takes, mean (lowest-
 highest) over the training seeds.
 
-  .venv/bin/python experiments/across_datasets.py > experiments/across_datasets.md
+  .venv/bin/python experiments/across_datasets/table.py     # writes experiments/across_datasets/table.md
 
 Reads, whichever are on this machine, the runs of experiments/dancers/sweep.toml as calibrated with the poses
 measure (runs/dancers_poses), experiments/rnn_types/dancers.toml, experiments/mdn_vs_mse/dancers.toml,
 experiments/families/dancers.toml and experiments/aclstm/ (its CPU runs in runs/aclstm_cpu). Each evaluated
 run's small files are copied beside its experiment (``results/``), and the table falls back to them where
-the runs are not on this machine.
+the runs are not on this machine. Filmstrips: the end of seed 0's first 10,000-frame dancer of each
+configuration whose runs are on this machine, beside a held-out take (strip_DATASET_CONFIG.png; those drawn
+on an earlier machine stay).
 """
 
 import json
@@ -20,18 +22,25 @@ import numpy as np
 
 from chorjax.scoring import mean_of
 
-HERE = Path(__file__).parent
+HERE = Path(__file__).parent.parent  # experiments/
+OUT = Path(__file__).parent
 KEPT = ("config.json", "calibration.json", "metrics.jsonl", "eval/metrics.json")
 DATASETS = ("cmu94", "salsa", "martial", "cmu05", "cmu131")
-# (label, runs folder, the folder its results are kept in, what a run's name holds besides dataset and seed)
+# (label, runs folder, the folder its results are kept in, what a run's name holds besides dataset and seed, slug)
 CONFIGS = [
-  ("LN-LSTM, MDN (the quickstart)", "runs/dancers_poses", "dancers/results/dancers_poses", ""),
-  ("LSTM, MDN", "runs/rnn_types_dancers", "rnn_types/results/rnn_types_dancers", "cell=lstm-"),
-  ("GRU, MDN", "runs/rnn_types_dancers", "rnn_types/results/rnn_types_dancers", "cell=gru-"),
-  ("LN-LSTM, MSE (the quickstart's twin)", "runs/mdn_vs_mse_dancers", "mdn_vs_mse/results/mdn_vs_mse_dancers", ""),
-  ("LSTM-GAN (experiments/families)", "runs/families_dancers", "families/results/families_dancers", ""),
-  ("acLSTM, 3 x 1024 LSTM, MSE: 6 min on 2 CPU cores", "runs/aclstm_cpu", "aclstm/results/cpu", ""),
-  ("acLSTM, 3 x 1024 LSTM, MSE: 4.5-6 min on an H200", "runs/aclstm_gpu", "aclstm/results/gpu", ""),
+  ("LN-LSTM, MDN (the quickstart)", "runs/dancers_poses", "dancers/results/dancers_poses", "", "quickstart"),
+  ("LSTM, MDN", "runs/rnn_types_dancers", "rnn_types/results/rnn_types_dancers", "cell=lstm-", "lstm"),
+  ("GRU, MDN", "runs/rnn_types_dancers", "rnn_types/results/rnn_types_dancers", "cell=gru-", "gru"),
+  (
+    "LN-LSTM, MSE (the quickstart's twin)",
+    "runs/mdn_vs_mse_dancers",
+    "mdn_vs_mse/results/mdn_vs_mse_dancers",
+    "",
+    "mse",
+  ),
+  ("LSTM-GAN (experiments/families)", "runs/families_dancers", "families/results/families_dancers", "", "gan"),
+  ("acLSTM, 3 x 1024 LSTM, MSE: 6 min on 2 CPU cores", "runs/aclstm_cpu", "aclstm/results/cpu", "", "aclstm_cpu"),
+  ("acLSTM, 3 x 1024 LSTM, MSE: 4.5-6 min on an H200", "runs/aclstm_gpu", "aclstm/results/gpu", "", "aclstm_gpu"),
 ]
 
 
@@ -65,7 +74,7 @@ def runs_of(runs: str, kept: str, holds: str, dataset: str) -> list[Path]:
 
 def save_results() -> None:
   """Copies the small files of every evaluated run on this machine beside its experiment."""
-  for _, runs, kept, holds in CONFIGS:
+  for _, runs, kept, holds, _ in CONFIGS:
     for dataset in DATASETS:
       for run in runs_of(runs, kept, holds, dataset):
         if run.is_relative_to(HERE):
@@ -95,7 +104,7 @@ def winner(cells: dict[str, list[float]], better: str) -> str | None:
 def tables() -> list[str]:
   evaluated = {
     (label, dataset): [json.loads((d / "eval" / "metrics.json").read_text()) for d in runs_of(*where, dataset)]
-    for label, *where in CONFIGS
+    for label, *where, _ in CONFIGS
     for dataset in DATASETS
   }
   datasets = [d for d in DATASETS if any(evaluated[label, d] for label, *_ in CONFIGS)]
@@ -115,6 +124,47 @@ def tables() -> list[str]:
   return out
 
 
+def strips() -> list[str]:
+  """Per dataset: the last 900 frames of seed 0's first evaluated dancer of each configuration run here,
+  then a held-out take as training read it."""
+  from chorjax.data.npz import read_npz
+  from chorjax.render.plot import plot_strip
+  from chorjax.run import load_run, read_reference
+
+  out = []
+  for dataset in DATASETS:
+    drawn, real_from = [], None
+    for label, runs, _, holds, slug in CONFIGS:
+      run = Path(runs)
+      seed0 = [d for d in run.glob(f"*-{dataset}-{holds}seed=0") if (d / "eval" / "sample.npz").exists()]
+      png = OUT / f"strip_{dataset}_{slug}.png"
+      if seed0:
+        dance = read_npz(seed0[0] / "eval" / "sample.npz")[0]
+        end = dance.replace(positions=dance.positions[-900:], name=f"{dataset}, {label}: frames 9,100-10,000")
+        plot_strip(end, png, every=10, poses=12)
+        real_from = real_from or seed0[0]
+      if png.exists():
+        drawn.append(f"![{dataset}, {label}]({png.name})")
+    png = OUT / f"strip_{dataset}_real.png"
+    if real_from is not None:
+      real = read_reference(load_run(real_from), ["held-out"])[0][0]
+      plot_strip(real.replace(name=f"{dataset} held-out take {real.name}"), png, every=10, poses=12)
+    if drawn and png.exists():
+      out += [f"### {dataset}", "", *(f"{x}\n" for x in drawn), f"![{dataset} real]({png.name})", ""]
+  return out
+
+
 if __name__ == "__main__":
   save_results()
-  print("\n".join(tables()), file=sys.stdout)
+  lines = [
+    "# Every configuration on every dataset of the dancers benchmark",
+    "",
+    f"Written by `experiments/across_datasets/table.py` ({__doc__.splitlines()[0][4:]}).",
+    "",
+    *tables(),
+    "## The end of a 10,000-frame dancer (seed 0) beside a held-out take",
+    "",
+    *strips(),
+  ]
+  (OUT / "table.md").write_text("\n".join(lines))
+  print(f"wrote {OUT / 'table.md'}", file=sys.stderr)
