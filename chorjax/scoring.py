@@ -166,13 +166,14 @@ def _reference_rows(reference, features, window: int) -> tuple:
 
 
 def _distribution(
-  motions, reference, features, window: int, splits: int, seed: int, std_floor: float, rows=None
+  motions, reference, features, window: int, splits: int, seed: int, std_floor: float, rows=None, diversity=True
 ) -> tuple:
   """``(fid values, fid_real values, div, div_real)`` under the resampling scheme in the module doc.
 
   Features are normalized by the reference windows' mean and std, the std floored at ``std_floor``: a
   feature the reference never varies (a pose it never takes) must not divide by zero. ``rows``: the
-  reference's ``_reference_rows``, where they were measured before.
+  reference's ``_reference_rows``, where they were measured before. ``diversity=False``: the two
+  diversities (up to 1,000 x 1,000 distances each) are not computed and are None.
   """
   piece_rows, ref_all = rows or _reference_rows(reference, features, window)
   gen = _stack(_window_rows(motions, window, max(window // 2, 1), features))
@@ -194,6 +195,8 @@ def _distribution(
       f"--data: too few {window}-frame windows in the reference takes or the motions to compare distributions "
       "(longer takes, or a smaller --window)"
     )
+  if not diversity:
+    return fids, reals, None, None
   cap = lambda f: f[rng.choice(len(f), min(len(f), 1000), replace=False)]
   return fids, reals, metrics.diversity(norm(cap(gen))), metrics.diversity(norm(cap(ref_all)))
 
@@ -212,7 +215,7 @@ class PoseDistribution:
   def ratio(self, motions) -> float:
     """FID_g of ``motions`` (``[T, J, 3]`` each, y-up, at least ``window`` frames) / the reference's own."""
     args = (self.features, self.window, self.splits, self.seed, GEO_STD_FLOOR, self.rows)
-    fids, reals, *_ = _distribution(motions, self.reference, *args)
+    fids, reals, *_ = _distribution(motions, self.reference, *args, diversity=False)
     return float(np.mean(fids) / max(np.mean(reals), 1e-9))
 
 
