@@ -44,6 +44,10 @@ CONFIGS = [
 ]
 
 
+def FID_G(e: dict) -> float:
+  return mean_of(e["fid_g"]) / mean_of(e["fid_g_train"])
+
+
 def novelty(e: dict) -> float:
   return mean_of(e["novelty"]) / mean_of(e["novelty_real"])
 
@@ -51,7 +55,7 @@ def novelty(e: dict) -> float:
 # (label, value of one evaluation, the direction that is better: 'one' = nearer 1 on a log scale, 'low', 'high')
 MEASURES = [
   ("FID_k / the training takes'", lambda e: mean_of(e["fid_k"]) / mean_of(e["fid_k_train"]), "low"),
-  ("FID_g / the training takes'", lambda e: mean_of(e["fid_g"]) / mean_of(e["fid_g_train"]), "low"),
+  ("FID_g / the training takes'", FID_G, "low"),
   (
     "movement, worst 1,000-frame segment (1 = the held-out takes')",
     lambda e: min(mean_of(e["movement_min"]), 2 - mean_of(e["movement_max"])),
@@ -124,6 +128,40 @@ def tables() -> list[str]:
   return out
 
 
+def chosen(run: Path) -> dict | None:
+  """The calibration's row of the settings it chose (measured on the run's training takes), if calibrated."""
+  path = run / "calibration.json"
+  if not path.exists():
+    return None
+  cal = json.loads(path.read_text())
+  return next((r for r in cal["table"] if r["settings"] == cal["settings"]), None)
+
+
+def selection() -> list[str]:
+  """Would choosing, among a configuration's training seeds, the one whose calibrated draws' poses are nearest
+  the training takes' (calibration.json's poses measure: no held-out take involved) pick the seed with the
+  best held-out FID_g? One row per configuration and dataset with 3 calibrated seeds."""
+  out = [
+    "| configuration | dataset | poses measure on the training takes, by seed | held-out FID_g / train, by seed "
+    "| the chosen seed's FID_g | mean over seeds |",
+    "|---|---|---|---|---|---|",
+  ]
+  for label, runs, kept, holds, _ in CONFIGS:
+    for dataset in DATASETS:
+      found = runs_of(runs, kept, holds, dataset)
+      rows = [chosen(d) for d in found]
+      if len(found) < 3 or any(r is None or "poses" not in r for r in rows):
+        continue
+      fid = [FID_G(json.loads((d / "eval" / "metrics.json").read_text())) for d in found]
+      poses = [r["poses"] for r in rows if r is not None]
+      pick = int(np.argmin(poses))
+      out.append(
+        f"| {label} | {dataset} | {', '.join(f'{p:.2f}' for p in poses)} | {', '.join(f'{f:.2f}' for f in fid)} "
+        f"| {fid[pick]:.2f} | {np.mean(fid):.2f} |"
+      )
+  return out
+
+
 def strips() -> list[str]:
   """Per dataset: the last 900 frames of seed 0's first evaluated dancer of each configuration run here,
   then a held-out take as training read it."""
@@ -162,6 +200,12 @@ if __name__ == "__main__":
     f"Written by `experiments/across_datasets/table.py` ({__doc__.splitlines()[0][4:]}).",
     "",
     *tables(),
+    "## Choosing among training seeds by the calibration's poses measure",
+    "",
+    selection.__doc__.split("\n\n")[0].replace("\n  ", " ") if selection.__doc__ else "",
+    "",
+    *selection(),
+    "",
     "## The end of a 10,000-frame dancer (seed 0) beside a held-out take",
     "",
     *strips(),
