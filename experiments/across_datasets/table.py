@@ -14,17 +14,18 @@ on an earlier machine stay).
 """
 
 import json
-import shutil
 import sys
 from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).parent.parent))
+from _results import end_strip, keep_small_files, real_strip
+
 from chorjax.scoring import mean_of
 
 HERE = Path(__file__).parent.parent  # experiments/
 OUT = Path(__file__).parent
-KEPT = ("config.json", "calibration.json", "metrics.jsonl", "eval/metrics.json")
 DATASETS = ("cmu94", "salsa", "martial", "cmu05", "cmu131")
 # (label, runs folder, the folder its results are kept in, what a run's name holds besides dataset and seed, slug)
 CONFIGS = [
@@ -80,12 +81,8 @@ def save_results() -> None:
   for _, runs, kept, holds, _ in CONFIGS:
     for dataset in DATASETS:
       for run in runs_of(runs, kept, holds, dataset):
-        if run.is_relative_to(HERE):
-          continue
-        for name in KEPT:
-          if (run / name).exists():
-            (HERE / kept / run.name / name).parent.mkdir(parents=True, exist_ok=True)
-            shutil.copyfile(run / name, HERE / kept / run.name / name)
+        if not run.is_relative_to(HERE):
+          keep_small_files(run, HERE / kept)
 
 
 def spread(values: list[float]) -> str:
@@ -164,28 +161,20 @@ def selection() -> list[str]:
 def strips() -> list[str]:
   """Per dataset: the last 900 frames of seed 0's first evaluated dancer of each configuration run here,
   then a held-out take as training read it."""
-  from chorjax.data.npz import read_npz
-  from chorjax.render.plot import plot_strip
-  from chorjax.run import load_run, read_reference
-
   out = []
   for dataset in DATASETS:
     drawn, real_from = [], None
     for label, runs, _, holds, slug in CONFIGS:
-      run = Path(runs)
-      seed0 = [d for d in run.glob(f"*-{dataset}-{holds}seed=0") if (d / "eval" / "sample.npz").exists()]
+      seed0 = [d for d in Path(runs).glob(f"*-{dataset}-{holds}seed=0") if (d / "eval" / "sample.npz").exists()]
       png = OUT / f"strip_{dataset}_{slug}.png"
       if seed0:
-        dance = read_npz(seed0[0] / "eval" / "sample.npz")[0]
-        end = dance.replace(positions=dance.positions[-900:], name=f"{dataset}, {label}: frames 9,100-10,000")
-        plot_strip(end, png, every=10, poses=12)
+        end_strip(seed0[0] / "eval" / "sample.npz", png, f"{dataset}, {label}")
         real_from = real_from or seed0[0]
       if png.exists():
         drawn.append(f"![{dataset}, {label}]({png.name})")
     png = OUT / f"strip_{dataset}_real.png"
     if real_from is not None:
-      real = read_reference(load_run(real_from), ["held-out"])[0][0]
-      plot_strip(real.replace(name=f"{dataset} held-out take {real.name}"), png, every=10, poses=12)
+      real_strip(real_from, png, dataset)
     if drawn and png.exists():
       out += [f"### {dataset}", "", *(f"{x}\n" for x in drawn), f"![{dataset} real]({png.name})", ""]
   return out
@@ -200,6 +189,13 @@ if __name__ == "__main__":
     "dataset's held-out takes, 4 sampling seeds x 10,000 frames per run, mean (lowest-highest) over training",
     "seeds. A configuration is named beyond the spread only where every one of its 3 seeds beats every seed of",
     "every other configuration with 3 seeds.",
+    "",
+    "Machines: every run on an AMD EPYC machine's 2 CPU cores (jax 0.10.2), except those trained and scored on",
+    "a lent NVIDIA H100 (its image's jax 0.11.2 / flax 0.12.10, 6-11 sweep processes side by side, 2026-11-26):",
+    "GRU and LSTM on martial, the MSE twin on cmu05 (3 seeds) and cmu131 (seed 0), the LSTM-GAN on cmu94; and",
+    "acLSTM's H200 row. Same configs, steps and evaluation on both; a GPU rounds differently, so a seed there",
+    "is another draw of the same recipe. cmu05 holds one short held-out take: its FID_k reference (the training",
+    "takes' own FID_k) is 9,272 +- 9,062 over the draws, so its FID_k column is not read; its FID_g is.",
     "",
     *tables(),
     "## Choosing among training seeds by the calibration's poses measure",

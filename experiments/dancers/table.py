@@ -20,16 +20,18 @@ the table falls back to them where a variant's runs are not on this machine.
 """
 
 import json
-import shutil
+import sys
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent.parent))
+from _results import end_strip, keep_small_files, real_strip
 
 from chorjax.scoring import mean_of
 
 HERE = Path(__file__).parent
 RESULTS = HERE / "results"  # each run's small files, kept in the repository (runs/ is not)
-KEPT = ("config.json", "calibration.json", "metrics.jsonl", "eval/metrics.json")
 VARIANTS = {
   "quickstart": Path("runs/dancers"),
   "kept at best of 4 checkpoints + calibrated": Path("runs/dancers_learned"),
@@ -98,10 +100,7 @@ def save_results() -> None:
   for root in VARIANTS.values():
     for run in sorted(root.glob("*-seed=*")):
       if (run / "eval" / "metrics.json").exists():
-        for name in KEPT:
-          if (run / name).exists():
-            (RESULTS / root.name / run.name / name).parent.mkdir(parents=True, exist_ok=True)
-            shutil.copyfile(run / name, RESULTS / root.name / run.name / name)
+        keep_small_files(run, RESULTS / root.name)
 
 
 def evaluations(root: Path, dataset: str) -> list[tuple[Path, dict]]:
@@ -232,10 +231,6 @@ def table() -> list[str]:
 def strips() -> list[str]:
   """Per dataset: the end of the first evaluated dancer of seed 0 (of each variant in ``STRIPS`` run here)
   beside a held-out take, as training read it."""
-  from chorjax.data.npz import read_npz
-  from chorjax.render.plot import plot_strip
-  from chorjax.run import load_run, read_reference
-
   out = []
   for dataset in DATASETS:
     runs = {
@@ -248,21 +243,16 @@ def strips() -> list[str]:
       continue
     out += [f"### {dataset}", ""]
     for variant, run in runs.items():
-      dance = read_npz(run / "eval" / "sample.npz")[0]
-      end = dance.replace(positions=dance.positions[-900:], name=f"{dataset} {variant}: frames 9,100-10,000")
       png = HERE / f"strip_{dataset}_{SLUG[variant]}.png"
-      plot_strip(end, png, every=10, poses=12)
+      end_strip(run / "eval" / "sample.npz", png, f"{dataset} {variant}")
       out += [f"![{dataset} {variant}]({png.name})", ""]
-    real = read_reference(load_run(next(iter(runs.values()))), ["held-out"])[0][0]
     png = HERE / f"strip_{dataset}_real.png"
-    plot_strip(real.replace(name=f"{dataset} held-out take {real.name}"), png, every=10, poses=12)
+    real_strip(next(iter(runs.values())), png, dataset)
     out += [f"![{dataset} real]({png.name})", ""]
   return out
 
 
 if __name__ == "__main__":
-  import sys
-
   save_results()
   if sys.argv[1:] == ["--readme"]:
     print("\n".join(readme_table()))
