@@ -1,13 +1,31 @@
-"""Test set-up: 4 host devices for the data-parallel tests (must precede the first jax import)."""
+"""Test set-up: 4 host devices for the data-parallel tests and one XLA compilation cache for the whole run
+(both must precede the first jax import)."""
 
+import atexit
 import os
+import shutil
+import tempfile
 from pathlib import Path
+
+import pytest
 
 os.environ.setdefault("XLA_FLAGS", "--xla_force_host_platform_device_count=4")
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
 os.environ.setdefault("CHORJAX_DEBUG", "1")  # a bug raises in tests (the CLI's last-resort line would hide it)
 
-import pytest
+# Most of the suite's time is XLA compiling tiny programs, and the same ones compile again in each xdist
+# worker and CLI subprocess: pytest's first process makes one persistent cache (a fresh temporary folder,
+# removed at exit) that the workers and every subprocess inherit. Every program is cached, however quick.
+if "JAX_COMPILATION_CACHE_DIR" not in os.environ and "PYTEST_XDIST_WORKER" not in os.environ:
+  _xla_cache = tempfile.mkdtemp(prefix="chorjax-tests-xla-")
+  os.environ["JAX_COMPILATION_CACHE_DIR"] = _xla_cache
+  atexit.register(shutil.rmtree, _xla_cache, ignore_errors=True)
+os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")
+os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES", "-1")
+# jax writes an entry in place, so a process reading it while another writes it finds it cut short, says
+# so and compiles again: harmless, and not what a test of a command's output is about.
+_race = "ignore:Error reading persistent compilation cache entry"
+os.environ["PYTHONWARNINGS"] = ",".join(w for w in (os.environ.get("PYTHONWARNINGS"), _race) if w)
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
