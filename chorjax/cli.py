@@ -1093,7 +1093,8 @@ def _add_compare_command(sub) -> None:
     help="a markdown report comparing evaluated runs, with plots",
     description="Groups runs that differ only in train.seed (mean ± sd), names a winner per metric only beyond "
     "the spread, and, where the runs trained on several datasets (data.dataset), gives each dataset its own "
-    "table and winners.",
+    "table and winners. Where two or more runs were calibrated, it names the one whose calibrated draws came "
+    "nearest its own training takes (the lowest calibration objective): the pick made without the held-out takes.",
   )
   cmp_.add_argument("workdirs", nargs="+", metavar="WORKDIR", help="evaluated run directories (chorjax eval or sweep)")
   cmp_.add_argument("-o", "--output", required=True, metavar="report.md", help="the markdown report to write")

@@ -153,6 +153,20 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
   assert " ± " in row[header.index("FID_k / train takes'")] and " ± " in row[header.index("root travel")]
   assert (tmp_path / "report_strip0.png").exists() and "![t-head=mse](report_strip1.png)" in text
   assert (tmp_path / "report_loss.png").exists() and (tmp_path / "report_movement.png").exists()
+  assert "Chosen from the training takes alone" not in text  # no run was calibrated
+  # calibrated runs: the report names the one whose draws came nearest its own training takes
+  from chorjax.calibrate import calibrate
+
+  objective = {}
+  for run, rho in ((runs[0], 0.9), (runs[1], 0.0)):  # smooth draws and white noise: different distances
+    cal = calibrate(run, frames=240, num=2, grid={"noise_smoothing": (rho,)}, log=lambda _: None)
+    objective[run.name] = cal["table"][0]["objective"]
+  assert objective["t-head=mdn-seed=0"] != objective["t-head=mdn-seed=1"]
+  assert cli.main(["compare", *map(str, runs), "-o", str(tmp_path / "chosen.md")]) == 0
+  chosen = next(l for l in (tmp_path / "chosen.md").read_text().splitlines() if "Chosen from the training" in l)
+  best = min(objective, key=objective.__getitem__)
+  assert f"**Chosen from the training takes alone**: {best} (t-head=mdn)" in chosen
+  assert f"of 2 calibrated runs ({objective[best]:.2f};" in chosen
   # eval through the CLI, and its errors
   assert (
     cli.main(
