@@ -20,15 +20,21 @@ def keep_small_files(run: Path, dest: Path) -> None:
       shutil.copyfile(run / name, dest / run.name / name)
 
 
-def held_out_take(run: Path):
-  """The first take of the run's dataset that it did not train on, read as its training read it, from its
-  config.json alone (no checkpoint needed: runs trained elsewhere keep only their small files)."""
+def takes_as_trained(run: Path):
+  """``(the run's dataset as training loaded it, every take of it by name, conformed as training read them)``,
+  from its config.json alone (no checkpoint needed: runs trained elsewhere keep only their small files)."""
   from chorjax.config import config_from_dict
   from chorjax.data.dataset import conform, load_dataset, read_takes
 
   cfg = config_from_dict(json.loads((run / "config.json").read_text())).data
-  trained = set(load_dataset(cfg).train_names)
-  return next(m for m in conform(read_takes([cfg.dataset], cfg), cfg) if m.name not in trained)
+  return load_dataset(cfg), {m.name: m for m in conform(read_takes([cfg.dataset], cfg), cfg)}
+
+
+def held_out_take(run: Path):
+  """The first take of the run's dataset that it did not train on, read as its training read it."""
+  ds, every = takes_as_trained(run)
+  trained = set(ds.train_names)
+  return next(m for name, m in every.items() if name not in trained)
 
 
 def end_strip(sample: Path, png: Path, title: str, frames: int = 900) -> None:

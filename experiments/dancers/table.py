@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent.parent))
-from _results import end_strip, keep_small_files, real_strip
+from _results import end_strip, keep_small_files, real_strip, takes_as_trained
 
 from chorjax.scoring import mean_of
 
@@ -122,13 +122,9 @@ def cell(values, worst) -> str:
 def real_takes(run: Path) -> tuple[list, list, object, float]:
   """``(training takes, held-out takes, skeleton, fps)`` of a run, y-up, read as its training read them
   (from its config.json alone: no checkpoint needed)."""
-  from chorjax.config import config_from_dict
-  from chorjax.data.dataset import conform, load_dataset, read_takes
   from chorjax.data.transforms import to_y_up
 
-  cfg = config_from_dict(json.loads((run / "config.json").read_text())).data
-  ds = load_dataset(cfg)
-  every = {m.name: m for m in conform(read_takes([cfg.dataset], cfg), cfg)}
+  ds, every = takes_as_trained(run)
   y_up = lambda names: [np.asarray(to_y_up(every[n].positions, ds.features.up_axis)) for n in names]
   return y_up(ds.train_names), y_up(ds.val_names), ds.features.skeleton, ds.fps
 
