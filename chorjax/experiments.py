@@ -283,20 +283,15 @@ def _read_run(workdir: Path) -> dict:
 
 
 def _calibration_objective(workdir: Path) -> float | None:
-  """The objective of the settings a run's calibration chose (``calibration.json``: how far its draws are
-  from its training takes on movement, jitter, speed, root travel and poses); None if never calibrated or
-  if its settings were edited by hand (no measured row is theirs)."""
-  from chorjax.run import calibration_path
+  """The objective of the settings a run's calibration chose (how far its draws are from its training takes
+  on movement, jitter, speed, root travel and poses); None if never calibrated or hand-edited."""
+  from chorjax.run import chosen_calibration_row
 
-  path = calibration_path(workdir)
-  if not path.is_file():
-    return None
-  cal = _json_file(path, "calibration", f"run `chorjax calibrate {workdir}` again (or delete it)")
+  row = chosen_calibration_row(workdir)
   try:
-    rows = [r for r in cal["table"] if r["settings"] == cal["settings"]]
-    return float(rows[0]["objective"]) if rows else None
-  except (KeyError, TypeError, ValueError, IndexError):
-    raise UserError(f"{path}: damaged calibration; run `chorjax calibrate {workdir}` again (or delete it)") from None
+    return None if row is None else float(row["objective"])
+  except (KeyError, TypeError, ValueError):
+    raise UserError(f"{workdir}: damaged calibration; run `chorjax calibrate {workdir}` again (or delete it)") from None
 
 
 EVAL_NEEDS = ("frames", "num", "data", "sampling", "segment_frames", "movement_curve", "movement_min", "jitter")

@@ -321,6 +321,21 @@ def read_calibration(workdir) -> dict:
   return settings
 
 
+def chosen_calibration_row(workdir) -> dict | None:
+  """The row of ``calibration.json``'s table measured with the settings it chose (its objective and rates
+  against the run's training takes); None if the run was never calibrated or its settings were edited by
+  hand (no measured row is theirs)."""
+  path = calibration_path(workdir)
+  if not path.is_file():
+    return None
+  fix = f"run `chorjax calibrate {workdir}` again (or delete it)"
+  try:
+    cal = json.loads(path.read_text(errors="replace"))
+    return next((r for r in cal["table"] if r["settings"] == cal["settings"]), None)
+  except (json.JSONDecodeError, KeyError, TypeError, AttributeError):
+    raise UserError(f"{path}: damaged calibration; {fix}") from None
+
+
 def _keeps_best(workdir: Path) -> bool:
   """Whether the run's config (``config.json``) says ``train.keep = "best"``."""
   try:

@@ -11,7 +11,8 @@ from chorjax import calibrate, cli
 from chorjax.calibrate import calibration_path, search
 from chorjax.data.npz import read_npz
 from chorjax.data.transforms import to_y_up
-from chorjax.run import CALIBRATED, load_run
+from chorjax.errors import UserError
+from chorjax.run import CALIBRATED, chosen_calibration_row, load_run
 from chorjax.sample import dance
 from chorjax.training import train_and_evaluate
 
@@ -71,6 +72,9 @@ def test_calibrate_records_the_settings_and_the_run_uses_them_unless_told(run_di
   assert set(chosen) == set(CALIBRATED) and saved["reference"] == "training takes"  # a canonical run: feet too
   assert len(saved["table"]) == 4 and "calibrated:" in capsys.readouterr().out
   assert {"movement", "jitter", "speed", "root_travel", "poses", "objective"} <= set(saved["table"][0])
+  row = chosen_calibration_row(run_dir)  # what compare ranks calibrated runs by
+  assert row is not None and row["settings"] == chosen
+  assert row["objective"] == min(r["objective"] for r in saved["table"])
   assert cli.main(args) == 2  # an existing calibration is not replaced without --force
   assert "calibration.json" in capsys.readouterr().err
   out = tmp_path / "s.npz"
@@ -83,7 +87,10 @@ def test_calibrate_records_the_settings_and_the_run_uses_them_unless_told(run_di
   calibration_path(run_dir).write_text("{not json")
   assert cli.main(["sample", str(run_dir), "-o", str(tmp_path / "t.npz"), "--frames", "30"]) == 2
   assert "damaged calibration" in capsys.readouterr().err
+  with pytest.raises(UserError, match="damaged calibration"):
+    chosen_calibration_row(run_dir)
   calibration_path(run_dir).unlink()
+  assert chosen_calibration_row(run_dir) is None
 
 
 def test_a_run_keeps_its_best_checkpoint_and_calibrates_it_when_told(tmp_path, small_grid):

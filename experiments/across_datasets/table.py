@@ -22,6 +22,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).parent.parent))
 from _results import end_strip, keep_small_files, real_strip
 
+from chorjax.run import chosen_calibration_row
 from chorjax.scoring import mean_of
 
 HERE = Path(__file__).parent.parent  # experiments/
@@ -124,15 +125,6 @@ def tables() -> list[str]:
   return out
 
 
-def chosen(run: Path) -> dict | None:
-  """The calibration's row of the settings it chose (measured on the run's training takes), if calibrated."""
-  path = run / "calibration.json"
-  if not path.exists():
-    return None
-  cal = json.loads(path.read_text())
-  return next((r for r in cal["table"] if r["settings"] == cal["settings"]), None)
-
-
 def selection() -> list[str]:
   """Would choosing, among a configuration's training seeds, the one whose calibrated draws' poses are nearest
   the training takes' (calibration.json's poses measure: no held-out take involved) pick the seed with the
@@ -145,7 +137,7 @@ def selection() -> list[str]:
   for label, runs, kept, holds, _ in CONFIGS:
     for dataset in DATASETS:
       found = runs_of(runs, kept, holds, dataset)
-      rows = [chosen(d) for d in found]
+      rows = [chosen_calibration_row(d) for d in found]
       if len(found) < 3 or any(r is None or "poses" not in r for r in rows):
         continue
       fid = [FID_G(json.loads((d / "eval" / "metrics.json").read_text())) for d in found]
@@ -176,7 +168,7 @@ def cell_selection() -> list[str]:
     for label, where, kept, holds, _ in CONFIGS:
       if label in CELLS:
         found = runs_of(where, kept, holds, dataset)
-        runs += [(label, d, chosen(d)) for d in found] if len(found) >= 3 else []
+        runs += [(label, d, chosen_calibration_row(d)) for d in found] if len(found) >= 3 else []
     if len({label for label, *_ in runs}) < len(CELLS) or any(r is None for *_, r in runs):
       continue
     fid = [FID_G(json.loads((d / "eval" / "metrics.json").read_text())) for _, d, _ in runs]
