@@ -5,7 +5,7 @@ highest) over the training seeds.
   .venv/bin/python experiments/across_datasets/table.py     # writes experiments/across_datasets/table.md
 
 Reads, whichever are on this machine, the runs of experiments/dancers/sweep.toml as calibrated with the poses
-measure (runs/dancers_poses), experiments/rnn_types/dancers.toml, experiments/mdn_vs_mse/dancers.toml,
+measure (runs/dancers_poses) and as first calibrated without it (runs/dancers, session 17), experiments/rnn_types/dancers.toml, experiments/mdn_vs_mse/dancers.toml,
 experiments/families/dancers.toml and experiments/aclstm/ (its CPU runs in runs/aclstm_cpu). Each evaluated
 run's small files are copied beside its experiment (``results/``), and the table falls back to them where
 the runs are not on this machine. Filmstrips: the end of seed 0's first 10,000-frame dancer of each
@@ -31,6 +31,13 @@ DATASETS = ("cmu94", "salsa", "martial", "cmu05", "cmu131")
 # (label, runs folder, the folder its results are kept in, what a run's name holds besides dataset and seed, slug)
 CONFIGS = [
   ("LN-LSTM, MDN (the quickstart)", "runs/dancers_poses", "dancers/results/dancers_poses", "", "quickstart"),
+  (
+    "LN-LSTM, MDN, calibrated without the poses measure (session 17)",
+    "runs/dancers",
+    "dancers/results/dancers",
+    "",
+    "quickstart17",
+  ),
   ("LSTM, MDN", "runs/rnn_types_dancers", "rnn_types/results/rnn_types_dancers", "cell=lstm-", "lstm"),
   ("GRU, MDN", "runs/rnn_types_dancers", "rnn_types/results/rnn_types_dancers", "cell=gru-", "gru"),
   ("LN-LSTM, MSE", "runs/mdn_vs_mse_dancers", "mdn_vs_mse/results/mdn_vs_mse_dancers", "head=mse-", "mse"),
