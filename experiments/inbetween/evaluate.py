@@ -208,6 +208,7 @@ def main() -> None:
   results = ib.benchmark(methods, takes, space, feet, context, std)
   per_set = {name: ib.benchmark(methods, ts, space, feet, context, std, lengths=(5, 30)) for name, ts in sets.items()}
   out = Path(args.out)
+  out.mkdir(parents=True, exist_ok=True)
   (out / "results.json").write_text(json.dumps({"all": results, "by_set": per_set}, indent=1, default=float))
   strip(runs, takes[0], out / "strip_30.png", context)
   windows = len(ib.benchmark_windows(takes, context, max(ib.BENCHMARK_LENGTHS))[0])
