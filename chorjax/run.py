@@ -307,17 +307,34 @@ def calibration_path(workdir) -> Path:
   return Path(workdir) / "calibration.json"
 
 
-def read_calibration(workdir) -> dict:
-  """The calibrated controls of a run (``{}`` when it was never calibrated)."""
+def _damaged_calibration(workdir) -> UserError:
+  return UserError(
+    f"{calibration_path(workdir)}: damaged calibration; run `chorjax calibrate {workdir}` again (or delete it)"
+  )
+
+
+def _calibration(workdir) -> dict | None:
+  """``calibration.json`` as a dict (None when the run was never calibrated); one line if it is not JSON."""
   path = calibration_path(workdir)
   if not path.is_file():
+    return None
+  try:
+    return json.loads(path.read_text(errors="replace"))
+  except json.JSONDecodeError:
+    raise _damaged_calibration(workdir) from None
+
+
+def read_calibration(workdir) -> dict:
+  """The calibrated controls of a run (``{}`` when it was never calibrated)."""
+  cal = _calibration(workdir)
+  if cal is None:
     return {}
   try:
-    settings = json.loads(path.read_text())["settings"]
-  except (json.JSONDecodeError, KeyError, TypeError, UnicodeDecodeError):
-    raise UserError(f"{path}: damaged calibration; run `chorjax calibrate {workdir}` again (or delete it)") from None
+    settings = cal["settings"]
+  except (KeyError, TypeError):
+    raise _damaged_calibration(workdir) from None
   if not isinstance(settings, dict) or set(settings) - set(CALIBRATED):
-    raise UserError(f"{path}: damaged calibration; run `chorjax calibrate {workdir}` again (or delete it)")
+    raise _damaged_calibration(workdir)
   return settings
 
 
@@ -325,15 +342,13 @@ def chosen_calibration_row(workdir) -> dict | None:
   """The row of ``calibration.json``'s table measured with the settings it chose (its objective and rates
   against the run's training takes); None if the run was never calibrated or its settings were edited by
   hand (no measured row is theirs)."""
-  path = calibration_path(workdir)
-  if not path.is_file():
+  cal = _calibration(workdir)
+  if cal is None:
     return None
-  fix = f"run `chorjax calibrate {workdir}` again (or delete it)"
   try:
-    cal = json.loads(path.read_text(errors="replace"))
     return next((r for r in cal["table"] if r["settings"] == cal["settings"]), None)
-  except (json.JSONDecodeError, KeyError, TypeError, AttributeError):
-    raise UserError(f"{path}: damaged calibration; {fix}") from None
+  except (KeyError, TypeError, AttributeError):
+    raise _damaged_calibration(workdir) from None
 
 
 def _keeps_best(workdir: Path) -> bool:
