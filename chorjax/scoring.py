@@ -29,7 +29,10 @@ Keys (a value, or ``{"mean", "sd"}`` over several motions or reference splits):
   ``fid_k_train`` / ``fid_g_train`` (when the reference is held-out takes and the training takes are
   given): the same figure for the run's TRAINING takes scored as if they were a sample against the
   held-out ones, with the same splits: as close as another stretch of real dance by this dancer gets. The
-  honest bar for a model judged on takes it never saw (None otherwise).
+  honest bar for a model judged on takes it never saw (None otherwise). ``movement_min_train`` /
+  ``movement_max_train`` (likewise): the calmest and the busiest ``segment``-frame segment of the training
+  takes (a shorter take is one segment): how far real dance by this dancer strays from the held-out takes'
+  movement (cmu94's takes: 0.66-1.27 of its two held-out ones').
 * ``speed``: mean joint speed per frame / the reference's (trembling is fast too: read it with
   ``jitter``); ``root_travel``: the root's path length per frame / the reference's (a dancer who stays on
   one spot -> 0).
@@ -80,11 +83,16 @@ def upgrade(result: dict) -> dict:
   return out
 
 
-def _movement_and_jitter(motions, reference, skeleton: Skeleton, fps: float, segment: int) -> dict:
+def _movement_and_jitter(motions, reference, skeleton: Skeleton, fps: float, segment: int, train=None) -> dict:
+  """The movement and jitter keys; with ``train`` (the training takes, where the reference is held-out
+  takes), ``movement_min_train`` / ``movement_max_train``: the calmest and the busiest segment of real dance
+  by this dancer, in segments of ``segment`` frames (a take shorter than that is one)."""
   lag = max(round(0.5 * fps), 1)
   ref_disp, ref_rough = metrics.reference_rates(reference, skeleton.root, lag)
+  curve = lambda m, length: metrics.movement_curve(m, skeleton.root, lag, ref_disp, length)
+  real = np.concatenate([curve(t, segment) for t in train]) if train else None
   segment = min(segment, min(len(m) for m in motions))
-  moves = [metrics.movement_curve(m, skeleton.root, lag, ref_disp, segment) for m in motions]
+  moves = [curve(m, segment) for m in motions]
   jitters = [metrics.jitter_curve(m, ref_rough, segment) for m in motions]
   each = {
     "movement_min": [float(c.min()) for c in moves],
@@ -100,6 +108,8 @@ def _movement_and_jitter(motions, reference, skeleton: Skeleton, fps: float, seg
     "jitter": spread([metrics.roughness(m) / ref_rough for m in motions]),
     "movement_curve": np.mean([c for c in moves if len(c) == len(moves[0])], axis=0).tolist(),
     "movement_lag_frames": lag,
+    "movement_min_train": None if real is None else float(real.min()),
+    "movement_max_train": None if real is None else float(real.max()),
   }
 
 
@@ -304,7 +314,7 @@ def score(
   speed = float(np.mean(np.concatenate([metrics.joint_speed(t) for t in reference])))
   speeds = spread([metrics.speed_ratio(m, speed) for m in motions])
   moving, steps = (
-    _movement_and_jitter(motions, reference, skeleton, fps, segment),
+    _movement_and_jitter(motions, reference, skeleton, fps, segment, train if unseen else None),
     _root_steps(motions, reference, skeleton),
   )
   return {

@@ -127,7 +127,16 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
   runs = sorted((tmp_path / "runs" / "t").iterdir())
   assert [r.name for r in runs] == ["t-head=mdn-seed=0", "t-head=mdn-seed=1", "t-head=mse-seed=0", "t-head=mse-seed=1"]
   m = json.loads((runs[0] / "eval" / "metrics.json").read_text())
-  for key in ("heldout_loss", *METRIC_KEYS, "fid_k_real", "fid_g_real", "novelty_real", "fid_k_train", "fid_g_train"):
+  for key in (
+    "heldout_loss",
+    *METRIC_KEYS,
+    "fid_k_real",
+    "fid_g_real",
+    "novelty_real",
+    "fid_k_train",
+    "fid_g_train",
+    "movement_min_train",
+  ):
     assert np.isfinite(mean_of(m[key])), key
   assert m["data"] == ["held-out"]  # judged on the run's own held-out take (94_10) alone
   assert set(m["fid_k"]) == {"mean", "sd"} and set(m["movement_first"]) == {"mean", "sd"}  # 2 seeds
@@ -374,8 +383,16 @@ def test_the_training_takes_are_the_reference_held_out_figures_are_held_against(
   for k in ("fid_k", "fid_g"):
     assert r[f"{k}_train"] == r[k], k  # the same windows, splits and seed
     assert r[f"{k}_train"]["mean"] > r[f"{k}_real"]["mean"] > 0  # other takes differ more than halves
+  lag = 15  # half a second at 30 fps
+  ref, _ = M.reference_rates(unseen, MPII16.root, lag)
+  each = [
+    M.displacement(t, MPII16.root, lag) / ref for t in train
+  ]  # each cmu94 take is under 2,000 frames: one segment
+  assert r["movement_min_train"] == pytest.approx(min(each)) and r["movement_max_train"] == pytest.approx(max(each))
+  # the dancer's own takes stray from the held-out takes' movement: one training take is calmer than 0.7 of it
+  assert r["movement_min_train"] < 0.7 < 1.1 < r["movement_max_train"]
   same = score(unseen, unseen, MPII16, 30.0, splits=5)
-  assert same["fid_k_train"] is None  # no training takes: no such reference
+  assert same["fid_k_train"] is None and same["movement_min_train"] is None  # no training takes: no such reference
   assert same["speed"] == pytest.approx({"mean": 1.0, "sd": same["speed"]["sd"]}, rel=0.3)
   assert np.mean([same["root_travel"]["mean"]]) == pytest.approx(1.0, rel=0.3)
   frozen = np.repeat(unseen[0][:1], 600, axis=0)
