@@ -993,7 +993,8 @@ def _add_calibrate_command(sub) -> None:
     "calibrate",
     help="choose the run's sampling settings on its dancer's takes; the run's default after",
     description="Samples the run over a grid of noise_smoothing, sigma_temperature, persistence, crossfade and "
-    "(canonical runs) foot_lock, 180 settings (an MSE head draws no noise: foot_lock alone), and keeps the one "
+    "(canonical runs) foot_lock, 180 settings (an MSE head draws no noise: foot_lock alone), and past the "
+    "grid's ends where its best noise smoothing or sigma temperature is one, while that helps; it keeps the one "
     "whose dance moves like the reference takes "
     "(movement over 0.5 s, jitter, joint speed and root travel, together nearest the takes' own) and whose "
     "poses go together as theirs do (the geometric FID over the takes' own, counted above 1). The "

@@ -1,5 +1,6 @@
 """``chorjax calibrate``: sampling settings chosen on the dancer's takes, recorded in the run, used after."""
 
+import itertools
 import json
 
 import jax
@@ -41,6 +42,18 @@ def run_dir(tmp_path_factory):
   return w
 
 
+def _drawer(run, seed: int):
+  """``draw(settings)``: 4 dancers of 400 frames from ``run`` with sampling seed ``seed``, y-up."""
+
+  def draw(settings):
+    s = run.sampling(**settings)
+    r = run.ranged(s)
+    pos = dance(r.graphdef, r.params, r.features, np.arange(4) % 2, jax.random.key(seed), 400, s)
+    return np.asarray(to_y_up(pos, r.features.up_axis))
+
+  return draw
+
+
 @pytest.mark.parametrize(
   "true", [{"noise_smoothing": 0.85, "sigma_temperature": 1.3}, {"noise_smoothing": 0.6, "sigma_temperature": 0.9}]
 )
@@ -48,20 +61,27 @@ def test_calibration_recovers_the_settings_that_drew_the_reference(run_dir, true
   """A constructed case: the reference is the model's own dance drawn with known settings (sampling seed 1);
   the search, drawing with seed 0, finds exactly those settings among 24."""
   run = load_run(run_dir)
-
-  def drawer(seed):
-    def draw(settings):
-      s = run.sampling(**settings)
-      r = run.ranged(s)
-      pos = dance(r.graphdef, r.params, r.features, np.arange(4) % 2, jax.random.key(seed), 400, s)
-      return np.asarray(to_y_up(pos, r.features.up_axis))
-
-    return draw
-
-  reference = list(drawer(1)(true))
-  best, table = search(drawer(0), reference, run.features.skeleton, run.fps, GRID)
+  reference = list(_drawer(run, 1)(true))
+  best, table = search(_drawer(run, 0), reference, run.features.skeleton, run.fps, GRID)
   assert best == true
-  assert len(table) == 24 and min(o for *_, o in table) < 0.2  # four measures within ~5% of the reference's
+  assert [s for s, *_ in table[:24]] == [dict(zip(GRID, v)) for v in itertools.product(*GRID.values())]
+  assert min(o for *_, o in table) < 0.2  # four measures within ~5% of the reference's
+
+
+@pytest.mark.parametrize("true", [0.7, 1.7])
+def test_calibration_goes_past_the_end_of_the_grid_while_the_dance_gets_nearer(run_dir, true):
+  """The reference drawn with a sigma temperature outside the grid (0.9-1.2): the best grid value is an end,
+  and the search walks the ladder past it (0.8, 0.7, ... or 1.4, 1.7, ...) to the reference's value, and one
+  value further, where the objective rises again."""
+  run = load_run(run_dir)
+  grid = {"noise_smoothing": (0.85,), "sigma_temperature": (0.9, 1.0, 1.2)}
+  reference = list(_drawer(run, 1)({"noise_smoothing": 0.85, "sigma_temperature": true}))
+  best, table = search(_drawer(run, 0), reference, run.features.skeleton, run.fps, grid)
+  assert best == {"noise_smoothing": 0.85, "sigma_temperature": true}
+  walked = [s["sigma_temperature"] for s, *_ in table[3:]]
+  assert walked == ([0.8, 0.7, 0.6] if true < 1 else [1.4, 1.7, 2.0])
+  at_end, _ = search(_drawer(run, 0), reference, run.features.skeleton, run.fps, grid, beyond={})
+  assert at_end["sigma_temperature"] == (0.9 if true < 1 else 1.2)  # without the walk: the grid's end
 
 
 def test_calibrate_records_the_settings_and_the_run_uses_them_unless_told(run_dir, tmp_path, capsys, small_grid):
@@ -70,7 +90,9 @@ def test_calibrate_records_the_settings_and_the_run_uses_them_unless_told(run_di
   saved = json.loads(calibration_path(run_dir).read_text())
   chosen = saved["settings"]
   assert set(chosen) == set(CALIBRATED) and saved["reference"] == "training takes"  # a canonical run: feet too
-  assert len(saved["table"]) == 4 and "calibrated:" in capsys.readouterr().out
+  # the grid's 4 settings, then the walk past the end its best noise smoothing is at (of two values, always one)
+  assert len(saved["table"]) > 4 and "calibrated:" in capsys.readouterr().out
+  assert saved["table"][4]["settings"]["noise_smoothing"] in (0.5, 0.97)
   assert {"movement", "jitter", "speed", "root_travel", "poses", "objective"} <= set(saved["table"][0])
   row = chosen_calibration_row(run_dir)  # what compare ranks calibrated runs by
   assert row is not None and row["settings"] == chosen

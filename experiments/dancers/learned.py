@@ -7,6 +7,8 @@ the runs they come from stay as they were. Skips finished copies, so it can run 
   .venv/bin/python experiments/dancers/learned.py runs/dancers_best runs/dancers_cal5 cal5-
   .venv/bin/python experiments/dancers/learned.py runs/dancers_pca runs/dancers_ground ground- sample.ground=true
   chorjax compare runs/dancers_learned/learned-* -o experiments/dancers/learned_report.md
+  # calibration's walk past the grid's ends (2026-11-26): each run's own measured settings not drawn again
+  .venv/bin/python experiments/dancers/learned.py runs/dancers_poses runs/dancers_beyond beyond- --reuse
 """
 
 import json
@@ -19,10 +21,18 @@ CHORJAX = str(Path(sys.executable).with_name("chorjax"))
 
 
 def main(
-  base: Path = Path("runs/dancers"), out: Path = Path("runs/dancers_learned"), prefix: str = "learned-", sets=()
+  base: Path = Path("runs/dancers"),
+  out: Path = Path("runs/dancers_learned"),
+  prefix: str = "learned-",
+  sets=(),
+  reuse: bool = False,
 ) -> None:
   """Copies of ``base``'s evaluated runs in ``out``, named ``prefix`` + the point, with ``sets`` (``SECTION.KEY=
-  true|false|number``) changed in their config, calibrated and evaluated."""
+  true|false|number``) changed in their config, calibrated and evaluated. ``reuse``: the settings the run's
+  own calibration.json measured are not drawn again (the same checkpoint and draws), and where the choice
+  is the same its evaluation is kept (the same checkpoint, settings and sampling seeds: the same dance)."""
+  from chorjax.calibrate import MEASURES, calibrate
+
   out.mkdir(parents=True, exist_ok=True)
   for run in sorted(base.glob("*-seed=*")):
     if not (run / "eval" / "metrics.json").exists():
@@ -32,6 +42,13 @@ def main(
       continue
     shutil.rmtree(copy, ignore_errors=True)
     shutil.copytree(run, copy, ignore=shutil.ignore_patterns("eval", "events.*", "calibration.json"))
+    if reuse:
+      before = json.loads((run / "calibration.json").read_text())
+      known = [(r["settings"], {k: r[k] for k in MEASURES}) for r in before["table"]]
+      settings = calibrate(copy, known=known, log=lambda line: None)["settings"]
+      if settings == before["settings"]:
+        shutil.copytree(run / "eval", copy / "eval")
+        continue
     config = json.loads((copy / "config.json").read_text())
     config["train"].update(keep="best", calibrate=True)
     for assignment in sets:
@@ -40,7 +57,8 @@ def main(
       config[section][name] = json.loads(value)
     config["name"] = copy.name
     (copy / "config.json").write_text(json.dumps(config, indent=2))
-    subprocess.run([CHORJAX, "calibrate", str(copy)], check=True)
+    if not reuse:
+      subprocess.run([CHORJAX, "calibrate", str(copy)], check=True)
     subprocess.run(
       [
         CHORJAX,
@@ -63,4 +81,5 @@ def main(
 
 
 if __name__ == "__main__":
-  main(*(Path(a) for a in sys.argv[1:3]), *sys.argv[3:4], sets=sys.argv[4:])
+  args = [a for a in sys.argv[1:] if a != "--reuse"]
+  main(*(Path(a) for a in args[0:2]), *args[2:3], sets=args[3:], reuse="--reuse" in sys.argv)
