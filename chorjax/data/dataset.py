@@ -304,8 +304,8 @@ def dataset_notes(ds: Dataset) -> list[str]:
     out.append(
       f"note: {minutes:.1f} minutes of training motion: on the dancers benchmark, sets under "
       f"{SMALL_DATA_MINUTES:g} minutes (martial arts 1.2, CMU 5 and 131 0.5) keep dancing but with calm spells "
-      "(their calmest 1,000 frames at 0.4-0.8 of the held-out takes' movement) and poses less like the held-out "
-      "takes' (FID 1.5-3x); more takes help most (README: How well the quickstart dances)"
+      "(their calmest 1,000 frames at 0.3-0.7 of the held-out takes' movement) and, under a minute, poses less "
+      "like the held-out takes' (FID 1.7-4x); more takes help most (README: How well the quickstart dances)"
     )
   if not ds.val_names:
     why = "a single take" if len(ds.id_map) == 1 else "data.val_takes = []"

@@ -5,7 +5,8 @@ highest) over the training seeds.
   .venv/bin/python experiments/across_datasets/table.py     # writes experiments/across_datasets/table.md
 
 Reads, whichever are on this machine, the runs of experiments/dancers/sweep.toml as calibrated with the poses
-measure (runs/dancers_poses) and as first calibrated without it (runs/dancers, session 17),
+measure (runs/dancers_poses), as first calibrated without it (runs/dancers, session 17) and calibrated again
+past the grid's ends (runs/dancers_beyond, session 22), the LSTM cell's runs so calibrated (runs/dancers_lstm),
 experiments/rnn_types/dancers.toml, experiments/mdn_vs_mse/dancers.toml, experiments/families/dancers.toml and
 experiments/aclstm/ (its CPU runs in runs/aclstm_cpu). Each evaluated run's small files are copied beside its
 experiment (``results/``), and the table falls back to them where the runs are not on this machine.
@@ -30,13 +31,33 @@ OUT = Path(__file__).parent
 DATASETS = ("cmu94", "salsa", "martial", "cmu05", "cmu131")
 # (label, runs folder, the folder its results are kept in, what a run's name holds besides dataset and seed, slug)
 CONFIGS = [
-  ("LN-LSTM, MDN (the quickstart)", "runs/dancers_poses", "dancers/results/dancers_poses", "", "quickstart"),
+  (
+    "LN-LSTM, MDN (the quickstart until 2026-11-26)",
+    "runs/dancers_poses",
+    "dancers/results/dancers_poses",
+    "",
+    "quickstart",
+  ),
   (
     "LN-LSTM, MDN, calibrated without the poses measure (session 17)",
     "runs/dancers",
     "dancers/results/dancers",
     "",
     "quickstart17",
+  ),
+  (
+    "LN-LSTM, MDN, calibrated past the grid's ends (session 22)",
+    "runs/dancers_beyond",
+    "dancers/results/dancers_beyond",
+    "",
+    "quickstart_beyond",
+  ),
+  (
+    "LSTM, MDN, calibrated past the grid's ends (the quickstart since session 22)",
+    "runs/dancers_lstm",
+    "dancers/results/dancers_lstm",
+    "",
+    "lstm_beyond",
   ),
   ("LSTM, MDN", "runs/rnn_types_dancers", "rnn_types/results/rnn_types_dancers", "cell=lstm-", "lstm"),
   ("GRU, MDN", "runs/rnn_types_dancers", "rnn_types/results/rnn_types_dancers", "cell=gru-", "gru"),
@@ -166,7 +187,7 @@ def selection() -> list[str]:
   return out
 
 
-CELLS = ("LN-LSTM, MDN (the quickstart)", "LSTM, MDN", "GRU, MDN")
+CELLS = ("LN-LSTM, MDN (the quickstart until 2026-11-26)", "LSTM, MDN", "GRU, MDN")
 
 
 def cell_selection() -> list[str]:
@@ -233,10 +254,11 @@ if __name__ == "__main__":
     "",
     "Machines: every run on an AMD EPYC machine's 2 CPU cores (jax 0.10.2), except those trained and scored on",
     "a lent NVIDIA H100 (its image's jax 0.11.2 / flax 0.12.10, 6-11 sweep processes side by side, 2026-11-26):",
-    "GRU and LSTM on martial, the MSE twin on cmu05 (3 seeds) and cmu131 (seed 0), the LSTM-GAN on cmu94; and",
-    "acLSTM's H200 row. Same configs, steps and evaluation on both; a GPU rounds differently, so a seed there",
-    "is another draw of the same recipe. cmu05 holds one short held-out take: its FID_k reference (the training",
-    "takes' own FID_k) is 9,272 +- 9,062 over the draws, so its FID_k column is not read; its FID_g is.",
+    "GRU and LSTM on martial (the LSTM trained again on CPU for the session-22 row), the MSE twin on cmu05 (3",
+    "seeds) and cmu131 (seed 0), the LSTM-GAN on cmu94; and acLSTM's H200 row. Same configs, steps and",
+    "evaluation on both; a GPU rounds differently, so a seed there is another draw of the same recipe. cmu05",
+    "holds one short held-out take: its FID_k reference (the training takes' own FID_k) is 9,272 +- 9,062 over",
+    "the draws, so its FID_k column is not read; its FID_g is.",
     "",
     *tables(),
     "## Choosing among training seeds by the calibration's poses measure",
