@@ -33,6 +33,8 @@ def main(
   is the same its evaluation is kept (the same checkpoint, settings and sampling seeds: the same dance)."""
   from chorjax.calibrate import MEASURES, calibrate
 
+  if reuse and sets:
+    raise SystemExit("--reuse draws what the runs drew: it changes nothing in their config")
   out.mkdir(parents=True, exist_ok=True)
   for run in sorted(base.glob("*-seed=*")):
     if not (run / "eval" / "metrics.json").exists():
@@ -42,22 +44,22 @@ def main(
       continue
     shutil.rmtree(copy, ignore_errors=True)
     shutil.copytree(run, copy, ignore=shutil.ignore_patterns("eval", "events.*", "calibration.json"))
-    if reuse:
-      before = json.loads((run / "calibration.json").read_text())
-      known = [(r["settings"], {k: r[k] for k in MEASURES}) for r in before["table"]]
-      settings = calibrate(copy, known=known, log=lambda line: None)["settings"]
-      if settings == before["settings"]:
-        shutil.copytree(run / "eval", copy / "eval")
-        continue
     config = json.loads((copy / "config.json").read_text())
-    config["train"].update(keep="best", calibrate=True)
+    if not reuse:  # reuse keeps the checkpoint the measured table was drawn from
+      config["train"].update(keep="best", calibrate=True)
     for assignment in sets:
       key, value = assignment.split("=", 1)
       section, name = key.split(".")
       config[section][name] = json.loads(value)
     config["name"] = copy.name
     (copy / "config.json").write_text(json.dumps(config, indent=2))
-    if not reuse:
+    if reuse:
+      before = json.loads((run / "calibration.json").read_text())
+      known = [(r["settings"], {k: r[k] for k in MEASURES}) for r in before["table"]]
+      if calibrate(copy, known=known, log=lambda line: None)["settings"] == before["settings"]:
+        shutil.copytree(run / "eval", copy / "eval")
+        continue
+    else:
       subprocess.run([CHORJAX, "calibrate", str(copy)], check=True)
     subprocess.run(
       [

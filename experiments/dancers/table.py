@@ -144,8 +144,7 @@ def real_scores(run: Path) -> tuple[dict, tuple[int, float]]:
   from chorjax.scoring import score
 
   train, held, skeleton, fps = real_takes(run)
-  e = score(train, held, skeleton, fps, train=train, unseen=held)
-  e["fid_k_train"], e["fid_g_train"] = e["fid_k"], e["fid_g"]
+  e = score(train, held, skeleton, fps, train=train, unseen=held)  # its fid_*_train are its fid_k / fid_g
   e["movement_min"], e["movement_max"] = e["movement_min_train"], e["movement_max_train"]
   return e, (len(train), sum(map(len, train)) / fps / 60)
 
@@ -196,10 +195,10 @@ def readme_table() -> list[str]:
       ("quickstart, calibrated with the poses measure", " (the LN-LSTM cell, calibrated before the walk)"),
       ("quickstart", " (the LN-LSTM cell, calibrated before the poses measure)"),
     ]
-    variant, said = next(((v, w) for v, w in shipped if evaluations(VARIANTS[v], dataset)), (None, ""))
+    found = ((v, w, evaluations(VARIANTS[v], dataset)) for v, w in shipped)  # read until one has runs
+    variant, said, evs = next((f for f in found if f[2]), (None, "", []))
     if variant is None:
       continue
-    evs = evaluations(VARIANTS[variant], dataset)
     e, (takes, minutes) = real_scores(evs[0][0])
     name = f"{dataset} ({takes} takes, {minutes:.1f} min)"
 
