@@ -7,7 +7,8 @@ highest) over the training seeds.
 Reads, whichever are on this machine, the runs of experiments/dancers/sweep.toml as calibrated with the poses
 measure (runs/dancers_poses), as first calibrated without it (runs/dancers, session 17) and calibrated again
 past the grid's ends (runs/dancers_beyond, session 22), the LSTM cell's runs so calibrated (runs/dancers_lstm),
-experiments/rnn_types/dancers.toml, experiments/mdn_vs_mse/dancers.toml, experiments/families/dancers.toml and
+experiments/rnn_types/dancers.toml, experiments/mdn_vs_mse/dancers.toml and dancers_lstm.toml,
+experiments/families/dancers.toml and
 experiments/aclstm/ (its CPU runs in runs/aclstm_cpu). Each evaluated run's small files are copied beside its
 experiment (``results/``), and the table falls back to them where the runs are not on this machine.
 Filmstrips: the end of seed 0's first 10,000-frame dancer of each configuration whose runs are on this
@@ -62,6 +63,13 @@ CONFIGS = [
   ("LSTM, MDN", "runs/rnn_types_dancers", "rnn_types/results/rnn_types_dancers", "cell=lstm-", "lstm"),
   ("GRU, MDN", "runs/rnn_types_dancers", "rnn_types/results/rnn_types_dancers", "cell=gru-", "gru"),
   ("LN-LSTM, MSE", "runs/mdn_vs_mse_dancers", "mdn_vs_mse/results/mdn_vs_mse_dancers", "head=mse-", "mse"),
+  (
+    "LSTM, MSE (the quickstart's twin since session 22)",
+    "runs/mdn_vs_mse_lstm",
+    "mdn_vs_mse/results/mdn_vs_mse_lstm",
+    "head=mse-",
+    "mse_lstm",
+  ),
   ("LSTM-GAN (experiments/families)", "runs/families_dancers", "families/results/families_dancers", "", "gan"),
   ("acLSTM, 3 x 1024 LSTM, MSE: 6 min on 2 CPU cores", "runs/aclstm_cpu", "aclstm/results/cpu", "", "aclstm_cpu"),
   ("acLSTM, 3 x 1024 LSTM, MSE: 4.5-6 min on an H200", "runs/aclstm_gpu", "aclstm/results/gpu", "", "aclstm_gpu"),
@@ -254,8 +262,9 @@ if __name__ == "__main__":
     "",
     "Machines: every run on an AMD EPYC machine's 2 CPU cores (jax 0.10.2), except those trained and scored on",
     "a lent NVIDIA H100 (its image's jax 0.11.2 / flax 0.12.10, 6-11 sweep processes side by side, 2026-11-26):",
-    "GRU and LSTM on martial (the LSTM trained again on CPU for the session-22 row), the MSE twin on cmu05 (3",
-    "seeds) and cmu131 (seed 0), the LSTM-GAN on cmu94; and acLSTM's H200 row. Same configs, steps and",
+    "GRU and LSTM on martial (the LSTM trained again on CPU for the session-22 row), the LN-LSTM's MSE twin on",
+    "cmu05 (3 seeds) and cmu131 (seed 0), the LSTM's MSE twin (all), the LSTM-GAN on cmu94, martial seeds 1-2,",
+    "cmu05 seed 2 and cmu131 (session 23); and acLSTM's H200 row. Same configs, steps and",
     "evaluation on both; a GPU rounds differently, so a seed there is another draw of the same recipe. cmu05",
     "holds one short held-out take: its FID_k reference (the training takes' own FID_k) is 9,272 +- 9,062 over",
     "the draws, so its FID_k column is not read; its FID_g is.",
