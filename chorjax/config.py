@@ -363,7 +363,8 @@ class SampleConfig:
   ground: bool = _field(
     False,
     "canonical features: a foot the model says is in contact with the floor stands on it (the body is moved "
-    "up or down to the training takes' floor, smoothly): no floating, no feet sunk into the floor",
+    "up or down to the training takes' floor, smoothly, and never faster than the takes' fastest vertical "
+    "root step): no floating, no feet sunk into the floor",
     resumable=True,
   )
   clamp: bool = _field(

@@ -239,3 +239,29 @@ def test_grounded_feet_stand_on_the_floor_and_a_jump_keeps_its_height(take):
   jumped = np.asarray(tf.ground_feet(up, air, SK.feet, floor))
   np.testing.assert_allclose(jumped, up, atol=1e-6)
   assert lowest(grounded).std() < lowest(up).std()
+
+
+@pytest.mark.parametrize("take", TAKES[:2], ids=lambda m: m.name)
+def test_paced_grounding_moves_the_root_no_faster_than_the_take_does(take):
+  from chorjax.data.features import floor_height, leg_length
+
+  canon = np.asarray(_features("canonical", take).canonical(take.positions), np.float64)
+  leg = leg_length(canon, SK)
+  contacts = np.asarray(tf.foot_contacts(canon, SK.feet, leg))
+  floor = floor_height([canon], SK)
+  rise = np.abs(np.diff(canon[:, SK.root, 1])).max()  # the take's own largest vertical root step
+  up = canon.copy()
+  up[100:300, :, 1] += 0.5 * leg  # a cut: the body lifted half a leg between two frames
+  eased = np.asarray(tf.ground_feet(up, contacts, SK.feet, floor))
+  paced = np.asarray(tf.ground_feet(up, contacts, SK.feet, floor, root=SK.root, max_rise=rise))
+  vertical = lambda p: np.abs(np.diff(p[:, SK.root, 1])).max()
+  assert vertical(eased) > 1.5 * rise  # the 5-frame easing alone lets the body rise faster than it ever did
+  assert vertical(paced) <= rise + 1e-6
+  poses = lambda p: p - p[:, SK.root : SK.root + 1]
+  np.testing.assert_allclose(poses(paced), poses(up), atol=1e-5)  # poses and the path over the floor: kept
+  np.testing.assert_allclose(paced[..., [0, 2]], up[..., [0, 2]], atol=1e-5)
+  # it catches up: once the lift is made good, feet in contact stand where the eased shift puts them
+  late = slice(100 + int(np.ceil(0.5 * leg / rise)) + 10, 290)
+  touching = (contacts[late] > 0.5).any(-1)
+  err = np.abs(paced[late] - eased[late])[..., SK.root, 1][touching]
+  assert touching.mean() > 0.5 and np.median(err) < 1e-3 * leg, (late, np.median(err))

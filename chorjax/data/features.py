@@ -73,6 +73,14 @@ class Features:
     return feature_dim(self.skeleton, self.representation)
 
   @property
+  def max_rise(self) -> float | None:
+    """The training takes' largest vertical root step per frame (canonical runs that record their steps;
+    y-up, scaled): how fast ``decode(ground=True)`` may move the body up or down."""
+    if self.representation != "canonical" or self.step_low is None or self.step_high is None:
+      return None
+    return float(max(-self.step_low[3], self.step_high[3]) * self.std[3])
+
+  @property
   def pose_channels(self) -> np.ndarray:
     """Indices of the features that hold the pose (joint positions or bone directions, not root motion,
     velocities or contacts): what the pace governor measures, as the movement metric measures joints."""
@@ -116,7 +124,7 @@ class Features:
     contacts = rep[..., -len(feet) :]  # canonical features end with the feet's contacts (ground, lock_feet)
     if ground:
       assert self.floor is not None  # check_decode
-      pos = transforms.ground_feet(pos, contacts, feet, self.floor)
+      pos = transforms.ground_feet(pos, contacts, feet, self.floor, root=self.skeleton.root, max_rise=self.max_rise)
     if lock_feet:
       leg = leg_length(np.asarray(pos).reshape(-1, *pos.shape[-2:]), self.skeleton)
       pos = transforms.lock_feet(pos, contacts, feet, max_step=0.05 * leg)  # foot_contacts' speed

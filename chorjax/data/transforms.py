@@ -311,13 +311,24 @@ def lock_feet(pos_xTxJx3, contacts_xTxF, feet: Sequence[int], max_step: float = 
   return pos_xTxJx3 + jnp.concatenate([jnp.zeros_like(back[..., :1, :]), back], -2)[..., None, :]
 
 
-def ground_feet(pos_xTxJx3, contacts_xTxF, feet: Sequence[int], floor: float, hold: float = 0.9, width: int = 2):
+def ground_feet(
+  pos_xTxJx3,
+  contacts_xTxF,
+  feet: Sequence[int],
+  floor: float,
+  hold: float = 0.9,
+  width: int = 2,
+  root: int | None = None,
+  max_rise: float | None = None,
+):
   """The dance moved up or down so that a foot in contact stands on the floor (y-up positions): at each frame
   where feet are in contact (> 0.5) the body is shifted by ``floor`` minus the lowest such foot's height;
   frames without contact (a jump, a swing) keep the last shift, fading by ``hold`` per frame, and the shift
   is averaged over ``2 * width + 1`` frames so that it never jumps. Poses, bone lengths and the horizontal
   path are unchanged. A model whose feet float above (or sink into) the floor where it says they touch it
-  dances on the floor."""
+  dances on the floor. With ``root`` and ``max_rise`` (the training takes' largest vertical root step per
+  frame) the shift follows at the pace the dancer could: no frame moves the root up or down by more than
+  ``max_rise`` (where the shift alone would, it catches up over the next frames instead)."""
   y = pos_xTxJx3[..., jnp.asarray(feet), 1]
   on = contacts_xTxF > 0.5
   touching = on.any(-1)
@@ -334,6 +345,17 @@ def ground_feet(pos_xTxJx3, contacts_xTxF, feet: Sequence[int], floor: float, ho
   n = shift.shape[-1]
   padded = jnp.pad(shift, [(0, 0)] * (shift.ndim - 1) + [(width, width)], mode="edge")
   eased = jnp.mean(jnp.stack([padded[..., i : i + n] for i in range(2 * width + 1)]), 0)
+  if root is not None and max_rise is not None:
+    own = pos_xTxJx3[..., root, 1]
+
+    def paced(last, frame):  # last: the shifted root's height one frame before
+      want, height = frame
+      moved = jnp.clip(want, last - max_rise - height, last + max_rise - height)
+      return height + moved, moved
+
+    first = own[..., 0] + eased[..., 0]
+    _, eased = jax.lax.scan(paced, first, (time_first(eased), time_first(own)))
+    eased = jnp.moveaxis(eased, 0, -1)
   return pos_xTxJx3 + eased[..., None, None] * jnp.array([0.0, 1.0, 0.0])
 
 

@@ -14,7 +14,10 @@ runs/dancers_best runs/dancers_cal5 cal5-), runs/dancers_pca/pca-* (pca.toml), r
 runs/dancers_steps/steps-* (copies of the pca runs evaluated with --ground, and --ground --clamp-steps;
 experiments/dancers/README.md says how); runs/dancers_w128/w128-* (window128.toml: windows of 128 frames); and
 runs/dancers_poses/poses-* (the quickstart's runs calibrated again with the poses measure of 2026-11-26:
-learned.py runs/dancers runs/dancers_poses poses-).
+learned.py runs/dancers runs/dancers_poses poses-), runs/dancers_beyond/beyond-* (those calibrated past the
+grid's ends), runs/dancers_lstm/lstm-* (the cells' sweep's LSTM runs so calibrated) and
+runs/dancers_paced/paced-* (those judged again once `sample.ground` moved the body no faster than the takes'
+fastest vertical root step, 2026-11-26, session 23).
 Each evaluated run's small files (config, calibration, metrics log, eval metrics) are copied to results/, and
 the table falls back to them where a variant's runs are not on this machine.
 """
@@ -45,6 +48,7 @@ VARIANTS = {
   "quickstart, calibrated with the poses measure": Path("runs/dancers_poses"),
   "the same, calibrated past the grid's ends": Path("runs/dancers_beyond"),
   "the same with model.cell = lstm": Path("runs/dancers_lstm"),
+  "the same, the ground shift paced": Path("runs/dancers_paced"),
 }
 SLUG = dict(
   zip(
@@ -62,6 +66,7 @@ SLUG = dict(
       "poses",
       "beyond",
       "lstm",
+      "paced",
     ),
   )
 )
@@ -188,9 +193,11 @@ def readme_table() -> list[str]:
   head = ["dataset (motion trained on)", "", *[c[0] for c in README_COLUMNS], "train + calibrate"]
   lines = ["| " + " | ".join(head) + " |", "|---" * len(head) + "|"]
   for dataset in DATASETS:
-    # the quickstart as shipped (the LSTM cell, calibrated past the grid's ends), else its latest earlier form
+    # the quickstart as shipped (the LSTM cell, calibrated past the grid's ends, the ground shift paced), else
+    # its latest earlier form
     shipped = [
-      ("the same with model.cell = lstm", ""),
+      ("the same, the ground shift paced", ""),
+      ("the same with model.cell = lstm", " (before the ground shift was paced)"),
       ("the same, calibrated past the grid's ends", " (the LN-LSTM cell)"),
       ("quickstart, calibrated with the poses measure", " (the LN-LSTM cell, calibrated before the walk)"),
       ("quickstart", " (the LN-LSTM cell, calibrated before the poses measure)"),
