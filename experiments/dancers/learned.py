@@ -9,6 +9,8 @@ the runs they come from stay as they were. Skips finished copies, so it can run 
   chorjax compare runs/dancers_learned/learned-* -o experiments/dancers/learned_report.md
   # calibration's walk past the grid's ends (2026-11-26): each run's own measured settings not drawn again
   .venv/bin/python experiments/dancers/learned.py runs/dancers_poses runs/dancers_beyond beyond- --reuse
+  # calibration on longer draws (2026-11-26, session 23; SRC: links to the LSTM quickstart's runs)
+  .venv/bin/python experiments/dancers/learned.py SRC runs/dancers_long long- --frames 2400 --num 2
 """
 
 import json
@@ -26,15 +28,18 @@ def main(
   prefix: str = "learned-",
   sets=(),
   reuse: bool = False,
+  calibrate_args=(),
 ) -> None:
   """Copies of ``base``'s evaluated runs in ``out``, named ``prefix`` + the point, with ``sets`` (``SECTION.KEY=
   true|false|number``) changed in their config, calibrated and evaluated. ``reuse``: the settings the run's
   own calibration.json measured are not drawn again (the same checkpoint and draws), and where the choice
-  is the same its evaluation is kept (the same checkpoint, settings and sampling seeds: the same dance)."""
+  is the same its evaluation is kept (the same checkpoint, settings and sampling seeds: the same dance).
+  ``calibrate_args``: flags for `chorjax calibrate` (``--frames N``, ``--num N``). A copy whose checkpoint and
+  chosen settings are its run's keeps the run's evaluation."""
   from chorjax.calibrate import MEASURES, calibrate
 
-  if reuse and sets:
-    raise SystemExit("--reuse draws what the runs drew: it changes nothing in their config")
+  if reuse and (sets or calibrate_args):
+    raise SystemExit("--reuse draws what the runs drew: it changes nothing in their config or draws")
   out.mkdir(parents=True, exist_ok=True)
   for run in sorted(base.glob("*-seed=*")):
     if not (run / "eval" / "metrics.json").exists():
@@ -53,14 +58,16 @@ def main(
       config[section][name] = json.loads(value)
     config["name"] = copy.name
     (copy / "config.json").write_text(json.dumps(config, indent=2))
+    before = json.loads((run / "calibration.json").read_text()) if (run / "calibration.json").exists() else {}
     if reuse:
-      before = json.loads((run / "calibration.json").read_text())
       known = [(r["settings"], {k: r[k] for k in MEASURES}) for r in before["table"]]
-      if calibrate(copy, known=known, log=lambda line: None)["settings"] == before["settings"]:
-        shutil.copytree(run / "eval", copy / "eval")
-        continue
+      calibrate(copy, known=known, log=lambda line: None)
     else:
-      subprocess.run([CHORJAX, "calibrate", str(copy)], check=True)
+      subprocess.run([CHORJAX, "calibrate", str(copy), *calibrate_args], check=True)
+    same_run = reuse or (not sets and config["train"] == json.loads((run / "config.json").read_text())["train"])
+    if same_run and json.loads((copy / "calibration.json").read_text())["settings"] == before.get("settings"):
+      shutil.copytree(run / "eval", copy / "eval")  # the same checkpoint, settings and sampling seeds
+      continue
     subprocess.run(
       [
         CHORJAX,
@@ -83,5 +90,10 @@ def main(
 
 
 if __name__ == "__main__":
-  args = [a for a in sys.argv[1:] if a != "--reuse"]
-  main(*(Path(a) for a in args[0:2]), *args[2:3], sets=args[3:], reuse="--reuse" in sys.argv)
+  args, flags = [a for a in sys.argv[1:] if a != "--reuse"], []
+  for flag in ("--frames", "--num"):
+    if flag in args:
+      i = args.index(flag)
+      flags += args[i : i + 2]
+      del args[i : i + 2]
+  main(*(Path(a) for a in args[0:2]), *args[2:3], sets=args[3:], reuse="--reuse" in sys.argv, calibrate_args=flags)
