@@ -50,6 +50,7 @@ def main(
     shutil.rmtree(copy, ignore_errors=True)
     shutil.copytree(run, copy, ignore=shutil.ignore_patterns("eval", "events.*", "calibration.json"))
     config = json.loads((copy / "config.json").read_text())
+    trained = dict(config["train"])  # the run's own, before any change
     if not reuse:  # reuse keeps the checkpoint the measured table was drawn from
       config["train"].update(keep="best", calibrate=True)
     for assignment in sets:
@@ -64,7 +65,7 @@ def main(
       calibrate(copy, known=known, log=lambda line: None)
     else:
       subprocess.run([CHORJAX, "calibrate", str(copy), *calibrate_args], check=True)
-    same_run = reuse or (not sets and config["train"] == json.loads((run / "config.json").read_text())["train"])
+    same_run = reuse or (not sets and config["train"] == trained)
     if same_run and json.loads((copy / "calibration.json").read_text())["settings"] == before.get("settings"):
       shutil.copytree(run / "eval", copy / "eval")  # the same checkpoint, settings and sampling seeds
       continue
