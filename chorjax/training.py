@@ -90,7 +90,8 @@ def _feedback_loss_fn(params, batch, key, step, spec: StepSpec):
   The window runs frame by frame (``model.step``), since an input may be the previous output. What is
   fed back is a draw at the run's sample temperatures (as generation feeds itself) or the mixture
   mean, under ``stop_gradient``: a draw has no gradient, and the gradient through hundreds of fed-back
-  frames would be that of a much deeper, unstable network.
+  frames would be that of a much deeper, unstable network. Dropout drops the units the whole-window call
+  would with the same key (one mask per window and layer).
   """
   assert spec.feedback is not None
   fb, model = spec.feedback, nnx.merge(spec.graphdef, params)
@@ -100,6 +101,7 @@ def _feedback_loss_fn(params, batch, key, step, spec: StepSpec):
     x_BxTxD = x_BxTxD + spec.input_noise * jax.random.normal(noise_key, x_BxTxD.shape, x_BxTxD.dtype)
   b, t, _ = x_BxTxD.shape
   mask_BxT = feedback_mask(fb, mask_key, step, b, t)
+  masks = model.core.dropout_masks(jax.random.split(key)[1], b) if spec.dropout > 0 else None  # _loss_fn's key
 
   def body(c, inputs):
     carry, prev_BxP = c
@@ -109,7 +111,7 @@ def _feedback_loss_fn(params, batch, key, step, spec: StepSpec):
     else:
       drawn = model.mean(prev_BxP)
     x_in = jnp.where(own_B[:, None], jax.lax.stop_gradient(drawn), x_BxD)
-    carry, out_BxP = model.step(carry, x_in)
+    carry, out_BxP = model.step(carry, x_in, masks)
     return (carry, out_BxP), out_BxP
 
   init = (model.initial_carry(batch["motion_ids"]), jnp.zeros((b, model.num_outputs), x_BxTxD.dtype))
@@ -627,8 +629,6 @@ def _locked_train(cfg: Config, workdir: Path, force: bool, parallel, is_main: bo
         print(line, file=sys.stderr if line.startswith("warning") else sys.stdout, flush=True)
     if cfg.sample.frames > 0:  # fail now, not after hours of training, if the end sample cannot be drawn
       motion_weight_vector(ds.num_motions, cfg.sample.motion, source="sample.motion =")
-    if cfg.train.feedback != "none" and cfg.model.dropout > 0:
-      raise UserError("train.feedback runs the cells frame by frame, without dropout: set model.dropout = 0")
     manager = ckpt.create_manager(workdir, keep=cfg.train.keep_checkpoints)
     with contextlib.ExitStack() as cleanup:
       cleanup.callback(ckpt.close_quietly, manager)

@@ -1,6 +1,7 @@
 """Training: config errors and overrides, learning, one compile, NaN stop, TensorBoard, checkpoints,
 locking, and kill -9 + resume == uninterrupted (bit for bit)."""
 
+import dataclasses
 import json
 import os
 import shutil
@@ -366,9 +367,29 @@ def test_feedback_replaces_inputs_with_own_outputs_and_is_teacher_forcing_when_o
   assert float(loss_of_inputs(jnp.asarray(batch["inputs"]))) != pytest.approx(teacher, rel=1e-3)
 
 
+def test_feedback_drops_the_units_the_whole_window_would_and_is_teacher_forcing_when_off(tiny_setup):
+  """Dropout with feedback: run frame by frame with the window's masks, the cells give the fused window's
+  dropped-out loss to the last bit of float32 when nothing is fed back, and another loss without masks."""
+  from chorjax.training import _feedback_loss_fn, _loss_fn
+
+  _, ds = tiny_setup
+  cfg = tiny_config("model.dropout=0.3")
+  state, spec = create_train_state(cfg, 48, ds.num_motions)
+  assert spec.dropout == 0.3
+  batch = WindowSampler(ds.train, cfg.data.seq_length, 4, seed=0).batch(0)
+  key, step = jax.random.key(2), jnp.asarray(5)
+  dropped = float(_loss_fn(state["params"], batch, key, spec)[0])
+  plain = float(_loss_fn(state["params"], batch, key, dataclasses.replace(spec, dropout=0.0))[0])
+  assert dropped != pytest.approx(plain, rel=1e-3)  # the masks matter on this batch
+  off = dataclasses.replace(spec, feedback=_feedback(mode="scheduled", max_fraction=0.0))
+  assert float(_feedback_loss_fn(state["params"], batch, key, step, off)[0]) == pytest.approx(dropped, rel=1e-5)
+
+
 @pytest.mark.parametrize("feedback", ["auto", "scheduled"])
 def test_training_with_feedback_lowers_the_loss_and_samples(tmp_path, feedback):
-  train_tiny_and_check_it_learns(tmp_path, f"train.feedback={feedback!r}", "sample.frames=30", "train.feedback_ramp=10")
+  dropout = ["model.dropout=0.2"] if feedback == "scheduled" else []  # feedback trains with dropout or without
+  overrides = (f"train.feedback={feedback!r}", "sample.frames=30", "train.feedback_ramp=10", *dropout)
+  train_tiny_and_check_it_learns(tmp_path, *overrides)
   rows = [json.loads(l) for l in (tmp_path / "metrics.jsonl").read_text().splitlines()]
   assert rows[0]["feedback"] < rows[-1]["feedback"] and rows[-1]["feedback"] > 0.2  # the ramp, logged
 

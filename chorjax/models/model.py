@@ -60,9 +60,10 @@ class ChorModel(nnx.Module):
     """The recurrent state before the first frame, chosen by ``motion`` (ids or weights)."""
     return self.core.initial_carry(as_weights(motion, self.num_motions))
 
-  def step(self, carry, x_BxD):
-    """One frame in: ``(carry, head outputs [B, P] for the next frame)``."""
-    carry, h_BxH = self.core.step(carry, x_BxD)
+  def step(self, carry, x_BxD, masks=None):
+    """One frame in: ``(carry, head outputs [B, P] for the next frame)``; ``masks``: the window's dropout
+    masks (``core.dropout_masks``; training with feedback), None in generation."""
+    carry, h_BxH = self.core.step(carry, x_BxD, masks)
     return carry, self.head(h_BxH)
 
   def loss(self, out, targets):

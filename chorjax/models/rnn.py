@@ -80,14 +80,22 @@ class RecurrentCore(nnx.Module):
         c, inp = cell.scan(carry[l], cell.project(inp))  # one big matmul, outside the time loop
       new_carry.append(c)
       if dropout_key is not None and self.dropout > 0:
-        mask = dropout_mask(jax.random.fold_in(dropout_key, l), (inp.shape[1], self.hidden), self.dropout)
-        inp = inp * mask
+        inp = inp * self.dropout_masks(dropout_key, inp.shape[1])[l]
     return jnp.swapaxes(inp, 0, 1), tuple(new_carry)
 
-  def step(self, carry, x_BxD):
-    """One frame through every layer: ``(carry, h_BxH)``. No dropout (used for generation)."""
+  def dropout_masks(self, key, batch: int) -> tuple:
+    """Each layer's variational dropout mask ``[B, H]`` for a window drawn with ``key`` (what the whole-window
+    call uses; ``step`` takes them to run the same window frame by frame)."""
+    shape = (batch, self.hidden)
+    return tuple(dropout_mask(jax.random.fold_in(key, l), shape, self.dropout) for l in range(self.num_layers))
+
+  def step(self, carry, x_BxD, masks=None):
+    """One frame through every layer: ``(carry, h_BxH)``. No dropout unless ``masks`` (``dropout_masks``)
+    are given: generation has none; training with feedback runs a window frame by frame with them."""
     new_carry = []
     for l, cell in enumerate(self.cells):
       c, x_BxD = cell.step(carry[l], cell.project(x_BxD))
       new_carry.append(c)
+      if masks is not None:
+        x_BxD = x_BxD * masks[l]
     return tuple(new_carry), x_BxD
