@@ -17,7 +17,8 @@ runs/dancers_poses/poses-* (the quickstart's runs calibrated again with the pose
 learned.py runs/dancers runs/dancers_poses poses-), runs/dancers_beyond/beyond-* (those calibrated past the
 grid's ends), runs/dancers_lstm/lstm-* (the cells' sweep's LSTM runs so calibrated) and
 runs/dancers_paced/paced-* (those judged again once `sample.ground` moved the body no faster than the takes'
-fastest vertical root step, 2026-11-26, session 23).
+fastest vertical root step, 2026-11-26, session 23), runs/dancers_feedback/feedback-* (feedback.toml: trained with
+scheduled sampling, session 24).
 Each evaluated run's small files (config, calibration, metrics log, eval metrics) are copied to results/, and
 the table falls back to them where a variant's runs are not on this machine.
 """
@@ -49,6 +50,7 @@ VARIANTS = {
   "the same, calibrated past the grid's ends": Path("runs/dancers_beyond"),
   "the same with model.cell = lstm": Path("runs/dancers_lstm"),
   "the same, the ground shift paced": Path("runs/dancers_paced"),
+  "the same, trained with scheduled sampling": Path("runs/dancers_feedback"),
 }
 SLUG = dict(
   zip(
@@ -67,6 +69,7 @@ SLUG = dict(
       "beyond",
       "lstm",
       "paced",
+      "feedback",
     ),
   )
 )
@@ -78,6 +81,7 @@ STRIPS = (
   "quickstart, calibrated with the poses measure",
   "the same, calibrated past the grid's ends",
   "the same with model.cell = lstm",
+  "the same, trained with scheduled sampling",
 )
 DATASETS = ("cmu94", "salsa", "martial", "cmu05", "cmu131")
 # (label, value of one evaluation, how a row's worst seed is picked: the one farthest from the bar)
