@@ -18,7 +18,7 @@ learned.py runs/dancers runs/dancers_poses poses-), runs/dancers_beyond/beyond-*
 grid's ends), runs/dancers_lstm/lstm-* (the cells' sweep's LSTM runs so calibrated) and
 runs/dancers_paced/paced-* (those judged again once `sample.ground` moved the body no faster than the takes'
 fastest vertical root step, 2026-11-26, session 23), runs/dancers_feedback/feedback-* (feedback.toml: trained with
-scheduled sampling, session 24).
+scheduled sampling, session 24) and runs/dancers_fbdrop/fbdrop-* (feedback_dropout.toml: the same keeping dropout).
 Each evaluated run's small files (config, calibration, metrics log, eval metrics) are copied to results/, and
 the table falls back to them where a variant's runs are not on this machine.
 """
@@ -51,6 +51,7 @@ VARIANTS = {
   "the same with model.cell = lstm": Path("runs/dancers_lstm"),
   "the same, the ground shift paced": Path("runs/dancers_paced"),
   "the same, trained with scheduled sampling": Path("runs/dancers_feedback"),
+  "the same, scheduled sampling with dropout 0.2": Path("runs/dancers_fbdrop"),
 }
 SLUG = dict(
   zip(
@@ -70,6 +71,7 @@ SLUG = dict(
       "lstm",
       "paced",
       "feedback",
+      "fbdrop",
     ),
   )
 )
@@ -82,6 +84,7 @@ STRIPS = (
   "the same, calibrated past the grid's ends",
   "the same with model.cell = lstm",
   "the same, trained with scheduled sampling",
+  "the same, scheduled sampling with dropout 0.2",
 )
 DATASETS = ("cmu94", "salsa", "martial", "cmu05", "cmu131")
 # (label, value of one evaluation, how a row's worst seed is picked: the one farthest from the bar)
