@@ -73,14 +73,16 @@ class RecurrentCore(nnx.Module):
     new_carry = []
     inp = jnp.swapaxes(x_BxTxD, 0, 1)
     cudnn = self.lstm_kernel == "cudnn" and on_cuda()
+    drop = dropout_key is not None and self.dropout > 0
+    masks = self.dropout_masks(dropout_key, inp.shape[1]) if drop else None
     for l, cell in enumerate(self.cells):
       if cudnn:
         c, inp = cell.cudnn_scan(carry[l], inp)
       else:
         c, inp = cell.scan(carry[l], cell.project(inp))  # one big matmul, outside the time loop
       new_carry.append(c)
-      if dropout_key is not None and self.dropout > 0:
-        inp = inp * self.dropout_masks(dropout_key, inp.shape[1])[l]
+      if masks is not None:
+        inp = inp * masks[l]
     return jnp.swapaxes(inp, 0, 1), tuple(new_carry)
 
   def dropout_masks(self, key, batch: int) -> tuple:
