@@ -5,7 +5,9 @@ Each checkpoint step has three items:
   building an optimizer (as big_vision loads params);
   ``train``: ``{opt_state, step}``, what resuming needs besides the params;
   ``meta``: JSON with the resolved config, the feature pipeline (normalization statistics,
-  representation, skeleton), the motion-id map, the RNG seed and the data-sampler position.
+  representation, skeleton), the motion-id map, the RNG seed and the data-sampler position;
+and, where the step was evaluated, orbax's own ``metrics`` (its validation loss, so that a resumed run's
+manager still knows which step is the best).
 Runs written before 2026-11-22 hold one ``state`` item ``{params, opt_state, step}`` instead; they
 restore the same way (their params alone by a partial restore).
 The manager keeps the latest ``keep`` steps plus the best one by validation loss.
@@ -14,6 +16,7 @@ The manager keeps the latest ``keep`` steps plus the best one by validation loss
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
 import shutil
 import time
@@ -28,13 +31,15 @@ from chorjax.errors import UserError
 
 
 class _ReadOnlyNotice(logging.Filter):
-  """Drops orbax's warning that a directory opened read-only is read-only (we asked for that) and its
+  """Drops orbax's warning that a directory opened read-only is read-only (we asked for that), that a step
+  was saved without a validation loss (a run with no validation takes: the latest steps are kept), and its
   background threads' tracebacks of a failed write (``wait`` reports that failure as one line)."""
 
   def filter(self, record: logging.LogRecord) -> bool:
     msg = str(record.msg)
     failed_write = "orbax" in record.pathname and record.levelno >= logging.ERROR  # re-raised by `wait`/`save`
-    return not (msg.startswith("Given directory is read only") or failed_write)
+    expected = msg.startswith(("Given directory is read only", "Requested `tracked_metric`"))
+    return not (expected or failed_write)
 
 
 logging.getLogger("absl").addFilter(_ReadOnlyNotice())
@@ -44,15 +49,40 @@ def checkpoint_dir(workdir) -> Path:
   return Path(workdir).absolute() / "checkpoints"
 
 
+def _val_loss(metrics) -> float:
+  return metrics["val_loss"]
+
+
+def _write_missing_metrics(directory: Path) -> None:
+  """Steps saved before orbax wrote their metrics (chorjax before 2026-11-27) get them from their own meta,
+  so that resuming such a run keeps its best step. A step whose meta cannot be read is left as it is."""
+  if not directory.is_dir():
+    return
+  for step in directory.iterdir():
+    metrics = step / "metrics" / "metrics"
+    if not step.name.isdigit() or metrics.exists() or not (step / "commit_success.txt").exists():
+      continue
+    try:
+      val_loss = json.loads((step / "meta" / "metadata").read_text()).get("val_loss")
+    except (OSError, ValueError, AttributeError):
+      continue
+    if isinstance(val_loss, (int, float)):
+      metrics.parent.mkdir(exist_ok=True)
+      metrics.write_text(json.dumps({"val_loss": float(val_loss)}))
+
+
 def create_manager(workdir, keep: int = 3, read_only: bool = False) -> ocp.CheckpointManager:
+  if not read_only:
+    _write_missing_metrics(checkpoint_dir(workdir))
   policy = pp.AnyPreservationPolicy(
-    [
-      pp.LatestN(keep),
-      pp.BestN(get_metric_fn=lambda m: m["val_loss"], reverse=True, n=1, keep_checkpoints_without_metrics=False),
-    ]
+    [pp.LatestN(keep), pp.BestN(get_metric_fn=_val_loss, reverse=True, n=1, keep_checkpoints_without_metrics=False)]
   )
   options = ocp.CheckpointManagerOptions(
     preservation_policy=policy,
+    # best_fn makes orbax write each step's metrics beside it: without them a reopened manager (a resumed
+    # run) knew no step's validation loss, and BestN deleted the best step at the first save after resuming
+    best_fn=_val_loss,
+    best_mode="min",
     cleanup_tmp_directories=not read_only,
     create=not read_only,
     read_only=read_only,
@@ -189,14 +219,19 @@ def step_meta(manager, step) -> dict:
   return dict(meta)
 
 
-def best_step(manager) -> int | None:
-  """The kept step with the lowest validation loss (None if no intact checkpoint has one)."""
+def val_losses(manager) -> dict[int, float]:
+  """``{step: validation loss}`` of the kept intact steps that have one."""
   losses = {}
   for s in manager.all_steps():
     with contextlib.suppress(Damaged):
       losses[s] = step_meta(manager, s).get("val_loss")
-  losses = {s: v for s, v in losses.items() if v is not None}
-  return min(losses, key=losses.get) if losses else None
+  return {s: v for s, v in losses.items() if v is not None}
+
+
+def best_step(manager) -> int | None:
+  """The kept step with the lowest validation loss (None if no intact checkpoint has one)."""
+  losses = val_losses(manager)
+  return min(losses, key=losses.__getitem__) if losses else None
 
 
 def move_aside(manager: ocp.CheckpointManager, steps) -> Path:

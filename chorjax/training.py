@@ -480,9 +480,10 @@ def checkpoint_hook(manager, meta_of: Callable[[int], dict]):
 
 
 def best_checkpoint_hook(manager, save: Callable):
-  """``train.keep = "best"``: a checkpoint at every evaluation whose validation loss is the lowest so far
-  (the manager keeps the best by validation loss beside the latest ones)."""
-  best = [math.inf]
+  """``train.keep = "best"``: a checkpoint at every evaluation whose validation loss is the lowest so far,
+  counting the steps kept before a resume (the manager keeps the best by validation loss beside the latest
+  ones)."""
+  best = [min(ckpt.val_losses(manager).values(), default=math.inf)]
 
   def save_if_best(loop: Loop) -> None:
     if loop.val_loss is not None and loop.val_loss < best[0]:

@@ -23,6 +23,7 @@ import contextlib
 import dataclasses
 import functools
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -204,12 +205,27 @@ def _run(cfgs, workdirs, ds, managers, restored, stack) -> list[dict]:
       loop.val_loss = float(loop.vec_val.mean())
     loop.flush()
 
+  def save_point(k: int) -> None:
+    val_k = None if loop.val_loss is None or loop.vec_val is None else float(loop.vec_val[k])
+    ckpt.save(managers[k], loop.step, _take(loop.state, k), run_meta(cfgs[k], ds.features, loop.step, ds), val_k)
+
   def save(_: Loop) -> None:
     loop.flush()
-    for k, (c, m) in enumerate(zip(cfgs, managers)):
-      val_k = None if loop.val_loss is None or loop.vec_val is None else float(loop.vec_val[k])
-      ckpt.save(m, loop.step, _take(loop.state, k), run_meta(c, ds.features, loop.step, ds), val_k)
+    for k in range(k_points):
+      save_point(k)
     loop.last_good = loop.step
+
+  best = [min(ckpt.val_losses(m).values(), default=math.inf) for m in managers]
+
+  def save_best(_: Loop) -> None:  # train.keep = "best": each point's best where it happens, as when alone
+    if loop.vec_val is None:
+      return
+    for k, m in enumerate(managers):
+      if float(loop.vec_val[k]) < best[k]:
+        best[k] = float(loop.vec_val[k])
+        if m.latest_step() != loop.step:
+          loop.flush()
+          save_point(k)
 
   def save_now(_: Loop) -> None:
     if managers[0].latest_step() != loop.step:
@@ -219,6 +235,8 @@ def _run(cfgs, workdirs, ds, managers, restored, stack) -> list[dict]:
 
   loop.add_hook(evaluate, c0.train.eval_every)
   loop.add_hook(save, c0.train.checkpoint_every)
+  if c0.train.keep == "best" and val:
+    loop.add_hook(save_best, c0.train.eval_every or c0.train.num_steps)
 
   def wait(_: Loop) -> None:
     for m in managers:

@@ -155,11 +155,32 @@ def test_periodic_actions_follow_one_due_rule():
   assert [s for s in range(1, 11) if due(s, 0, 10)] == [10]  # 0: only at the last
 
 
+@pytest.mark.parametrize("older", [False, True])
+def test_a_reopened_manager_keeps_the_best_step(tmp_path, older):
+  """The best step by validation loss outlives a reopening (a resumed run) and the saves after it; ``older``:
+  steps written before orbax stored their metrics (chorjax before 2026-11-27) get them from their meta."""
+  state = lambda s: {"params": {"w": np.full(3, s, np.float32)}, "opt_state": {"m": np.zeros(1)}, "step": np.int32(s)}
+  manager = ckpt.create_manager(tmp_path, keep=1)
+  for step, val in ((10, 3.0), (20, 2.0), (30, 2.5)):
+    ckpt.save(manager, step, state(step), {"step": step}, val)
+  manager.close()
+  assert manager.all_steps() == [20, 30]
+  if older:
+    for metrics in (tmp_path / "checkpoints").glob("*/metrics"):
+      shutil.rmtree(metrics)
+  manager = ckpt.create_manager(tmp_path, keep=1)
+  for step, val in ((40, 2.7), (50, None)):
+    ckpt.save(manager, step, state(step), {"step": step}, val)
+  assert manager.all_steps() == [20, 50] and ckpt.best_step(manager) == 20
+  manager.close()
+
+
 def test_params_are_their_own_checkpoint_item_and_a_run_written_before_that_still_samples(tmp_path, capsys):
   cfg = tiny_config("train.num_steps=2", "log.tensorboard=false")
   train_and_evaluate(cfg, tmp_path / "new")
   assert sorted(p.name for p in (tmp_path / "new" / "checkpoints" / "2").iterdir() if p.is_dir()) == [
     "meta",
+    "metrics",  # orbax's: the step's validation loss, which a resumed run's manager reads back
     "params",
     "train",
   ]
