@@ -79,18 +79,24 @@ def test_eval_windows_cover_the_held_out_take(ds):
 
 
 def test_the_dancers_benchmark_holds_out_whole_takes_partners_together_and_nothing_leaks(shared_data):
-  """The salsa split of experiments/dancers/sweep.toml: both partners of a take are held out together, and
-  no held-out frame, nor its left/right mirror, is among the training frames (the mirror augmentation is
-  applied to the training takes only)."""
+  """The splits of experiments/dancers/sweep.toml: cmu94 and martial hold out the pairs split.py chose
+  (whole takes, none trained on); both salsa partners of a take are held out together, and no held-out
+  frame, nor its left/right mirror, is among the training frames (the mirror augmentation is applied to the
+  training takes only)."""
   from pathlib import Path
 
   from chorjax.experiments import load_sweep, sweep_points
 
   root = Path(__file__).resolve().parents[1]
   sweep = load_sweep(root / "experiments" / "dancers" / "sweep.toml")
-  (overrides,) = [o for name, o in sweep_points(sweep) if name == "dancers-salsa-seed=0"]
-  overrides += [f"data.dataset='{shared_data / 'aclstm' / 'salsa'}'"]
-  ds = load_dataset(load_config(root / "experiments" / "dancers" / sweep["base"], overrides).data)
+  points = dict(sweep_points(sweep))
+  base = root / "experiments" / "dancers" / sweep["base"]
+  read = lambda point, *more: load_dataset(load_config(base, [*points[point], *more]).data)
+  cmu94 = read("split-cmu94-seed=0")
+  assert set(cmu94.val_names) == {"94_05_skeleton_3d", "94_08_skeleton_3d"} and len(cmu94.train_names) == 8
+  martial = read("split-martial-seed=0", f"data.dataset='{shared_data / 'aclstm' / 'martial'}'")
+  assert set(martial.val_names) == {"03", "07"} and set(martial.train_names) == {"04", "06", "08", "10"}
+  ds = read("split-salsa-seed=0", f"data.dataset='{shared_data / 'aclstm' / 'salsa'}'")
   held = set(ds.val_names)
   assert held == {"12", "27", "14", "29"} and not held & set(ds.train_names)
   assert all(f"{int(n) + 15 if int(n) <= 15 else int(n) - 15:02d}" in held for n in held)  # NN and NN+15 dance together

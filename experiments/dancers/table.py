@@ -4,8 +4,9 @@ takes; and, per dataset, the end of a generated dance beside a held-out take (fi
   .venv/bin/python experiments/dancers/table.py > experiments/dancers/table.md
   .venv/bin/python experiments/dancers/table.py --readme    # the README's table (the quickstart per dataset)
 
-Reads (VARIANTS), whichever are on this machine: runs/dancers/dancers-* (sweep.toml: the quickstart as it is
-now), and the variants measured on the way there (their runs were on the machine of 2026-11-25; their rows are
+Reads (VARIANTS), whichever are on this machine: runs/dancers/dancers-* (sweep.toml until session 25: the LN-LSTM
+quickstart of 2026-11-25, its cmu94 and martial held out by name), and the variants measured on the way there
+(their runs were on the machine of 2026-11-25; their rows are
 in table_2026-11-25.md): runs/dancers_learned/learned-* (the old quickstart's runs kept at their best validation
 checkpoint and calibrated: experiments/dancers/learned.py), runs/dancers_best/best-* (best.toml),
 runs/dancers_cal5/cal5-* (those calibrated again with five controls and four measures: learned.py
@@ -18,7 +19,9 @@ learned.py runs/dancers runs/dancers_poses poses-), runs/dancers_beyond/beyond-*
 grid's ends), runs/dancers_lstm/lstm-* (the cells' sweep's LSTM runs so calibrated) and
 runs/dancers_paced/paced-* (those judged again once `sample.ground` moved the body no faster than the takes'
 fastest vertical root step, 2026-11-26, session 23), runs/dancers_feedback/feedback-* (feedback.toml: trained with
-scheduled sampling, session 24) and runs/dancers_fbdrop/fbdrop-* (feedback_dropout.toml: the same keeping dropout).
+scheduled sampling, session 24), runs/dancers_fbdrop/fbdrop-* (feedback_dropout.toml: the same keeping dropout)
+and runs/dancers_split/split-* (sweep.toml since session 25: the quickstart judged on held-out takes that its
+dancer's own training takes pass the bars against; a real row precedes the first recipe judged on each split).
 Each evaluated run's small files (config, calibration, metrics log, eval metrics) are copied to results/, and
 the table falls back to them where a variant's runs are not on this machine.
 """
@@ -52,6 +55,7 @@ VARIANTS = {
   "the same, the ground shift paced": Path("runs/dancers_paced"),
   "the same, trained with scheduled sampling": Path("runs/dancers_feedback"),
   "the same, scheduled sampling with dropout 0.2": Path("runs/dancers_fbdrop"),
+  "the quickstart, judged on the held-out takes split.py chooses": Path("runs/dancers_split"),
 }
 SLUG = dict(
   zip(
@@ -72,6 +76,7 @@ SLUG = dict(
       "paced",
       "feedback",
       "fbdrop",
+      "split",
     ),
   )
 )
@@ -85,6 +90,7 @@ STRIPS = (
   "the same with model.cell = lstm",
   "the same, trained with scheduled sampling",
   "the same, scheduled sampling with dropout 0.2",
+  "the quickstart, judged on the held-out takes split.py chooses",
 )
 DATASETS = ("cmu94", "salsa", "martial", "cmu05", "cmu131")
 # (label, value of one evaluation, how a row's worst seed is picked: the one farthest from the bar)
@@ -161,15 +167,19 @@ def real_scores(run: Path) -> tuple[dict, tuple[int, float]]:
   return e, (len(train), sum(map(len, train)) / fps / 60)
 
 
-def real_row(dataset: str) -> str | None:
-  """The dataset's training takes scored as if they were a sample against its held-out takes: what real
-  dance by this dancer scores on each column (FID ratios are 1 by construction; novelty has no meaning)."""
-  evs = evaluations(VARIANTS["quickstart"], dataset)
-  if not evs:
-    return None
-  e, _ = real_scores(evs[0][0])
+def held_out_names(run: Path) -> str:
+  """The run's held-out (validation) takes, as its config names them."""
+  return ", ".join(json.loads((run / "config.json").read_text())["data"]["val_takes"])
+
+
+def real_row(dataset: str, run: Path) -> str:
+  """The dataset's training takes scored as if they were a sample against its held-out takes (those of
+  ``run``'s split): what real dance by this dancer scores on each column (FID ratios are 1 by construction;
+  novelty has no meaning)."""
+  e, _ = real_scores(run)
   cells = [cell([f(e)], worst) if "novelty" not in label else "-" for label, f, worst in COLUMNS]
-  return f"| {dataset} | real: the training takes as a sample | - | " + " | ".join(cells) + " | - |"
+  label = f"real: the training takes as a sample (held out: {held_out_names(run)})"
+  return f"| {dataset} | {label} | - | " + " | ".join(cells) + " | - |"
 
 
 README_COLUMNS = [
@@ -203,6 +213,7 @@ def readme_table() -> list[str]:
     # the quickstart as shipped (the LSTM cell, calibrated past the grid's ends, the ground shift paced), else
     # its latest earlier form
     shipped = [
+      ("the quickstart, judged on the held-out takes split.py chooses", ""),
       ("the same, the ground shift paced", ""),
       ("the same with model.cell = lstm", " (before the ground shift was paced)"),
       ("the same, calibrated past the grid's ends", " (the LN-LSTM cell)"),
@@ -214,7 +225,7 @@ def readme_table() -> list[str]:
     if variant is None:
       continue
     e, (takes, minutes) = real_scores(evs[0][0])
-    name = f"{dataset} ({takes} takes, {minutes:.1f} min)"
+    name = f"{dataset} ({takes} takes, {minutes:.1f} min; held out: {held_out_names(evs[0][0])})"
 
     def seg(es):  # the calmest segment's mean (lowest) / the busiest's mean (highest) over the seeds
       low, high = [np.array([mean_of(x[k]) for x in es]) for k in ("movement_min", "movement_max")]
@@ -239,12 +250,14 @@ def table() -> list[str]:
   head = ["dataset", "recipe", "runs", *[c[0] for c in COLUMNS], "held-out NLL kept - best"]
   lines = ["| " + " | ".join(head) + " |", "|---" * len(head) + "|"]
   for dataset in DATASETS:
-    real = real_row(dataset)
-    lines += [real] if real else []
+    splits = set()  # a real row before the first recipe judged on each split
     for variant, root in VARIANTS.items():
       evs = evaluations(root, dataset)
       if not evs:
         continue
+      if held_out_names(evs[0][0]) not in splits:
+        splits.add(held_out_names(evs[0][0]))
+        lines.append(real_row(dataset, evs[0][0]))
       cells = [cell([f(e) for _, e in evs], worst) for _, f, worst in COLUMNS]
       gap = [
         e["heldout_loss"]
