@@ -205,45 +205,8 @@ def _run(cfgs, workdirs, ds, managers, restored, stack) -> list[dict]:
       loop.val_loss = float(loop.vec_val.mean())
     loop.flush()
 
-  def save_point(k: int) -> None:
-    val_k = None if loop.val_loss is None or loop.vec_val is None else float(loop.vec_val[k])
-    ckpt.save(managers[k], loop.step, _take(loop.state, k), run_meta(cfgs[k], ds.features, loop.step, ds), val_k)
-
-  def save(_: Loop) -> None:
-    loop.flush()
-    for k in range(k_points):
-      save_point(k)
-    loop.last_good = loop.step
-
-  best = [min(ckpt.val_losses(m).values(), default=math.inf) for m in managers]
-
-  def save_best(_: Loop) -> None:  # train.keep = "best": each point's best where it happens, as when alone
-    if loop.vec_val is None:
-      return
-    for k, m in enumerate(managers):
-      if float(loop.vec_val[k]) < best[k]:
-        best[k] = float(loop.vec_val[k])
-        if m.latest_step() != loop.step:
-          loop.flush()
-          save_point(k)
-
-  def save_now(_: Loop) -> None:
-    if managers[0].latest_step() != loop.step:
-      save(loop)
-    for m in managers:
-      ckpt.wait(m)
-
   loop.add_hook(evaluate, c0.train.eval_every)
-  loop.add_hook(save, c0.train.checkpoint_every)
-  if c0.train.keep == "best" and val:
-    loop.add_hook(save_best, c0.train.eval_every or c0.train.num_steps)
-
-  def wait(_: Loop) -> None:
-    for m in managers:
-      ckpt.wait(m)
-
-  loop.end_hooks.append(wait)
-  loop.on_stop = save_now
+  _checkpoint_hooks(loop, cfgs, managers, ds, bool(val))
   samples: list[dict] = [{} for _ in cfgs]
 
   def end_samples(_: Loop) -> None:  # each point as it would end alone: calibrated (train.calibrate), then drawn
@@ -260,6 +223,50 @@ def _run(cfgs, workdirs, ds, managers, restored, stack) -> list[dict]:
     loop.stop = stop
     loop.run()
   return [_summary(loop, k, start, t_start, samples[k]) for k in range(k_points)]
+
+
+def _checkpoint_hooks(loop: VecLoop, cfgs, managers, ds, has_val: bool) -> None:
+  """Each point's checkpoints, as it would save them alone: every ``checkpoint_every`` steps, its best where it
+  happens (``train.keep = "best"``), this step's on a stop signal; and the end waits for the writes."""
+  c0 = cfgs[0]
+
+  def save_point(k: int) -> None:
+    val_k = None if loop.val_loss is None or loop.vec_val is None else float(loop.vec_val[k])
+    ckpt.save(managers[k], loop.step, _take(loop.state, k), run_meta(cfgs[k], ds.features, loop.step, ds), val_k)
+
+  def save(_: Loop) -> None:
+    loop.flush()
+    for k in range(len(cfgs)):
+      save_point(k)
+    loop.last_good = loop.step
+
+  best = [min(ckpt.val_losses(m).values(), default=math.inf) for m in managers]
+
+  def save_best(_: Loop) -> None:
+    if loop.vec_val is None:
+      return
+    for k, m in enumerate(managers):
+      if float(loop.vec_val[k]) < best[k]:
+        best[k] = float(loop.vec_val[k])
+        if m.latest_step() != loop.step:
+          loop.flush()
+          save_point(k)
+
+  def save_now(_: Loop) -> None:
+    if managers[0].latest_step() != loop.step:
+      save(loop)
+    for m in managers:
+      ckpt.wait(m)
+
+  def wait(_: Loop) -> None:
+    for m in managers:
+      ckpt.wait(m)
+
+  loop.add_hook(save, c0.train.checkpoint_every)
+  if c0.train.keep == "best" and has_val:
+    loop.add_hook(save_best, c0.train.eval_every or c0.train.num_steps)
+  loop.end_hooks.append(wait)
+  loop.on_stop = save_now
 
 
 def _summary(loop: VecLoop, k: int, start: int, t_start: float, samples: dict) -> dict:
