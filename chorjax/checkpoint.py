@@ -67,8 +67,9 @@ def _write_missing_metrics(directory: Path) -> None:
     except (OSError, ValueError, AttributeError):
       continue
     if isinstance(val_loss, (int, float)):
-      metrics.parent.mkdir(exist_ok=True)
-      metrics.write_text(json.dumps({"val_loss": float(val_loss)}))
+      with contextlib.suppress(OSError):  # not writable: saving will say so, in one line
+        metrics.parent.mkdir(exist_ok=True)
+        metrics.write_text(json.dumps({"val_loss": float(val_loss)}))
 
 
 def create_manager(workdir, keep: int = 3, read_only: bool = False) -> ocp.CheckpointManager:
