@@ -479,15 +479,16 @@ def checkpoint_hook(manager, meta_of: Callable[[int], dict]):
   return save
 
 
-def best_checkpoint_hook(manager, save: Callable):
-  """``train.keep = "best"``: a checkpoint at every evaluation whose validation loss is the lowest so far,
-  counting the steps kept before a resume (the manager keeps the best by validation loss beside the latest
-  ones)."""
+def best_checkpoint_hook(manager, save: Callable, val_loss: Callable[[Loop], float | None] = lambda l: l.val_loss):
+  """``train.keep = "best"``: a checkpoint at every evaluation whose validation loss (``val_loss(loop)``; a
+  vectorized run's point reads its own) is the lowest so far, counting the steps kept before a resume (the
+  manager keeps the best by validation loss beside the latest ones)."""
   best = [min(ckpt.val_losses(manager).values(), default=math.inf)]
 
   def save_if_best(loop: Loop) -> None:
-    if loop.val_loss is not None and loop.val_loss < best[0]:
-      best[0] = loop.val_loss
+    val = val_loss(loop)
+    if val is not None and val < best[0]:
+      best[0] = val
       if manager.latest_step() != loop.step:
         save(loop)
 

@@ -23,7 +23,6 @@ import contextlib
 import dataclasses
 import functools
 import json
-import math
 import sys
 import time
 from pathlib import Path
@@ -47,6 +46,7 @@ from chorjax.training import (
   _train_step,
   _truncate_metrics,
   _write_config,
+  best_checkpoint_hook,
   calibrate_and_sample,
   calibrates,
   eval_step,
@@ -240,17 +240,12 @@ def _checkpoint_hooks(loop: VecLoop, cfgs, managers, ds, has_val: bool) -> None:
       save_point(k)
     loop.last_good = loop.step
 
-  best = [min(ckpt.val_losses(m).values(), default=math.inf) for m in managers]
+  def best_of(k: int):  # point k's own best, as best_checkpoint_hook keeps a run's alone
+    def save_k(_: Loop) -> None:
+      loop.flush()
+      save_point(k)
 
-  def save_best(_: Loop) -> None:
-    if loop.vec_val is None:
-      return
-    for k, m in enumerate(managers):
-      if float(loop.vec_val[k]) < best[k]:
-        best[k] = float(loop.vec_val[k])
-        if m.latest_step() != loop.step:
-          loop.flush()
-          save_point(k)
+    return best_checkpoint_hook(managers[k], save_k, lambda _: None if loop.vec_val is None else float(loop.vec_val[k]))
 
   def save_now(_: Loop) -> None:
     if managers[0].latest_step() != loop.step:
@@ -264,7 +259,8 @@ def _checkpoint_hooks(loop: VecLoop, cfgs, managers, ds, has_val: bool) -> None:
 
   loop.add_hook(save, c0.train.checkpoint_every)
   if c0.train.keep == "best" and has_val:
-    loop.add_hook(save_best, c0.train.eval_every or c0.train.num_steps)
+    for k in range(len(cfgs)):
+      loop.add_hook(best_of(k), c0.train.eval_every or c0.train.num_steps)
   loop.end_hooks.append(wait)
   loop.on_stop = save_now
 

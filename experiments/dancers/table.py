@@ -255,8 +255,9 @@ def table() -> list[str]:
       evs = evaluations(root, dataset)
       if not evs:
         continue
-      if held_out_names(evs[0][0]) not in splits:
-        splits.add(held_out_names(evs[0][0]))
+      split = held_out_names(evs[0][0])
+      if split not in splits:
+        splits.add(split)
         lines.append(real_row(dataset, evs[0][0]))
       cells = [cell([f(e) for _, e in evs], worst) for _, f, worst in COLUMNS]
       gap = [
