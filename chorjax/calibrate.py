@@ -18,6 +18,12 @@ against the reference over the reference's own (one half of its takes against th
 smallest wins: ``|log movement| + |log jitter| + |log speed| + |log root travel| + max(log poses, 0)``
 (poses nearer than another stretch of the same dance is no fault).
 
+The noise order (``sample.noise_order``: how many AR(1) filters the drawn noise passes, ``--noise-order``) is
+not searched: the smoothing is chosen for the run's order and recorded with it. The quickstart's 4 filters
+leave a third of two filters' frame-to-frame tremble at the same speed; with two, the smoothing that keeps
+the dance's speed left a model trembling at 1.2-1.3x its dancer's jitter over 10,000 frames, and smoothing
+harder made its poses wander off (experiments/dancers, 2026-11-27).
+
 The reference is the run's TRAINING takes (never the takes it is judged on: tuning on those would be
 tuning on the test); ``--data`` names others. The result goes to ``WORKDIR/calibration.json`` and is the
 run's default from then on (``sample``, ``eval``, ``live``; a flag or key given explicitly still wins).
@@ -56,13 +62,14 @@ RATES = ("movement", "jitter", "speed", "root_travel")
 MEASURES = (*RATES, "poses")
 
 
-DRAWN = ("noise_smoothing", "sigma_temperature", "persistence", "crossfade")  # what an MSE head ignores
+DRAWN = ("noise_smoothing", "noise_order", "sigma_temperature", "persistence", "crossfade")  # an MSE head ignores
 
 
-def default_grid(config) -> dict:
+def default_grid(config, noise_order: int | None = None) -> dict:
   """``GRID`` less what ``config``'s run cannot use: ``foot_lock`` needs canonical features, and an MSE head
-  draws no noise (its frame is its prediction), so only ``foot_lock`` can change its dance."""
-  grid = dict(GRID)
+  draws no noise (its frame is its prediction), so only ``foot_lock`` can change its dance. The noise passes
+  ``noise_order`` filters (default: the run's ``sample.noise_order``), recorded with the smoothing chosen."""
+  grid = {"noise_order": (noise_order or config.sample.noise_order,), **GRID}
   if config.data.representation != "canonical":
     del grid["foot_lock"]
   if config.model.head == "mse":
@@ -166,6 +173,7 @@ def calibrate(
   grid: dict | None = None,
   log=print,
   known: Sequence | None = None,
+  noise_order: int | None = None,
 ) -> dict:
   """Chooses and records the run's sampling settings (see the module docstring).
 
@@ -176,6 +184,7 @@ def calibrate(
     grid: the values tried per control (default ``GRID``; ``foot_lock`` only where the run can lock feet).
     log: where progress lines go.
     known: ``(settings, measures)`` already measured with these draws (see :func:`search`).
+    noise_order: the AR(1) filters the drawn noise passes (default: the run's ``sample.noise_order``).
 
   Returns:
     What ``calibration.json`` holds: the settings, the reference, and every setting's measurements.
@@ -203,7 +212,7 @@ def calibrate(
     return y_up(dance(ranged.graphdef, ranged.params, ranged.features, motion, key, frames, sampling))
 
   if grid is None:
-    grid = default_grid(run.config)
+    grid = default_grid(run.config, noise_order)
     if not grid:
       raise UserError(f"{workdir}: an MSE head on {run.config.data.representation} features draws nothing to calibrate")
   log(f"calibrating {workdir} on {'the takes given' if data else 'its training takes'} ({len(reference)} takes)")

@@ -523,10 +523,13 @@ def _eval(args) -> int:
 
 def _calibrate(args) -> int:
   from chorjax.calibrate import calibrate, calibration_path
+  from chorjax.config import check_sample_control
 
   _counts(args, frames=60, num=1)
   _refuse_existing([calibration_path(args.workdir)], args.force)
-  calibrate(args.workdir, args.data, frames=args.frames, num=args.num, seed=args.seed)
+  if args.noise_order is not None:
+    check_sample_control("noise_order", args.noise_order, "--noise-order")
+  calibrate(args.workdir, args.data, frames=args.frames, num=args.num, seed=args.seed, noise_order=args.noise_order)
   return 0
 
 
@@ -583,7 +586,16 @@ def _controls(args) -> dict:
   (unset ones are None: the run's config)."""
   from chorjax.config import check_sample_control
 
-  numbers = ("pi_temperature", "sigma_temperature", "noise_smoothing", "persistence", "crossfade", "pace", "scale_cap")
+  numbers = (
+    "pi_temperature",
+    "sigma_temperature",
+    "noise_smoothing",
+    "noise_order",
+    "persistence",
+    "crossfade",
+    "pace",
+    "scale_cap",
+  )
   given = {k: getattr(args, k) for k in numbers}
   for name, value in given.items():
     if value is not None:
@@ -649,6 +661,12 @@ def _add_sampling_args(p) -> None:
     type=float,
     metavar="RHO",
     help="MDN noise correlated over frames, 0 <= RHO < 1 (default: the run's calibration, else sample.noise_smoothing)",
+  )
+  p.add_argument(
+    "--noise-order",
+    type=int,
+    metavar="N",
+    help="AR(1) filters the MDN noise passes, 1-8 (default: the run's calibration, else sample.noise_order)",
   )
   p.add_argument(
     "--persistence",
@@ -992,7 +1010,8 @@ def _add_calibrate_command(sub) -> None:
   cal = sub.add_parser(
     "calibrate",
     help="choose the run's sampling settings on its dancer's takes; the run's default after",
-    description="Samples the run over a grid of noise_smoothing, sigma_temperature, persistence, crossfade and "
+    description="Samples the run over a grid of noise_smoothing (for the run's sample.noise_order, or "
+    "--noise-order, recorded with it), sigma_temperature, persistence, crossfade and "
     "(canonical runs) foot_lock, 180 settings (an MSE head draws no noise: foot_lock alone), and past the "
     "grid's ends where its best noise smoothing or sigma temperature is one, while that helps; it keeps the one "
     "whose dance moves like the reference takes "
@@ -1008,6 +1027,13 @@ def _add_calibrate_command(sub) -> None:
   cal.add_argument("--frames", type=int, default=1200, help="frames per drawn dancer (default 1200)")
   cal.add_argument("--num", type=int, default=4, help="dancers drawn per setting (default 4)")
   cal.add_argument("--seed", type=int, default=0, help="sampling seed (default 0)")
+  cal.add_argument(
+    "--noise-order",
+    type=int,
+    metavar="N",
+    help="AR(1) filters the drawn noise passes, 1-8, recorded with the chosen settings (default: the run's "
+    "sample.noise_order)",
+  )
   cal.add_argument("--force", action="store_true", help="replace an existing calibration.json")
   cal.set_defaults(func=_calibrate)
 

@@ -333,6 +333,16 @@ class SampleConfig:
     below=1.0,
     resumable=True,
   )
+  noise_order: int = _field(
+    2,
+    "how many AR(1) filters (each with coefficient noise_smoothing) the MDN noise passes, 1-8: two leave "
+    "a tremble in every frame's change (their second difference keeps every frequency) that smoothing harder "
+    "only trades for poses that wander off; four at 0.8 move as fast per frame as two at 0.9 with a third of "
+    "the second difference",
+    minimum=1,
+    below=9,
+    resumable=True,
+  )
   persistence: float = _field(
     0.0,
     "MDN component persistence: added to the log-weight of the component drawn for the previous frame, so "
@@ -413,6 +423,7 @@ class SampleConfig:
     "sigma_temperature",
     "greedy",
     "noise_smoothing",
+    "noise_order",
     "persistence",
     "crossfade",
     "pace",

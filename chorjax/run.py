@@ -300,7 +300,9 @@ class Run:
 
 
 # what `chorjax calibrate` chooses (runs calibrated before 2026-11-25 hold the first two alone)
-CALIBRATED = ("noise_smoothing", "sigma_temperature", "persistence", "crossfade", "foot_lock")
+# What calibration.json's settings may hold: what it searched, and the noise order its smoothing was chosen with
+# (older calibrations lack it: they were chosen with the run's sample.noise_order)
+CALIBRATED = ("noise_smoothing", "noise_order", "sigma_temperature", "persistence", "crossfade", "foot_lock")
 
 
 def calibration_path(workdir) -> Path:

@@ -9,6 +9,7 @@ inverse of the feature pipeline.
 from __future__ import annotations
 
 import functools
+import math
 from pathlib import Path
 
 import jax
@@ -26,7 +27,20 @@ from chorjax.models.gan import GanModel, gan_controls, generate_sequences, pose_
 # rounding differs, which a free-running dance grows into another dance.
 UNROLL = 4
 
-_STATIC = ("graphdef", "num_frames", "greedy", "noise_smoothing", "persistence", "crossfade", "pace", "pace_lag")
+_STATIC = (
+  "graphdef",
+  "num_frames",
+  "greedy",
+  "noise_smoothing",
+  "noise_order",
+  "persistence",
+  "crossfade",
+  "pace",
+  "pace_lag",
+)
+# The most AR(1) filters the smoothed noise can pass (``noise_order``): a stream's state holds this many, so
+# the order may change between chunks of an endless dance.
+MAX_NOISE_ORDER = 8
 
 
 @functools.partial(jax.jit, static_argnames=_STATIC)
@@ -42,6 +56,7 @@ def generate(
   sigma_temperature=1.0,
   greedy: bool = False,
   noise_smoothing: float = 0.0,
+  noise_order: int = 2,
   persistence: float = 0.0,
   crossfade: float = 0.0,
   bounds=None,
@@ -61,7 +76,8 @@ def generate(
     prime_BxPxD: optional real phrase (normalized); generation continues after its last frame.
       Without it, generation starts from the zero frame (the mean pose) and the id's state.
     pi_temperature, sigma_temperature, greedy: MDN sampling controls (see ``heads.mdn_sample``).
-    noise_smoothing: the MDN noise's AR(1) coefficient (:func:`smooth_noise`; 0 = independent per frame).
+    noise_smoothing, noise_order: the MDN noise passes ``noise_order`` cascaded AR(1) filters with coefficient
+      ``noise_smoothing`` (:func:`smooth_noise`; 0 = independent per frame).
     persistence: added to the log-weight of the previous frame's mixture component.
     crossfade: a change of component glides: the jump between the means decays by this factor per frame.
     bounds: optional ``(low [D], high [D])``: every drawn frame is clipped to them before it is fed back
@@ -93,7 +109,8 @@ def generate(
   if pace and pace_target is None:
     raise ValueError("pace needs pace_target = (the training pace, the pose weights): Features.pace")
   pacing = (pace, pace_lag, *pace_target) if pace and pace_target is not None else None
-  return _generate_smoothly(model, carry, x0, key, num_frames, noise_smoothing, controls, bounds, pacing)
+  noise = (noise_smoothing, noise_order)
+  return _generate_smoothly(model, carry, x0, key, num_frames, noise, controls, bounds, pacing)
 
 
 def _primed(model, motion, prime_BxPxD):
@@ -127,9 +144,7 @@ def _clip(x_BxD, bounds, previous_BxD=None):
   return jnp.clip(x_BxD, bounds[0], bounds[1])
 
 
-def _generate_smoothly(
-  model, carry, x0_BxD, key, num_frames: int, noise_smoothing: float, controls: dict, bounds, pacing
-):
+def _generate_smoothly(model, carry, x0_BxD, key, num_frames: int, noise: tuple, controls: dict, bounds, pacing):
   """The scan of :func:`generate` with smoothed noise and the draw's state (component, offset) carried.
 
   With ``pacing = (gain, lag, ref, weights)`` a governor holds the dancer to the training pace ``ref``
@@ -137,30 +152,32 @@ def _generate_smoothly(
   multiplied by ``(ref / own pace) ** gain`` within 0.5-2x, the own pace a running mean over about ten
   lags; a dancer who slows down gets more energy, one who races or trembles less."""
   state = _smooth_start(carry, x0_BxD, pacing)
-  return _smooth_scan(model, state, key, num_frames, noise_smoothing, controls, bounds, pacing)[1]
+  return _smooth_scan(model, state, key, num_frames, noise, controls, bounds, pacing)[1]
 
 
 def _smooth_start(carry, x0_BxD, pacing):
-  """The state of :func:`_smooth_scan` before the first frame: ``(carry, previous frame, noise filters,
-  (component, offset), (the governor's recent frames, where the next goes, own pace))``."""
+  """The state of :func:`_smooth_scan` before the first frame: ``(carry, previous frame, noise filters
+  [MAX_NOISE_ORDER, B, D], (component, offset), (the governor's recent frames, where the next goes, own pace))``."""
   b = x0_BxD.shape[0]
   lag, ref = (pacing[1], pacing[2]) if pacing else (1, 1.0)
   none = (jnp.full((b,), -1, jnp.int32), jnp.zeros_like(x0_BxD))  # no component yet, no offset
   at = jnp.zeros((), jnp.int32)  # an array from the start: a resumed state keeps its type (no retrace)
   governor = (jnp.broadcast_to(x0_BxD, (lag, *x0_BxD.shape)), at, jnp.full((b,), ref, jnp.float32))
-  return (carry, x0_BxD, (jnp.zeros_like(x0_BxD), jnp.zeros_like(x0_BxD)), none, governor)
+  filters = jnp.zeros((MAX_NOISE_ORDER, *x0_BxD.shape), x0_BxD.dtype)
+  return (carry, x0_BxD, filters, none, governor)
 
 
-def _smooth_scan(model, state, key, num_frames: int, noise_smoothing: float, controls: dict, bounds, pacing):
-  """``num_frames`` smoothed draws from ``state``: ``(the state after them, frames [B, N, D])``."""
+def _smooth_scan(model, state, key, num_frames: int, noise: tuple, controls: dict, bounds, pacing):
+  """``num_frames`` smoothed draws from ``state`` with ``noise = (noise_smoothing, noise_order)``: ``(the state
+  after them, frames [B, N, D])``."""
   gain, lag, ref, weights = pacing or (0.0, 1, 1.0, jnp.zeros(state[1].shape[-1]))
   keep = 1.0 - 1.0 / (10 * lag)  # the running pace forgets over about ten lags (5 s)
 
   def body(c, k):
-    carry, previous, noise, drawn, (recent, at, own) = c
+    carry, previous, filters, drawn, (recent, at, own) = c
     carry, out = model.step(carry, previous)
     k_comp, k_noise = jax.random.split(k)
-    noise, eps_BxD = smooth_noise(noise, k_noise, noise_smoothing)
+    filters, eps_BxD = smooth_noise(filters, k_noise, *noise)
     sigma = controls["sigma_temperature"]
     if pacing:
       sigma = sigma * jnp.clip((ref / jnp.maximum(own, 1e-6)) ** gain, 0.5, 2.0)[:, None]
@@ -169,21 +186,43 @@ def _smooth_scan(model, state, key, num_frames: int, noise_smoothing: float, con
     if pacing:
       own = keep * own + (1 - keep) * (jnp.abs(x - recent[at]) @ weights)
       recent, at = recent.at[at].set(x), (at + 1) % lag
-    return (carry, x, noise, drawn, (recent, at, own)), x
+    return (carry, x, filters, drawn, (recent, at, own)), x
 
   state, xs_NxBxD = jax.lax.scan(body, state, jax.random.split(key, num_frames))
   return state, jnp.swapaxes(xs_NxBxD, 0, 1)
 
 
-def smooth_noise(state, key, rho: float):
-  """Standard-normal noise correlated over frames: white noise through two cascaded AR(1) filters with
-  coefficient ``rho`` (a smooth, low-pass process), scaled to unit stationary variance (the impulse
-  response ``(k + 1) rho^k`` has energy ``(1 + rho^2) / (1 - rho^2)^3``). ``rho = 0``: white noise.
-  ``state`` is ``(first filter, second filter)``; returns ``(state, noise)``."""
-  first, second = state
-  first = rho * first + jax.random.normal(key, first.shape, first.dtype)
-  second = rho * second + first
-  return (first, second), second * ((1 - rho**2) ** 3 / (1 + rho**2)) ** 0.5
+def smooth_noise(filters_KxBxD, key, rho: float, order: int = 2):
+  """Standard-normal noise correlated over frames: white noise through ``order`` cascaded AR(1) filters with
+  coefficient ``rho``, scaled to unit stationary variance (:func:`noise_gain`). ``rho = 0``: white noise.
+  Two filters (the default) give a smooth, low-pass process whose second difference still carries every
+  frequency (its spectrum falls as the fourth power, which the second difference undoes); four or more
+  leave far less frame-to-frame tremble at the same speed and forget sooner (at the same first difference,
+  four at 0.8 have a third of two at 0.9's second difference, and half its correlation over a second).
+  ``filters_KxBxD`` holds the filters' states (``K >= order``; the first ``order`` are used); returns
+  ``(filters, noise [B, D])``."""
+  x = jax.random.normal(key, filters_KxBxD.shape[1:], filters_KxBxD.dtype)
+  states = []
+  for k in range(order):
+    x = rho * filters_KxBxD[k] + x
+    states.append(x)
+  return filters_KxBxD.at[:order].set(jnp.stack(states)), x * noise_gain(rho, order)
+
+
+@functools.cache
+def noise_gain(rho: float, order: int) -> float:
+  """The factor that gives ``order`` cascaded AR(1) filters with coefficient ``rho`` unit stationary variance:
+  one over the root energy of their impulse response ``C(k + order - 1, k) rho^k`` (for two filters
+  ``(1 + rho^2) / (1 - rho^2)^3``)."""
+  if order < 1 or not 0.0 <= rho < 1.0:
+    raise ValueError(f"noise filters: need order >= 1 and 0 <= rho < 1, got {order}, {rho}")
+  if rho == 0.0:
+    return 1.0
+  if order == 2:
+    return ((1 - rho**2) ** 3 / (1 + rho**2)) ** 0.5
+  k = np.arange(int(60 * order / (1 - rho)) + 100)  # the response has fallen below 1e-20 of its peak by then
+  log_h = np.vectorize(math.lgamma)(k + order) - math.lgamma(order) - np.vectorize(math.lgamma)(k + 1) + k * np.log(rho)
+  return float(np.sum(np.exp(2 * log_h)) ** -0.5)
 
 
 def dance(graphdef, params, features, motion, key, num_frames: int, controls: dict, prime_BxPxD=None) -> np.ndarray:
@@ -274,6 +313,7 @@ def continue_stream(
   sigma_temperature=1.0,
   greedy: bool = False,
   noise_smoothing: float = 0.0,
+  noise_order: int = 2,
   persistence: float = 0.0,
   crossfade: float = 0.0,
   bounds=None,
@@ -290,7 +330,7 @@ def continue_stream(
     pi_temperature = sigma_temperature = 0.0
   controls = _draw_args(pi_temperature, sigma_temperature, persistence, crossfade, scale_cap)
   pacing = (pace, pace_lag, *pace_target) if pace and pace_target is not None else None
-  return _smooth_scan(model, state, key, num_frames, noise_smoothing, controls, bounds, pacing)
+  return _smooth_scan(model, state, key, num_frames, (noise_smoothing, noise_order), controls, bounds, pacing)
 
 
 def read_prime(spec: str, features, data_cfg) -> np.ndarray:

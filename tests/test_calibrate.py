@@ -31,7 +31,7 @@ SMALL = {
 
 @pytest.fixture
 def small_grid(monkeypatch):
-  assert set(SMALL) == set(calibrate.GRID) == set(CALIBRATED)
+  assert set(SMALL) == set(calibrate.GRID) == set(CALIBRATED) - {"noise_order"}  # the order is recorded, not searched
   monkeypatch.setattr(calibrate, "GRID", SMALL)
 
 
@@ -86,10 +86,13 @@ def test_calibration_goes_past_the_end_of_the_grid_while_the_dance_gets_nearer(r
 
 def test_calibrate_records_the_settings_and_the_run_uses_them_unless_told(run_dir, tmp_path, capsys, small_grid):
   args = ["calibrate", str(run_dir), "--frames", "200", "--num", "2"]
-  assert cli.main(args) == 0
+  assert cli.main([*args, "--noise-order", "9"]) == 2 and "sample.noise_order" in capsys.readouterr().err
+  assert not calibration_path(run_dir).exists()
+  assert cli.main([*args, "--noise-order", "4"]) == 0
   saved = json.loads(calibration_path(run_dir).read_text())
   chosen = saved["settings"]
   assert set(chosen) == set(CALIBRATED) and saved["reference"] == "training takes"  # a canonical run: feet too
+  assert chosen["noise_order"] == 4 and {r["settings"]["noise_order"] for r in saved["table"]} == {4}
   # the grid's 4 settings, then the walk past the end its best noise smoothing is at (of two values, always one)
   assert len(saved["table"]) > 4 and "calibrated:" in capsys.readouterr().out
   assert saved["table"][4]["settings"]["noise_smoothing"] in (0.5, 0.97)
