@@ -20,8 +20,10 @@ grid's ends), runs/dancers_lstm/lstm-* (the cells' sweep's LSTM runs so calibrat
 runs/dancers_paced/paced-* (those judged again once `sample.ground` moved the body no faster than the takes'
 fastest vertical root step, 2026-11-26, session 23), runs/dancers_feedback/feedback-* (feedback.toml: trained with
 scheduled sampling, session 24), runs/dancers_fbdrop/fbdrop-* (feedback_dropout.toml: the same keeping dropout)
-and runs/dancers_split/split-* (sweep.toml since session 25: the quickstart judged on held-out takes that its
-dancer's own training takes pass the bars against; a real row precedes the first recipe judged on each split).
+runs/dancers_split/split-* (sweep.toml since session 25: the quickstart judged on held-out takes that its
+dancer's own training takes pass the bars against; a real row precedes the first recipe judged on each split)
+and runs/dancers_order4/* (those runs, and the paced cmu05 / cmu131 runs, calibrated again with the noise
+through four filters, `chorjax calibrate RUN --noise-order 4`, session 26: experiments/dancers/README.md).
 Each evaluated run's small files (config, calibration, metrics log, eval metrics) are copied to results/, and
 the table falls back to them where a variant's runs are not on this machine.
 """
@@ -56,6 +58,7 @@ VARIANTS = {
   "the same, trained with scheduled sampling": Path("runs/dancers_feedback"),
   "the same, scheduled sampling with dropout 0.2": Path("runs/dancers_fbdrop"),
   "the quickstart, judged on the held-out takes split.py chooses": Path("runs/dancers_split"),
+  "the same, its noise through four filters (sample.noise_order = 4)": Path("runs/dancers_order4"),
 }
 SLUG = dict(
   zip(
@@ -77,6 +80,7 @@ SLUG = dict(
       "feedback",
       "fbdrop",
       "split",
+      "order4",
     ),
   )
 )
@@ -90,7 +94,7 @@ STRIPS = (
   "the same with model.cell = lstm",
   "the same, trained with scheduled sampling",
   "the same, scheduled sampling with dropout 0.2",
-  "the quickstart, judged on the held-out takes split.py chooses",
+  "the same, its noise through four filters (sample.noise_order = 4)",
 )
 DATASETS = ("cmu94", "salsa", "martial", "cmu05", "cmu131")
 # (label, value of one evaluation, how a row's worst seed is picked: the one farthest from the bar)
@@ -213,7 +217,8 @@ def readme_table() -> list[str]:
     # the quickstart as shipped (the LSTM cell, calibrated past the grid's ends, the ground shift paced), else
     # its latest earlier form
     shipped = [
-      ("the quickstart, judged on the held-out takes split.py chooses", ""),
+      ("the same, its noise through four filters (sample.noise_order = 4)", ""),
+      ("the quickstart, judged on the held-out takes split.py chooses", " (noise through two filters)"),
       ("the same, the ground shift paced", ""),
       ("the same with model.cell = lstm", " (before the ground shift was paced)"),
       ("the same, calibrated past the grid's ends", " (the LN-LSTM cell)"),
