@@ -134,6 +134,22 @@ def _start_live(run_dir, *flags):
 
 
 @pytest.mark.slow
+def test_a_stream_draws_its_noise_through_the_quickstarts_four_filters(live_run):
+  """The quickstart's noise order (4) in an endless dance: the same seed draws the same frames, another order
+  draws others, and a stream may change the order between chunks (its state holds every filter)."""
+  run = load_run(live_run)
+  sampling = {**run.sampling(), "noise_order": 4}
+  run = run.ranged(sampling)
+  stream = Stream(run, sampling, motion_weight_vector(run.num_motions), seed=0, chunk=5)
+  four = np.concatenate([stream.next_chunk() for _ in range(4)])
+  again = Stream(run, sampling, motion_weight_vector(run.num_motions), seed=0, chunk=5)
+  np.testing.assert_array_equal(four, np.concatenate([again.next_chunk() for _ in range(4)]))
+  two = Stream(run, {**sampling, "noise_order": 2}, motion_weight_vector(run.num_motions), seed=0, chunk=5)
+  assert not np.allclose(four, np.concatenate([two.next_chunk() for _ in range(4)]))  # the order is used
+  stream.draw["noise_order"] = 2
+  assert np.isfinite(stream.next_chunk()).all()  # the state holds every filter an order may use
+
+
 def test_live_server_end_to_end(live_run, tmp_path):
   from websockets.exceptions import InvalidStatus
   from websockets.sync.client import connect
