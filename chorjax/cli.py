@@ -584,18 +584,9 @@ def _counts(args, **minimum) -> None:
 def _controls(args) -> dict:
   """The sampling flags given on the command line, checked as the same keys are in a config file
   (unset ones are None: the run's config)."""
-  from chorjax.config import check_sample_control
+  from chorjax.config import SampleConfig, check_sample_control
 
-  numbers = (
-    "pi_temperature",
-    "sigma_temperature",
-    "noise_smoothing",
-    "noise_order",
-    "persistence",
-    "crossfade",
-    "pace",
-    "scale_cap",
-  )
+  numbers = [k for k in SampleConfig.CONTROLS if k not in SampleConfig.FLAGS]
   given = {k: getattr(args, k) for k in numbers}
   for name, value in given.items():
     if value is not None:

@@ -314,6 +314,11 @@ class TrainConfig:
   )
 
 
+# The most AR(1) filters the MDN noise can pass (``sample.noise_order``): a stream's state holds this many
+# (chorjax.sample), so the order may change between chunks of an endless dance.
+MAX_NOISE_ORDER = 8
+
+
 @dataclasses.dataclass(frozen=True)
 class SampleConfig:
   frames: int = _field(600, "frames written by the sample at the end of training", minimum=1, resumable=True)
@@ -340,7 +345,7 @@ class SampleConfig:
     "only trades for poses that wander off; four at 0.8 move as fast per frame as two at 0.9 with a third of "
     "the second difference",
     minimum=1,
-    below=9,
+    below=MAX_NOISE_ORDER + 1,
     resumable=True,
   )
   persistence: float = _field(
@@ -415,8 +420,9 @@ class SampleConfig:
     """How to draw and decode a dance (``sample.dance``): each of ``CONTROLS`` as given, where given and
     not None, else this config's."""
     out = {k: getattr(self, k) if given.get(k) is None else given[k] for k in self.CONTROLS}
-    flags = ("greedy", "rigid_bones", "foot_lock", "ground", "clamp", "clamp_steps")
-    return {**out, **{k: bool(out[k]) for k in flags}}
+    return {**out, **{k: bool(out[k]) for k in self.FLAGS}}
+
+  FLAGS = ("greedy", "rigid_bones", "foot_lock", "ground", "clamp", "clamp_steps")  # the on/off ones of CONTROLS
 
   CONTROLS = (
     "pi_temperature",

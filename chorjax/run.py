@@ -299,9 +299,9 @@ class Run:
     return dataclasses.replace(self, features=f)
 
 
-# what `chorjax calibrate` chooses (runs calibrated before 2026-11-25 hold the first two alone)
-# What calibration.json's settings may hold: what it searched, and the noise order its smoothing was chosen with
-# (older calibrations lack it: they were chosen with the run's sample.noise_order)
+# What calibration.json's settings may hold: what `chorjax calibrate` chooses, and the noise order its smoothing
+# was chosen with (runs calibrated before 2026-11-25 hold noise_smoothing and sigma_temperature alone; before
+# 2026-11-27 no noise_order: they were chosen with the run's sample.noise_order)
 CALIBRATED = ("noise_smoothing", "noise_order", "sigma_temperature", "persistence", "crossfade", "foot_lock")
 
 

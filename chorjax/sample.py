@@ -9,7 +9,6 @@ inverse of the feature pipeline.
 from __future__ import annotations
 
 import functools
-import math
 from pathlib import Path
 
 import jax
@@ -17,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 from flax import nnx
 
+from chorjax.config import MAX_NOISE_ORDER
 from chorjax.data.dataset import conform, read_takes
 from chorjax.errors import UserError
 from chorjax.models.gan import GanModel, gan_controls, generate_sequences, pose_layer
@@ -38,9 +38,6 @@ _STATIC = (
   "pace",
   "pace_lag",
 )
-# The most AR(1) filters the smoothed noise can pass (``noise_order``): a stream's state holds this many, so
-# the order may change between chunks of an endless dance.
-MAX_NOISE_ORDER = 8
 
 
 @functools.partial(jax.jit, static_argnames=_STATIC)
@@ -216,13 +213,11 @@ def noise_gain(rho: float, order: int) -> float:
   ``(1 + rho^2) / (1 - rho^2)^3``)."""
   if order < 1 or not 0.0 <= rho < 1.0:
     raise ValueError(f"noise filters: need order >= 1 and 0 <= rho < 1, got {order}, {rho}")
-  if rho == 0.0:
-    return 1.0
-  if order == 2:
+  if order == 2:  # the closed form: the draws of runs before other orders existed, to the bit
     return ((1 - rho**2) ** 3 / (1 + rho**2)) ** 0.5
-  k = np.arange(int(60 * order / (1 - rho)) + 100)  # the response has fallen below 1e-20 of its peak by then
-  log_h = np.vectorize(math.lgamma)(k + order) - math.lgamma(order) - np.vectorize(math.lgamma)(k + 1) + k * np.log(rho)
-  return float(np.sum(np.exp(2 * log_h)) ** -0.5)
+  k = np.arange(1, int(60 * order / (1 - rho)) + 100)  # the response has fallen below 1e-20 of its peak by then
+  h = np.cumprod(np.r_[1.0, rho * (k + order - 1) / k])  # h_k = h_(k-1) rho (k + order - 1) / k
+  return float(np.sum(h**2) ** -0.5)
 
 
 def dance(graphdef, params, features, motion, key, num_frames: int, controls: dict, prime_BxPxD=None) -> np.ndarray:
