@@ -329,6 +329,13 @@ def ground_feet(
   dances on the floor. With ``root`` and ``max_rise`` (the training takes' largest vertical root step per
   frame) the shift follows at the pace the dancer could: no frame moves the root up or down by more than
   ``max_rise`` (where the shift alone would, it catches up over the next frames instead)."""
+  return _ground_feet(pos_xTxJx3, contacts_xTxF, tuple(feet), floor, hold, width, root, max_rise)
+
+
+# Compiled once per shape: called eagerly, each call's scan bodies (new closures) compiled anew, and
+# calibration, which grounds 180 drawn dances, spent most of its time compiling them.
+@functools.partial(jax.jit, static_argnames=("feet", "width", "root"))
+def _ground_feet(pos_xTxJx3, contacts_xTxF, feet, floor, hold, width, root, max_rise):
   y = pos_xTxJx3[..., jnp.asarray(feet), 1]
   on = contacts_xTxF > 0.5
   touching = on.any(-1)
