@@ -127,3 +127,24 @@ def test_training_on_a_few_minutes_of_motion_says_what_to_expect():
   (note,) = [n for n in dataset_notes(two) if "minutes of training motion" in n]
   minutes = sum(len(m.positions) for m in two.motions if m.name in two.train_names) / two.fps / 60
   assert note.startswith(f"note: {minutes:.1f} minutes") and 0.5 < minutes < 1.5
+
+
+def test_the_takes_are_read_at_full_float32_precision_on_every_backend(monkeypatch):
+  """On a GPU JAX multiplies float32 matrices in TF32 by default: a run trained there had features 4e-4 away
+  from the same takes read on a CPU (measured on an H200), and sampling it on a CPU refused its data as
+  changed. The reading asks for full precision (a no-op on a CPU, so this checks the request is made)."""
+  import jax
+
+  from chorjax.data import dataset
+
+  seen = []
+  lengths = dataset.bone_lengths
+
+  def spy(*a, **k):
+    seen.append(jax.config.jax_default_matmul_precision)
+    return lengths(*a, **k)
+
+  monkeypatch.setattr(dataset, "bone_lengths", spy)
+  load_dataset(load_config(None, ["data.seq_length=20"]).data)
+  assert seen and set(seen) == {"highest"}
+  assert jax.config.jax_default_matmul_precision in (None, "default")  # restored afterwards

@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
 
+import jax
 import numpy as np
 
 from chorjax.data import transforms
@@ -205,6 +206,14 @@ def load_dataset(data_cfg) -> Dataset:
   Raises:
     UserError: for unreadable files, an empty selection, or a take shorter than one window.
   """
+  # Full float32 products: on a GPU, JAX's default multiplies float32 matrices in TF32, and the features of a
+  # run trained there differed from the same takes read on a CPU by up to 1e-3 (2% of a feature's std), so
+  # sampling it elsewhere refused its training data as changed. On a CPU this changes nothing.
+  with jax.default_matmul_precision("highest"):
+    return _load_dataset(data_cfg)
+
+
+def _load_dataset(data_cfg) -> Dataset:
   mappings: dict = {}
   rest_notes: list[str] = []
   motions = conform(read_takes([data_cfg.dataset], data_cfg), data_cfg, mappings, rest_notes)
