@@ -108,7 +108,7 @@ def unroll_ab(reps: int = 5) -> dict:
   for n in (1, unroll):
     chorjax.sample.UNROLL = n  # read when the program is traced, just below
     fn = jax.jit(
-      lambda p: chorjax.sample.generate.__wrapped__(graphdef, p, motion, jax.random.key(0), num_frames=FRAMES)
+      lambda p: chorjax.sample._generate.__wrapped__(graphdef, p, motion, jax.random.key(0), num_frames=FRAMES)
     )
     compiled = fn.lower(params).compile()  # this program, whatever UNROLL says later
     pairs.append((n, lambda compiled=compiled: compiled(params), jax.block_until_ready))

@@ -27,20 +27,12 @@ from chorjax.models.gan import GanModel, gan_controls, generate_sequences, pose_
 # rounding differs, which a free-running dance grows into another dance.
 UNROLL = 4
 
-_STATIC = (
-  "graphdef",
-  "num_frames",
-  "greedy",
-  "noise_smoothing",
-  "noise_order",
-  "persistence",
-  "crossfade",
-  "pace",
-  "pace_lag",
-)
+# What a compiled sampling program is specialized on. The draw's other controls (temperatures, persistence,
+# crossfade, bounds, scale ceiling) are its arguments: calibration's 180 settings compiled 30 programs when
+# persistence and crossfade were in this list, 5 since.
+_STATIC = ("graphdef", "num_frames", "greedy", "noise_smoothing", "noise_order", "pace", "pace_lag")
 
 
-@functools.partial(jax.jit, static_argnames=_STATIC)
 def generate(
   graphdef,
   params,
@@ -88,10 +80,59 @@ def generate(
   Returns:
     ``[B, num_frames, D]`` normalized frames.
   """
+  plain = bool(greedy or (noise_smoothing == persistence == crossfade == pace == 0 and scale_cap is None))
+  return _generate(
+    graphdef,
+    params,
+    motion,
+    key,
+    num_frames=num_frames,
+    prime_BxPxD=prime_BxPxD,
+    pi_temperature=pi_temperature,
+    sigma_temperature=sigma_temperature,
+    greedy=greedy,
+    noise_smoothing=noise_smoothing,
+    noise_order=noise_order,
+    persistence=persistence,
+    crossfade=crossfade,
+    bounds=bounds,
+    pace=pace,
+    pace_lag=pace_lag,
+    pace_target=pace_target,
+    scale_cap=scale_cap,
+    plain=plain,
+  )
+
+
+@functools.partial(jax.jit, static_argnames=(*_STATIC, "plain"))
+def _generate(
+  graphdef,
+  params,
+  motion,
+  key,
+  *,
+  num_frames: int,
+  prime_BxPxD=None,
+  pi_temperature=1.0,
+  sigma_temperature=1.0,
+  greedy: bool = False,
+  noise_smoothing: float = 0.0,
+  noise_order: int = 2,
+  persistence=0.0,
+  crossfade=0.0,
+  bounds=None,
+  pace: float = 0.0,
+  pace_lag: int = 15,
+  pace_target=None,
+  scale_cap=None,
+  plain: bool = True,
+):
+  """:func:`generate`'s program (the same defaults); ``plain``: no smoothing, persistence, crossfade, governor
+  or scale ceiling (decided before tracing, where persistence and crossfade are still numbers)."""
   model = nnx.merge(graphdef, params)
   carry, x0 = _primed(model, motion, prime_BxPxD)
 
-  if greedy or (noise_smoothing == persistence == crossfade == pace == 0 and scale_cap is None):
+  if plain:
 
     def body(c, k):
       carry, x = c

@@ -55,7 +55,7 @@ def test_shapes_seeds_and_greedy(loaded):
 def test_the_unrolled_loop_draws_what_one_frame_per_iteration_draws(loaded, monkeypatch):
   w = jnp.tile(as_weights(jnp.array([3]), 10), (4, 1))
   draw = lambda: np.asarray(
-    jax.jit(generate.__wrapped__, static_argnames=("graphdef", "num_frames"))(
+    jax.jit(sample._generate.__wrapped__, static_argnames=("graphdef", "num_frames"))(
       loaded.graphdef, loaded.params, w, jax.random.key(0), num_frames=102
     )
   )
