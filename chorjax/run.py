@@ -272,7 +272,7 @@ class Run:
     f = self.features
     needs = (
       (sampling.get("clamp") and f.low is None)
-      or (sampling.get("pace") and f.pace is None)
+      or (sampling.get("pace") and (f.pace is None or (f.pace_joints is None and f.joint_motion is not None)))
       or (sampling.get("ground") and f.floor is None and f.representation == "canonical")
       or (sampling.get("clamp_steps") and f.step_low is None)
     )
@@ -292,17 +292,18 @@ class Run:
     same = fresh.dim == f.dim and close(fresh.mean, f.mean) and close(fresh.std, f.std)
     if not same:
       raise UserError(f"{self.workdir}: sampling needs {what} from its training data, which changed")
-    keys = (*Features.RANGES, *Features.STEPS, "pace_lag", "pace", "floor")
+    keys = (*Features.RANGES, *Features.STEPS, "pace_lag", "pace", "pace_joints", "floor")
     stats = {k: getattr(fresh, k) for k in keys} if needs else {}
     f = dataclasses.replace(f, **stats)
     f = with_ceiling(f, self.graphdef, self.params, ds.train, self.config.data.seq_length, sampling)
     return dataclasses.replace(self, features=f)
 
 
-# What calibration.json's settings may hold: what `chorjax calibrate` chooses, and the noise order its smoothing
-# was chosen with (runs calibrated before 2026-11-25 hold noise_smoothing and sigma_temperature alone; before
-# 2026-11-27 no noise_order: they were chosen with the run's sample.noise_order)
-CALIBRATED = ("noise_smoothing", "noise_order", "sigma_temperature", "persistence", "crossfade", "foot_lock")
+# What calibration.json's settings may hold: what `chorjax calibrate` chooses, and the noise order and governor
+# gain it was chosen with (runs calibrated before 2026-11-25 hold noise_smoothing and sigma_temperature alone;
+# before 2026-11-27 no noise_order, and before session 27 of that day no pace: they were chosen with the run's
+# sample.noise_order and sample.pace)
+CALIBRATED = ("noise_smoothing", "noise_order", "pace", "sigma_temperature", "persistence", "crossfade", "foot_lock")
 
 
 def calibration_path(workdir) -> Path:

@@ -18,6 +18,7 @@ from flax import nnx
 
 from chorjax.config import MAX_NOISE_ORDER
 from chorjax.data.dataset import conform, read_takes
+from chorjax.data.features import JointMotion, joint_pace
 from chorjax.errors import UserError
 from chorjax.models.gan import GanModel, gan_controls, generate_sequences, pose_layer
 
@@ -74,7 +75,8 @@ def generate(
       ``(step_low [D], step_high [D])`` after them, its change from the previous frame is clipped to those
       first (``sample.clamp_steps``; the first frame's change counts from the mean pose or the prime's last frame).
     pace, pace_lag, pace_target: the pace governor (0 = off; :func:`_generate_smoothly`); ``pace_target``
-      is ``(the training pace over pace_lag frames, [D] weights that average the pose features)``.
+      is ``(the training pace over pace_lag frames, its measure)``: a ``JointMotion`` (the judge's measure,
+      ``Features.pace_joints``) or ``[D]`` weights that average the pose features (``Features.pace``).
     scale_cap: optional ``[S]`` ceiling on the MDN scales (``run.scale_ceiling``; ``sample.scale_cap``).
 
   Returns:
@@ -185,8 +187,8 @@ def _clip(x_BxD, bounds, previous_BxD=None):
 def _generate_smoothly(model, carry, x0_BxD, key, num_frames: int, noise: tuple, controls: dict, bounds, pacing):
   """The scan of :func:`generate` with smoothed noise and the draw's state (component, offset) carried.
 
-  With ``pacing = (gain, lag, ref, weights)`` a governor holds the dancer to the training pace ``ref``
-  (the weighted mean absolute change of the features over ``lag`` frames): the scale temperature is
+  With ``pacing = (gain, lag, ref, measure)`` a governor holds the dancer to the training pace ``ref``
+  (how far it moves over ``lag`` frames, :func:`_moved`): the scale temperature is
   multiplied by ``(ref / own pace) ** gain`` within 0.5-2x, the own pace a running mean over about ten
   lags; a dancer who slows down gets more energy, one who races or trembles less."""
   state = _smooth_start(carry, x0_BxD, pacing)
@@ -222,12 +224,25 @@ def _smooth_scan(model, state, key, num_frames: int, noise: tuple, controls: dic
     x, drawn = model.draw(out, k_comp, eps_BxD, drawn, **{**controls, "sigma_temperature": sigma})
     x = _clip(x, bounds, previous)
     if pacing:
-      own = keep * own + (1 - keep) * (jnp.abs(x - recent[at]) @ weights)
+      own = keep * own + (1 - keep) * _moved(x, recent, at, weights)
       recent, at = recent.at[at].set(x), (at + 1) % lag
     return (carry, x, filters, drawn, (recent, at, own)), x
 
   state, xs_NxBxD = jax.lax.scan(body, state, jax.random.split(key, num_frames))
   return state, jnp.swapaxes(xs_NxBxD, 0, 1)
+
+
+def _moved(x_BxD, recent_LxBxD, at, measure):
+  """How far each dancer moved over the governor's lag (``recent[at]`` is the frame ``lag`` frames before
+  ``x``): with ``measure`` a ``JointMotion``, the judge's measure (``features.joint_pace``: joints relative
+  to the root, the turn over the lag summed from the heading changes); else the weighted mean absolute
+  change of the features (``measure``: ``[D]`` weights)."""
+  then = recent_LxBxD[at]
+  if not isinstance(measure, JointMotion):
+    return jnp.abs(x_BxD - then) @ measure
+  lag = recent_LxBxD.shape[0]
+  heading = recent_LxBxD[..., 0].sum(0) - then[:, 0] + x_BxD[:, 0]  # the changes of the lag frames up to x
+  return joint_pace(x_BxD, then, heading * measure.std[0] + lag * measure.mean[0], measure)
 
 
 def smooth_noise(filters_KxBxD, key, rho: float, order: int = 2):
@@ -319,7 +334,9 @@ def draw_controls(features, controls: dict) -> dict:
       np.full(features.dim, np.inf, np.float32),
     )
     drawn["bounds"] = (*span, *(getattr(features, k) for k in features.STEPS))
-  if controls["pace"]:
+  if controls["pace"] and features.pace_joints is not None and features.joint_motion is not None:
+    drawn.update(pace_lag=features.pace_lag, pace_target=(features.pace_joints, features.joint_motion))
+  elif controls["pace"]:  # runs whose training data cannot tell how their joints move
     weights = np.zeros(features.dim, np.float32)
     weights[features.pose_channels] = 1.0 / len(features.pose_channels)
     drawn.update(pace_lag=features.pace_lag, pace_target=(features.pace, weights))

@@ -16,7 +16,7 @@ import numpy as np
 
 from chorjax.data import transforms
 from chorjax.data.csv import read_csv
-from chorjax.data.features import Features, feature_dim, floor_height
+from chorjax.data.features import Features, feature_dim, floor_height, joint_pace
 from chorjax.data.motion import Motion, bone_lengths
 from chorjax.data.skeletons import get_skeleton
 from chorjax.errors import UserError
@@ -334,6 +334,10 @@ def _generation_stats(features: Features, train, fps: float) -> Features:
   pose = features.pose_channels
   moved = [np.abs(x[lag:, pose] - x[:-lag, pose]).mean(-1) for _, x in train if len(x) > lag]
   pace = float(np.concatenate(moved).mean())
+  joints = features.joint_motion
+  if joints is not None:  # the same as the judge measures it: joints relative to the root, turning included
+    turned = lambda x: (lambda c: c[lag:] - c[:-lag])(np.cumsum(x[:, 0] * joints.std[0] + joints.mean[0]))
+    moved = [np.asarray(joint_pace(x[lag:], x[:-lag], turned(x), joints)) for _, x in train if len(x) > lag]
   steps = np.concatenate([np.diff(x, axis=0) for _, x in train if len(x) > 1])
   return dataclasses.replace(
     features,
@@ -343,6 +347,7 @@ def _generation_stats(features: Features, train, fps: float) -> Features:
     step_high=steps.max(0),
     pace_lag=lag,
     pace=pace,
+    pace_joints=None if joints is None else float(np.concatenate(moved).mean()),
   )
 
 

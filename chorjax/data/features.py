@@ -8,6 +8,7 @@ decode is the exact inverse, so a sample comes back in the data's own units and 
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
@@ -17,6 +18,30 @@ from chorjax.data.motion import Skeleton, chain_length, mean_bone_lengths
 from chorjax.errors import UserError
 
 REPRESENTATIONS = ("absolute", "bone_relative", "root_relative", "canonical", "directions")
+
+
+class JointMotion(NamedTuple):
+  """What :func:`joint_pace` needs of canonical features: their normalization ``mean``, ``std`` ``[D]`` and
+  the channels of every joint but the root, ``joints`` ``[J - 1, 3]``."""
+
+  mean: np.ndarray
+  std: np.ndarray
+  joints: np.ndarray
+
+
+def joint_pace(now_xD, then_xD, turn_x, m: JointMotion):
+  """How far the joints move relative to the root from canonical frame ``then`` to ``now`` (normalized),
+  the dancer having turned by ``turn`` radians between them: the mean over all joints (the root's is 0) of
+  ``|R(turn) q(now) - q(then)|``, ``q`` a joint relative to the root in the facing frame (scaled, y-up).
+  What ``metrics.displacement`` measures on positions, turning included: a dancer who spins moves."""
+
+  def relative(z):  # [..., J - 1, 3]
+    pos = z[..., m.joints] * m.std[m.joints] + m.mean[m.joints]  # above the root's floor point
+    height = z[..., 3] * m.std[3] + m.mean[3]  # the root's (canonical channel 3)
+    return pos - height[..., None, None] * jnp.array([0.0, 1.0, 0.0])
+
+  moved = transforms.rotate_y(relative(now_xD), jnp.asarray(turn_x)[..., None]) - relative(then_xD)
+  return jnp.linalg.norm(moved, axis=-1).sum(-1) / (m.joints.shape[0] + 1)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -37,6 +62,8 @@ class Features:
     pace_lag, pace: how far the training frames' pose moves in ``pace_lag`` frames (half a second): the
       mean absolute change of the normalized ``pose_channels`` over that lag; generation can hold its
       own pace to it (``sample.pace``).
+    pace_joints: canonical runs: the same as the judge measures it (:func:`joint_pace`: joints relative
+      to the root, turning included, scaled units); where it is known the governor holds this instead.
     step_low, step_high: ``[D]`` the smallest and largest change of each normalized feature from one frame
       to the next over the training split; generation can hold each frame's change to them
       (``sample.clamp_steps``).
@@ -63,6 +90,7 @@ class Features:
   high: np.ndarray | None = None
   pace_lag: int | None = None
   pace: float | None = None
+  pace_joints: float | None = None
   floor: float | None = None
   step_low: np.ndarray | None = None
   step_high: np.ndarray | None = None
@@ -90,6 +118,14 @@ class Features:
     if self.representation == "directions":
       return np.arange(3, 3 + 3 * j)
     return np.arange(3 * j)
+
+  @property
+  def joint_motion(self) -> JointMotion | None:
+    """What :func:`joint_pace` needs of these features (canonical ones; else None)."""
+    if self.representation != "canonical":
+      return None
+    joints = self.pose_channels.reshape(-1, 3)
+    return JointMotion(np.asarray(self.mean, np.float32), np.asarray(self.std, np.float32), joints)
 
   def canonical(self, pos_TxJx3):
     """Data space -> y-up, scaled positions (before the representation)."""
@@ -189,7 +225,8 @@ class Features:
 
   def _optional(self) -> dict:
     ranges = {k: getattr(self, k) for k in (*self.RANGES, *self.STEPS)}
-    return {"lengths": self.lengths, **ranges, "pace_lag": self.pace_lag, "pace": self.pace, "floor": self.floor}
+    paces = {"pace_lag": self.pace_lag, "pace": self.pace, "pace_joints": self.pace_joints}
+    return {"lengths": self.lengths, **ranges, **paces, "floor": self.floor}
 
   RANGES = ("low", "high")
   STEPS = ("step_low", "step_high")
@@ -206,6 +243,7 @@ class Features:
       **{k: None if d.get(k) is None else np.asarray(d[k], np.float32) for k in ("lengths", *cls.RANGES, *cls.STEPS)},
       pace_lag=None if d.get("pace_lag") is None else int(d["pace_lag"]),
       pace=None if d.get("pace") is None else float(d["pace"]),
+      pace_joints=None if d.get("pace_joints") is None else float(d["pace_joints"]),
       floor=None if d.get("floor") is None else float(d["floor"]),
     )
 
