@@ -22,7 +22,9 @@ The noise order (``sample.noise_order``: how many AR(1) filters the drawn noise 
 not searched: the smoothing is chosen for the run's order and recorded with it. The quickstart's 4 filters
 leave a third of two filters' frame-to-frame tremble at the same speed; with two, the smoothing that keeps
 the dance's speed left a model trembling at 1.2-1.3x its dancer's jitter over 10,000 frames, and smoothing
-harder made its poses wander off (experiments/dancers, 2026-11-27).
+harder made its poses wander off (experiments/dancers, 2026-11-27). The pace governor's gain (``sample.pace``,
+``--pace``) is recorded the same way: the settings that move like the takes under one gain are not those
+under another.
 
 The reference is the run's TRAINING takes (never the takes it is judged on: tuning on those would be
 tuning on the test); ``--data`` names others. The result goes to ``WORKDIR/calibration.json`` and is the
@@ -62,14 +64,17 @@ RATES = ("movement", "jitter", "speed", "root_travel")
 MEASURES = (*RATES, "poses")
 
 
-DRAWN = ("noise_smoothing", "noise_order", "sigma_temperature", "persistence", "crossfade")  # an MSE head ignores
+DRAWN = ("noise_smoothing", "noise_order", "pace", "sigma_temperature", "persistence", "crossfade")  # MSE ignores
+RECORDED = ("noise_order", "pace")  # not searched: what the chosen settings were chosen with
 
 
-def default_grid(config, noise_order: int | None = None) -> dict:
+def default_grid(config, noise_order: int | None = None, pace: float | None = None) -> dict:
   """``GRID`` less what ``config``'s run cannot use: ``foot_lock`` needs canonical features, and an MSE head
   draws no noise (its frame is its prediction), so only ``foot_lock`` can change its dance. The noise passes
-  ``noise_order`` filters (default: the run's ``sample.noise_order``), recorded with the smoothing chosen."""
-  grid = {"noise_order": (noise_order or config.sample.noise_order,), **GRID}
+  ``noise_order`` filters and the governor holds the pace with gain ``pace`` (defaults: the run's
+  ``sample.noise_order`` and ``sample.pace``), both recorded with the settings chosen."""
+  pace = config.sample.pace if pace is None else pace
+  grid = {"noise_order": (noise_order or config.sample.noise_order,), "pace": (pace,), **GRID}
   if config.data.representation != "canonical":
     del grid["foot_lock"]
   if config.model.head == "mse":
@@ -174,6 +179,7 @@ def calibrate(
   log=print,
   known: Sequence | None = None,
   noise_order: int | None = None,
+  pace: float | None = None,
 ) -> dict:
   """Chooses and records the run's sampling settings (see the module docstring).
 
@@ -184,7 +190,7 @@ def calibrate(
     grid: the values tried per control (default ``GRID``; ``foot_lock`` only where the run can lock feet).
     log: where progress lines go.
     known: ``(settings, measures)`` already measured with these draws (see :func:`search`).
-    noise_order: the AR(1) filters the drawn noise passes (default: the run's ``sample.noise_order``).
+    noise_order, pace: the drawn noise's AR(1) filters, the governor's gain (default: the run's ``sample.*``).
 
   Returns:
     What ``calibration.json`` holds: the settings, the reference, and every setting's measurements.
@@ -203,7 +209,12 @@ def calibrate(
   ids = [run.id_map[m.name] for m in train] or [0]
   motion = np.array([ids[k % len(ids)] for k in range(num)])
   key = jax.random.key(seed)
-  ranged = run.ranged(run.sampling())  # the grid's controls leave the range, pace and scale ceiling alone
+  if grid is None:
+    grid = default_grid(run.config, noise_order, pace)
+    if not grid:
+      raise UserError(f"{workdir}: an MSE head on {run.config.data.representation} features draws nothing to calibrate")
+  fixed = {k: v[0] for k, v in grid.items() if k in RECORDED and len(v) == 1}
+  ranged = run.ranged(run.sampling(**fixed))  # the searched controls leave the range, pace and scale ceiling alone
 
   y_up = lambda pos: np.asarray(to_y_up(pos, f.up_axis))  # what the measures (the pose questions) expect
 
@@ -211,10 +222,6 @@ def calibrate(
     sampling = run.sampling(**settings)
     return y_up(dance(ranged.graphdef, ranged.params, ranged.features, motion, key, frames, sampling))
 
-  if grid is None:
-    grid = default_grid(run.config, noise_order)
-    if not grid:
-      raise UserError(f"{workdir}: an MSE head on {run.config.data.representation} features draws nothing to calibrate")
   log(f"calibrating {workdir} on {'the takes given' if data else 'its training takes'} ({len(reference)} takes)")
   positions = [y_up(m.positions) for m in reference]
   best, table = search(draw, positions, f.skeleton, run.fps, grid, log, known=known)

@@ -529,7 +529,10 @@ def _calibrate(args) -> int:
   _refuse_existing([calibration_path(args.workdir)], args.force)
   if args.noise_order is not None:
     check_sample_control("noise_order", args.noise_order, "--noise-order")
-  calibrate(args.workdir, args.data, frames=args.frames, num=args.num, seed=args.seed, noise_order=args.noise_order)
+  if args.pace is not None:
+    check_sample_control("pace", args.pace, "--pace")
+  kw = {"noise_order": args.noise_order, "pace": args.pace}
+  calibrate(args.workdir, args.data, frames=args.frames, num=args.num, seed=args.seed, **kw)
   return 0
 
 
@@ -1001,8 +1004,8 @@ def _add_calibrate_command(sub) -> None:
   cal = sub.add_parser(
     "calibrate",
     help="choose the run's sampling settings on its dancer's takes; the run's default after",
-    description="Samples the run over a grid of noise_smoothing (for the run's sample.noise_order, or "
-    "--noise-order, recorded with it), sigma_temperature, persistence, crossfade and "
+    description="Samples the run over a grid of noise_smoothing (for the run's sample.noise_order and "
+    "sample.pace, or --noise-order and --pace, recorded with it), sigma_temperature, persistence, crossfade and "
     "(canonical runs) foot_lock, 180 settings (an MSE head draws no noise: foot_lock alone), and past the "
     "grid's ends where its best noise smoothing or sigma temperature is one, while that helps; it keeps the one "
     "whose dance moves like the reference takes "
@@ -1024,6 +1027,12 @@ def _add_calibrate_command(sub) -> None:
     metavar="N",
     help="AR(1) filters the drawn noise passes, 1-8, recorded with the chosen settings (default: the run's "
     "sample.noise_order)",
+  )
+  cal.add_argument(
+    "--pace",
+    type=float,
+    metavar="GAIN",
+    help="the pace governor's gain (0 = off), recorded with the chosen settings (default: the run's sample.pace)",
   )
   cal.add_argument("--force", action="store_true", help="replace an existing calibration.json")
   cal.set_defaults(func=_calibrate)
