@@ -468,6 +468,17 @@ def test_pace_governor_drives_the_dancer_towards_the_training_pace(loaded, run_d
   assert json.loads(str(np.load(out)["meta"]))["settings"]["pace"] == 1.0
 
 
+def test_off_pace_the_governor_changes_the_scale_and_lets_go_of_the_component():
+  from chorjax.sample import _governed
+
+  controls = {"sigma_temperature": 1.2, "persistence": 6.0, "crossfade": 0.8}
+  own = jnp.array([1.0, 0.5, 2.0, 0.01])  # on pace, calm, racing, nearly still (training pace 1)
+  g = _governed(controls, own, 1.0, 2.0)
+  np.testing.assert_allclose(g["sigma_temperature"][:, 0], [1.2, 2.4, 0.6, 2.4])  # x (1 / own)^2 within 0.5-2
+  np.testing.assert_allclose(g["persistence"][:, 0], [6.0, 1.5, 1.5, 1.5])  # either way off pace: let go
+  assert g["crossfade"] == 0.8
+
+
 def test_scale_cap_holds_draws_to_the_scales_the_model_predicts_on_its_data(loaded, run_dir, tmp_path, capsys):
   from chorjax.errors import UserError
   from chorjax.models.heads import MDNHead
