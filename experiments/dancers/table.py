@@ -23,7 +23,13 @@ scheduled sampling, session 24), runs/dancers_fbdrop/fbdrop-* (feedback_dropout.
 runs/dancers_split/split-* (sweep.toml since session 25: the quickstart judged on held-out takes that its
 dancer's own training takes pass the bars against; a real row precedes the first recipe judged on each split)
 and runs/dancers_order4/* (those runs, and the paced cmu05 / cmu131 runs, calibrated again with the noise
-through four filters, `chorjax calibrate RUN --noise-order 4`, session 26: experiments/dancers/README.md).
+through four filters, `chorjax calibrate RUN --noise-order 4`, session 26: experiments/dancers/README.md);
+session 27 (2026-11-27): runs/dancers_h100_p05/* (sweep.toml trained again on a lent H100, calibrated and judged
+here as the quickstart of session 26 did: pace 0.5, the governor measuring the pose features),
+runs/dancers_h100/* (the same checkpoints calibrated and judged with the governor holding the judge's own
+measure at pace 2: `chorjax calibrate RUN --pace 2`), runs/dancers_hold/* (copies of them calibrated and judged
+once the governor also let go of the component off pace: the quickstart since) and runs/dancers_fbh100/*
+(martial trained with scheduled sampling, dropout 0, on the H100; calibrated as runs/dancers_h100).
 Each evaluated run's small files (config, calibration, metrics log, eval metrics) are copied to results/, and
 the table falls back to them where a variant's runs are not on this machine.
 """
@@ -59,6 +65,10 @@ VARIANTS = {
   "the same, scheduled sampling with dropout 0.2": Path("runs/dancers_fbdrop"),
   "the quickstart, judged on the held-out takes split.py chooses": Path("runs/dancers_split"),
   "the same, its noise through four filters (sample.noise_order = 4)": Path("runs/dancers_order4"),
+  "the same trained again on an H100 (pace 0.5, the governor on pose features)": Path("runs/dancers_h100_p05"),
+  "those runs, the governor holding the judge's measure at pace 2": Path("runs/dancers_h100"),
+  "the same, off pace the governor letting go of the component": Path("runs/dancers_hold"),
+  "the same, trained with scheduled sampling, dropout 0 (H100)": Path("runs/dancers_fbh100"),
 }
 SLUG = dict(
   zip(
@@ -81,6 +91,10 @@ SLUG = dict(
       "fbdrop",
       "split",
       "order4",
+      "h100_p05",
+      "h100",
+      "hold",
+      "fbh100",
     ),
   )
 )
@@ -95,6 +109,9 @@ STRIPS = (
   "the same, trained with scheduled sampling",
   "the same, scheduled sampling with dropout 0.2",
   "the same, its noise through four filters (sample.noise_order = 4)",
+  "those runs, the governor holding the judge's measure at pace 2",
+  "the same, off pace the governor letting go of the component",
+  "the same, trained with scheduled sampling, dropout 0 (H100)",
 )
 DATASETS = ("cmu94", "salsa", "martial", "cmu05", "cmu131")
 # (label, value of one evaluation, how a row's worst seed is picked: the one farthest from the bar)
@@ -217,7 +234,9 @@ def readme_table() -> list[str]:
     # the quickstart as shipped (the LSTM cell, calibrated past the grid's ends, the ground shift paced), else
     # its latest earlier form
     shipped = [
-      ("the same, its noise through four filters (sample.noise_order = 4)", ""),
+      ("the same, off pace the governor letting go of the component", " (trained on an H100)"),
+      ("those runs, the governor holding the judge's measure at pace 2", " (the governor on the scale alone)"),
+      ("the same, its noise through four filters (sample.noise_order = 4)", " (pace 0.5 on pose features)"),
       ("the quickstart, judged on the held-out takes split.py chooses", " (noise through two filters)"),
       ("the same, the ground shift paced", ""),
       ("the same with model.cell = lstm", " (before the ground shift was paced)"),
