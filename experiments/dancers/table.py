@@ -68,7 +68,7 @@ VARIANTS = {
   "the same trained again on an H100 (pace 0.5, the governor on pose features)": Path("runs/dancers_h100_p05"),
   "those runs, the governor holding the judge's measure at pace 2": Path("runs/dancers_h100"),
   "the same, off pace the governor letting go of the component": Path("runs/dancers_hold"),
-  "the same, trained with scheduled sampling, dropout 0 (H100)": Path("runs/dancers_fbh100"),
+  "the H100 runs, martial trained with scheduled sampling, dropout 0 (pace 2, scale alone)": Path("runs/dancers_fbh100"),
 }
 SLUG = dict(
   zip(
@@ -111,7 +111,7 @@ STRIPS = (
   "the same, its noise through four filters (sample.noise_order = 4)",
   "those runs, the governor holding the judge's measure at pace 2",
   "the same, off pace the governor letting go of the component",
-  "the same, trained with scheduled sampling, dropout 0 (H100)",
+  "the H100 runs, martial trained with scheduled sampling, dropout 0 (pace 2, scale alone)",
 )
 DATASETS = ("cmu94", "salsa", "martial", "cmu05", "cmu131")
 # (label, value of one evaluation, how a row's worst seed is picked: the one farthest from the bar)
