@@ -678,8 +678,8 @@ def _add_sampling_args(p) -> None:
     "--pace",
     type=float,
     metavar="GAIN",
-    help="hold the dancer to the training pace: scale temperature x (training / own pace)^GAIN, >= 0 "
-    "(default: the run's sample.pace)",
+    help="hold the dancer to the training pace: scale temperature x m = (training / own pace)^GAIN, "
+    "persistence x min(m, 1/m)^2, >= 0 (default: the run's calibration, else sample.pace)",
   )
   p.add_argument(
     "--scale-cap",

@@ -398,9 +398,11 @@ class SampleConfig:
   )
   pace: float = _field(
     0.0,
-    "MDN pace governor: the scale temperature is multiplied by (training pace / the dancer's own pace) to "
-    "this power (within 0.5-2x), the pace being how far the pose features move in half a second, averaged over "
-    "about 5 s: a dancer who slows down gets more energy, one who trembles or races gets less (0 = off)",
+    "MDN pace governor: the scale temperature is multiplied by m = (training pace / the dancer's own pace) to "
+    "this power (within 0.5-2x) and the persistence by min(m, 1/m)^2, the pace being how far the joints move "
+    "relative to the root in half a second, turning included, as the benchmark measures it (runs without "
+    "canonical features: the pose features), averaged over about 5 s: a dancer who slows down gets more "
+    "energy, one who trembles or races gets less, and either lets go of its mixture component sooner (0 = off)",
     minimum=0.0,
     resumable=True,
   )
