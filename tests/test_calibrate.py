@@ -204,7 +204,7 @@ def test_the_governor_holds_what_the_judge_measures_turning_included(run_dir):
   relative to the root, turning included: ``Features.pace_joints``), and the governor holds the dancer to it
   by that measure: told half or twice the free dancer's pace, it holds back or pushes on."""
   from chorjax.data.dataset import load_dataset
-  from chorjax.data.features import Features, joint_pace
+  from chorjax.data.features import Features, take_joint_pace
   from chorjax.metrics import displacement
   from chorjax.sample import generate
 
@@ -212,10 +212,7 @@ def test_the_governor_holds_what_the_judge_measures_turning_included(run_dir):
   f, m, lag = run.features, run.features.joint_motion, run.features.pace_lag
   assert m is not None and Features.from_dict(f.to_dict()).pace_joints == f.pace_joints  # saved with the run
 
-  def pace_of(z_TxD):
-    turned = np.cumsum(z_TxD[:, 0] * m.std[0] + m.mean[0])
-    return np.asarray(joint_pace(z_TxD[lag:], z_TxD[:-lag], turned[lag:] - turned[:-lag], m))
-
+  pace_of = lambda z_TxD: take_joint_pace(z_TxD, lag, m)
   train = [x for _, x in load_dataset(run.config.data).train]
   judged = [displacement(np.asarray(f.canonical(f.decode(x))), f.skeleton.root, lag) for x in train[:3]]
   np.testing.assert_allclose([pace_of(x).mean() for x in train[:3]], judged, rtol=1e-4)  # the judge's own measure

@@ -44,6 +44,13 @@ def joint_pace(now_xD, then_xD, turn_x, m: JointMotion):
   return jnp.linalg.norm(moved, axis=-1).sum(-1) / (m.joints.shape[0] + 1)
 
 
+def take_joint_pace(z_TxD, lag: int, m: JointMotion) -> np.ndarray:
+  """:func:`joint_pace` of a whole take (normalized canonical frames ``[T, D]``) at every frame ``lag`` frames
+  after another, ``[T - lag]``: the turn between them summed from the heading changes (channel 0)."""
+  turned = np.cumsum(z_TxD[:, 0] * m.std[0] + m.mean[0])
+  return np.asarray(joint_pace(z_TxD[lag:], z_TxD[:-lag], turned[lag:] - turned[:-lag], m))
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class Features:
   """Everything needed to map positions to model features and back.
