@@ -12,9 +12,10 @@ glide) and, for canonical runs, ``foot_lock``; where the best noise smoothing or
 end of the grid, it goes on past that end (``BEYOND``) while the objective falls. It keeps the setting
 whose samples move like the reference takes on four measures, each / the reference's: movement over half
 a second (which trembling cannot fake), jitter (the second difference, which over-smoothing pulls under
-1), mean joint speed and root travel (how far the dancer goes), and whose poses go together as the
-reference's do: ``poses``, the geometric FID (``chorjax eval``'s FID_g, windows of 2 s) of the sample
-against the reference over the reference's own (one half of its takes against the other). The objective,
+1), mean joint speed and root travel (how far the dancer goes), each pooled over the reference's frames as
+``chorjax eval`` pools them (a long take weighs more), and whose poses go together as the reference's do:
+``poses``, the geometric FID (``chorjax eval``'s FID_g, windows of 2 s) of the sample against the
+reference over the reference's own (one half of its takes against the other). The objective,
 smallest wins: ``|log movement| + |log jitter| + |log speed| + |log root travel| + max(log poses, 0)``
 (poses nearer than another stretch of the same dance is no fault).
 
@@ -98,18 +99,10 @@ def reference_rates(reference, skeleton, fps: float) -> dict:
     "lag": lag,
     "movement": disp,
     "jitter": rough,
-    "speed": max(_speed(reference), 1e-12),
-    "root_travel": max(_travel(reference, root), 1e-12),
+    "speed": max(metrics.pooled_speed(reference), 1e-12),
+    "root_travel": max(metrics.pooled_root_travel(reference, root), 1e-12),
     "poses": scoring.PoseDistribution(reference, skeleton),
   }
-
-
-def _speed(takes) -> float:
-  return float(np.mean([metrics.joint_speed(t).mean() for t in takes]))
-
-
-def _travel(takes, root: int) -> float:
-  return float(np.mean([metrics.root_travel(t, root).mean() for t in takes]))
 
 
 def measure(samples, rates: dict, root: int) -> dict:
@@ -117,8 +110,8 @@ def measure(samples, rates: dict, root: int) -> dict:
   return {
     "movement": float(np.mean([metrics.displacement(s, root, rates["lag"]) for s in samples]) / rates["movement"]),
     "jitter": float(np.mean([metrics.roughness(s) for s in samples]) / rates["jitter"]),
-    "speed": _speed(samples) / rates["speed"],
-    "root_travel": _travel(samples, root) / rates["root_travel"],
+    "speed": metrics.pooled_speed(samples) / rates["speed"],
+    "root_travel": metrics.pooled_root_travel(samples, root) / rates["root_travel"],
     "poses": rates["poses"].ratio(list(samples)),
   }
 

@@ -45,6 +45,18 @@ def root_travel(pos_TxJx3, root: int) -> np.ndarray:
   return np.linalg.norm(np.diff(pos_TxJx3[:, root], axis=0), axis=-1)
 
 
+def pooled_speed(takes) -> float:
+  """Mean joint speed per frame of ``takes``, every frame counted once (a long take weighs more): the
+  ``speed`` divisor of ``chorjax eval`` and what calibration matches."""
+  return float(np.mean(np.concatenate([joint_speed(t) for t in takes])))
+
+
+def pooled_root_travel(takes, root: int) -> float:
+  """The root's mean path length per frame over ``takes``, every frame counted once (``root_travel``'s
+  divisor, as :func:`pooled_speed`)."""
+  return float(np.mean(np.concatenate([root_travel(t, root) for t in takes])))
+
+
 def speed_ratio(pos_TxJx3, data_speed: float) -> float:
   """Mean frame-to-frame joint speed / the data's. Not a measure of freezing: trembling in place is
   fast; see :func:`displacement`."""

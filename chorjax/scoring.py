@@ -254,7 +254,7 @@ def _travel_and_train_reference(motions, reference, skeleton, train, unseen, fea
   """``root_travel`` (the root's path per frame / the reference's) and, when the reference is held-out takes
   and the training takes are given, ``fid_k_train`` / ``fid_g_train``: the training takes scored as a sample."""
   travel = lambda p: metrics.root_travel(p, skeleton.root)
-  ref_travel = float(np.mean(np.concatenate([travel(t) for t in reference])))
+  ref_travel = metrics.pooled_root_travel(reference, skeleton.root)
   out: dict = {"root_travel": spread([float(travel(m).mean() / max(ref_travel, 1e-12)) for m in motions])}
   for name, feats, floor in (("fid_k_train", features[0], 1e-10), ("fid_g_train", features[1], GEO_STD_FLOOR)):
     out[name] = (
@@ -311,7 +311,7 @@ def score(
   geo = _pose_features(skeleton, size)
   fid_k, fid_k_real, div_k, div_k_real = _distribution(motions, reference, kin, window, splits, seed, 1e-10)
   fid_g, fid_g_real, div_g, div_g_real = _distribution(motions, reference, geo, window, splits, seed, GEO_STD_FLOOR)
-  speed = float(np.mean(np.concatenate([metrics.joint_speed(t) for t in reference])))
+  speed = metrics.pooled_speed(reference)
   speeds = spread([metrics.speed_ratio(m, speed) for m in motions])
   moving, steps = (
     _movement_and_jitter(motions, reference, skeleton, fps, segment, train if unseen else None),

@@ -225,3 +225,25 @@ def test_the_governor_holds_what_the_judge_measures_turning_included(run_dir):
   free = settled(gen())
   held = lambda ref: settled(gen(pace=2.0, pace_lag=lag, pace_target=(ref, m)))
   assert held(0.5 * free) < 0.9 * free < 0.9 * held(2 * free)  # held back, left alone, pushed on
+
+
+def test_calibration_measures_a_dance_as_the_judge_does():
+  """The four rates calibration matches are ``chorjax eval``'s, reference pooled over its frames: on cmu94's
+  training takes (unequal lengths) a stretch of a held-out take gets the same movement, jitter, speed and root
+  travel from both. (Calibration once averaged speed and travel per take: martial's short, fast training takes
+  then weighed as much as its long ones, and a dancer calibrated to speed 1.15 was judged 1.25.)"""
+  from chorjax.data.dataset import load_dataset
+  from chorjax.scoring import score
+
+  ds = load_dataset(tiny_config().data)
+  f = ds.features
+  y_up = lambda m: np.asarray(to_y_up(m.positions, f.up_axis), np.float64)
+  train = [y_up(m) for m in ds.motions if m.name in ds.train_names]
+  assert len({len(t) for t in train}) > 1  # unequal lengths: pooled and per-take means differ
+  dancer = y_up(next(m for m in ds.motions if m.name in ds.val_names))[:600]
+  judged = score([dancer], train, f.skeleton, ds.fps, segment=600)
+  measured = calibrate.measure(dancer[None], calibrate.reference_rates(train, f.skeleton, ds.fps), f.skeleton.root)
+  judge = {"movement": "movement_first", "jitter": "jitter", "speed": "speed", "root_travel": "root_travel"}
+  assert set(judge) == set(calibrate.RATES)
+  for key, name in judge.items():  # one segment of 600 frames: the judge's first is the whole dance
+    assert measured[key] == pytest.approx(judged[name], rel=1e-6), key
