@@ -1009,7 +1009,8 @@ def _add_calibrate_command(sub) -> None:
     "(canonical runs) foot_lock, 180 settings (an MSE head draws no noise: foot_lock alone), and past the "
     "grid's ends where its best noise smoothing or sigma temperature is one, while that helps; it keeps the one "
     "whose dance moves like the reference takes "
-    "(movement over 0.5 s, jitter, joint speed and root travel, together nearest the takes' own) and whose "
+    "(movement over 0.5 s, jitter, joint speed and root travel, together nearest the takes' own, the "
+    "farthest of them counted twice) and whose "
     "poses go together as theirs do (the geometric FID over the takes' own, counted above 1). The "
     "reference is the run's training takes: never the takes it is judged on. Writes WORKDIR/calibration.json, "
     "which sample, eval and live then use unless a flag says otherwise.",
