@@ -68,6 +68,33 @@ def test_calibration_recovers_the_settings_that_drew_the_reference(run_dir, true
   assert min(o for *_, o in table) < 0.2  # four measures within ~5% of the reference's
 
 
+def test_the_walk_past_the_grid_starts_from_its_three_best_settings(monkeypatch):
+  """A constructed landscape (objective by settings): the grid's best has its scale temperature inside the
+  grid; its third best sits at the low end, and past it the objective falls below the grid's best. Walking from
+  the best alone stops there; walking from the three best finds the lower setting, each setting drawn once."""
+  grid = {"noise_smoothing": (0.75, 0.85), "sigma_temperature": (0.9, 1.0, 1.2)}
+  values = {(0.85, 1.0): 0.6, (0.85, 0.9): 0.65, (0.75, 0.9): 0.7, (0.75, 0.8): 0.6, (0.75, 0.7): 0.55}
+  values |= {(0.75, 0.6): 0.5, (0.75, 0.5): 0.52}
+  drawn = []
+
+  def draw(settings):
+    drawn.append(settings)
+    return values.get((settings["noise_smoothing"], settings["sigma_temperature"]), 1.0)
+
+  monkeypatch.setattr(calibrate, "reference_rates", lambda *a: {})
+  monkeypatch.setattr(
+    calibrate, "measure", lambda v, rates, root: {**dict.fromkeys(calibrate.RATES, 1.0), "movement": np.exp(v / 2)}
+  )
+  assert calibrate.objective(calibrate.measure(0.6, {}, 0)) == pytest.approx(0.6)
+  beyond = {"sigma_temperature": calibrate.BEYOND["sigma_temperature"]}
+  search_ = lambda: search(draw, [], type("S", (), {"root": 0})(), 30.0, grid, beyond=beyond)
+  best, table = search_()
+  assert best == {"noise_smoothing": 0.75, "sigma_temperature": 0.6}
+  assert len(drawn) == len(table) == len({json.dumps(s, sort_keys=True) for s in drawn})
+  monkeypatch.setattr(calibrate, "WALKS", 1)
+  assert search_()[0] == {"noise_smoothing": 0.85, "sigma_temperature": 1.0}  # the best's walk alone
+
+
 @pytest.mark.parametrize("true", [0.7, 1.7])
 def test_calibration_goes_past_the_end_of_the_grid_while_the_dance_gets_nearer(run_dir, true):
   """The reference drawn with a sigma temperature outside the grid (0.9-1.2): the best grid value is an end,
@@ -79,7 +106,8 @@ def test_calibration_goes_past_the_end_of_the_grid_while_the_dance_gets_nearer(r
   best, table = search(_drawer(run, 0), reference, run.features.skeleton, run.fps, grid)
   assert best == {"noise_smoothing": 0.85, "sigma_temperature": true}
   walked = [s["sigma_temperature"] for s, *_ in table[3:]]
-  assert walked == ([0.8, 0.7, 0.6] if true < 1 else [1.4, 1.7, 2.0])
+  assert walked[:3] == ([0.8, 0.7, 0.6] if true < 1 else [1.4, 1.7, 2.0])  # from the best
+  assert walked[3:] == ([1.4] if true < 1 else [0.8])  # the grid's other end, one step, further off
   at_end, _ = search(_drawer(run, 0), reference, run.features.skeleton, run.fps, grid, beyond={})
   assert at_end["sigma_temperature"] == (0.9 if true < 1 else 1.2)  # without the walk: the grid's end
 
