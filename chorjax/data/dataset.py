@@ -312,9 +312,10 @@ def dataset_notes(ds: Dataset) -> list[str]:
   if minutes < SMALL_DATA_MINUTES:
     out.append(
       f"note: {minutes:.1f} minutes of training motion: on the dancers benchmark, sets under "
-      f"{SMALL_DATA_MINUTES:g} minutes (martial arts 1.2, CMU 5 and 131 0.5) keep dancing but with calm spells "
-      "(their calmest 1,000 frames at 0.3-0.7 of the held-out takes' movement) and, under a minute, poses less "
-      "like the held-out takes' (FID 1.7-4x); more takes help most (README: How well the quickstart dances)"
+      f"{SMALL_DATA_MINUTES:g} minutes keep dancing, martial arts (1.3) at its held-out takes' movement (every "
+      "1,000 frames 0.90-1.22) a little faster than them (speed 1.14-1.20), CMU 5 and 131 (0.5) calmer (their "
+      "calmest 1,000 frames at 0.65-0.76) and in poses less like the held-out takes' (FID_g 1.0-2.3x); more "
+      "takes help most (README: How well the quickstart dances)"
     )
   if not ds.val_names:
     why = "a single take" if len(ds.id_map) == 1 else "data.val_takes = []"
