@@ -32,8 +32,8 @@ once the governor also let go of the component off pace: the quickstart since) a
 (martial trained with scheduled sampling, dropout 0, on the H100; calibrated as runs/dancers_h100);
 session 28: runs/dancers_pool/* (copies of runs/dancers_hold calibrated again once calibration pooled speed and
 root travel over the reference's frames as eval does) and runs/dancers_obj/* (calibrated again once the
-objective counted the farthest rate twice: the quickstart since) and runs/dancers_cpu/* (cpu_martial.toml:
-martial trained here with the quickstart as shipped, training seeds 3-5).
+objective counted the farthest rate twice: the quickstart since) and runs/dancers_cpu/* (cpu_martial.toml and
+cpu_others.toml: martial, cmu94 and salsa trained here with the quickstart as shipped, training seeds 3-5).
 Each evaluated run's small files (config, calibration, metrics log, eval metrics) are copied to results/, and
 the table falls back to them where a variant's runs are not on this machine.
 """
@@ -77,7 +77,7 @@ VARIANTS = {
   ),
   "the H100 runs as shipped, calibration pooling speed and root travel as eval does": Path("runs/dancers_pool"),
   "the same, the farthest rate counted twice in the objective": Path("runs/dancers_obj"),
-  "the quickstart as shipped, trained on CPU, training seeds 3-5 (cpu_martial.toml)": Path("runs/dancers_cpu"),
+  "the quickstart as shipped, trained on CPU, training seeds 3-5 (cpu_*.toml)": Path("runs/dancers_cpu"),
 }
 SLUG = dict(
   zip(
