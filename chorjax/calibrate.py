@@ -143,24 +143,23 @@ def search(
   grid = grid or GRID
   beyond = BEYOND if beyond is None else beyond
   rates = reference_rates(reference, skeleton, fps)
-  table = []
   before = {json.dumps(s, sort_keys=True): m for s, m in known or ()}
-  drawn = {}  # each setting drawn once, however many walks reach it
+  drawn = {}  # the table, in the order drawn: each setting once, however many walks reach it
 
   def row(settings):
     key = json.dumps(settings, sort_keys=True)
-    if key in drawn:
-      return drawn[key]
-    measured = before.get(key) or measure(draw(settings), rates, skeleton.root)
-    table.append(drawn.setdefault(key, (settings, measured, objective(measured))))
-    if log:
-      log(f"  {settings}: " + ", ".join(f"{k.replace('_', ' ')} {v:.3f}" for k, v in measured.items()))
-    return table[-1]
+    if key not in drawn:
+      measured = before.get(key) or measure(draw(settings), rates, skeleton.root)
+      drawn[key] = (settings, measured, objective(measured))
+      if log:
+        log(f"  {settings}: " + ", ".join(f"{k.replace('_', ' ')} {v:.3f}" for k, v in measured.items()))
+    return drawn[key]
 
   for values in itertools.product(*grid.values()):
     row(dict(zip(grid, values)))
-  for start in sorted(table, key=lambda r: r[2])[:WALKS]:
+  for start in sorted(drawn.values(), key=lambda r: r[2])[:WALKS]:
     _walk(row, start, grid, beyond)
+  table = list(drawn.values())
   return min(table, key=lambda r: r[2])[0], table
 
 

@@ -2,6 +2,7 @@
 
 import itertools
 import json
+from types import SimpleNamespace
 
 import jax
 import numpy as np
@@ -87,7 +88,7 @@ def test_the_walk_past_the_grid_starts_from_its_three_best_settings(monkeypatch)
   )
   assert calibrate.objective(calibrate.measure(0.6, {}, 0)) == pytest.approx(0.6)
   beyond = {"sigma_temperature": calibrate.BEYOND["sigma_temperature"]}
-  search_ = lambda: search(draw, [], type("S", (), {"root": 0})(), 30.0, grid, beyond=beyond)
+  search_ = lambda: search(draw, [], SimpleNamespace(root=0), 30.0, grid, beyond=beyond)
   best, table = search_()
   assert best == {"noise_smoothing": 0.75, "sigma_temperature": 0.6}
   assert len(drawn) == len(table) == len({json.dumps(s, sort_keys=True) for s in drawn})
