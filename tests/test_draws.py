@@ -1,0 +1,125 @@
+"""Draws do not change: tiny runs of every family, trained with fixed seeds, and the checkpoint in
+tests/fixtures/legacy_run, sampled by the commands a user runs (several controls, primes, blends, BVH);
+every written file's SHA-256 must equal the one recorded in tests/fixtures/draws.json.
+
+The digests were recorded before the package was restructured, so a refactor that changes one bit of a
+trained parameter or of a drawn frame fails here. Record them again only for an intended change of what is
+drawn (or on a CPU whose floating-point results differ in the last bits):
+``CHORJAX_RECORD_DRAWS=1 python -m pytest tests/test_draws.py -n 0``.
+"""
+
+import hashlib
+import json
+import os
+import shutil
+from pathlib import Path
+
+import pytest
+from helpers import QUICKSTART_SAMPLING, tiny_config
+
+from chorjax import cli
+from chorjax.data.dataset import bundled_path
+from chorjax.training import train_and_evaluate
+
+ROOT = Path(__file__).resolve().parents[1]
+DIGESTS = ROOT / "tests" / "fixtures" / "draws.json"
+RECORD = os.environ.get("CHORJAX_RECORD_DRAWS") == "1"
+TAKE = bundled_path("cmu94") / "94_10_skeleton_3d.csv"
+
+QUIET = ["train.num_steps=3", "log.tensorboard=false", "sample.frames=16"]
+FAMILIES = {
+  "quickstart": [*QUICKSTART_SAMPLING, "model.mdn_basis=pca", "data.augment=['mirror']", "sample.scale_cap=0.97"],
+  "mse": ["model.head=mse", "data.representation=canonical"],
+  "gan": [
+    "model.family=gan",
+    "data.representation=directions",
+    "gan.latent_size=8",
+    "gan.generator_dense=[16]",
+    "gan.generator_size=16",
+    "gan.critic_size=16",
+    "gan.critic_dense=[16]",
+    "gan.generator_layers=1",
+    "gan.critic_layers=1",
+  ],
+  "inbetween": [
+    "model.family=inbetween",
+    "model.num_layers=1",
+    "inbetween.encoder_sizes=[16]",
+    "inbetween.decoder_sizes=[16]",
+    "inbetween.context=4",
+    "inbetween.min_frames=2",
+    "inbetween.max_frames=8",
+  ],
+}
+FAMILIES["cvae"] = [
+  *FAMILIES["inbetween"],
+  "inbetween.system=cvae",
+  "inbetween.manifold_encoder_sizes=[16]",
+  "inbetween.expert_sizes=[16,16]",
+  "inbetween.gate_sizes=[16]",
+  "inbetween.experts=2",
+  "inbetween.latent_size=4",
+  "inbetween.manifold_frames=6",
+  "inbetween.manifold_steps=2",
+]
+
+# name -> (run, the command's arguments after the run directory; "{out}" is the output file)
+SAMPLE = ["sample", "{run}", "-o", "{out}", "--frames", "24"]
+BETWEEN = ["inbetween", "{run}", "--from", f"{TAKE}:100:6", "--to", f"{TAKE}:130", "--frames", "9", "-o", "{out}"]
+COMMANDS = {
+  "quickstart.csv": ("quickstart", [*SAMPLE, "--seed", "3"]),
+  "quickstart_num2.csv": ("quickstart", [*SAMPLE, "--num", "2", "--motion", "1"]),
+  "quickstart_plain.csv": (
+    "quickstart",
+    [*SAMPLE, *"--noise-smoothing 0 --persistence 0 --crossfade 0 --pace 0 --scale-cap 0 --seed 1".split()],
+  ),
+  "quickstart_greedy.csv": ("quickstart", [*SAMPLE, "--greedy", "--no-foot-lock", "--no-ground"]),
+  "quickstart_controls.csv": (
+    "quickstart",
+    [*SAMPLE, *"--pi-temperature 0.5 --sigma-temperature 0.7 --noise-order 2 --pace 1 --no-clamp-steps".split()],
+  ),
+  "quickstart_mix_prime.csv": ("quickstart", [*SAMPLE, "--mix", "2:0.5,3:0.5", "--prime", f"{TAKE}:10:8"]),
+  "quickstart.bvh": ("quickstart", [*SAMPLE, "--seed", "2"]),
+  "mse.csv": ("mse", [*SAMPLE, "--no-rigid-bones"]),
+  "gan.csv": ("gan", [*SAMPLE, "--num", "2", "--seed", "4"]),
+  "inbetween.csv": ("inbetween", [*BETWEEN, "--seed", "1"]),
+  "cvae.csv": ("cvae", [*BETWEEN, "--num", "2"]),
+  "legacy.csv": ("legacy", [*SAMPLE, "--seed", "5"]),
+}
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+  """Every family's tiny run (3 steps, its end sample written) and a copy of the checkpoint written before."""
+  root = tmp_path_factory.mktemp("draws")
+  made = {}
+  for name, overrides in FAMILIES.items():
+    made[name] = root / name
+    train_and_evaluate(tiny_config(*QUIET, *overrides), made[name])
+  made["legacy"] = shutil.copytree(ROOT / "tests" / "fixtures" / "legacy_run", root / "legacy")
+  return made
+
+
+def _digest(path: Path) -> str:
+  return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _drawn(runs, tmp_path) -> dict:
+  """SHA-256 of every file the commands and the runs' end samples wrote."""
+  found = {f"end_{name}.csv": _digest(runs[name] / "samples" / "sample.csv") for name in FAMILIES}
+  for name, (run, argv) in COMMANDS.items():
+    out = tmp_path / name
+    args = [a.replace("{run}", str(runs[run])).replace("{out}", str(out)) for a in argv]
+    assert cli.main(args) == 0, name
+    found[name] = _digest(out if out.exists() else out.with_name(f"{out.stem}_0{out.suffix}"))
+  return found
+
+
+def test_draws_and_trained_parameters_are_the_recorded_ones(runs, tmp_path):
+  found = _drawn(runs, tmp_path)
+  if RECORD:
+    DIGESTS.write_text(json.dumps(found, indent=2, sort_keys=True) + "\n")
+  recorded = json.loads(DIGESTS.read_text())
+  assert set(found) == set(recorded)
+  changed = sorted(k for k in found if found[k] != recorded[k])
+  assert not changed, f"these draws changed: {changed} (see this file's docstring)"
