@@ -24,9 +24,8 @@ REFERENCE = [f"model.num_layers={L}", f"model.hidden_size={H}", f"train.batch_si
 
 def _step(path, overrides, use_dense: bool, batch):
   from chorjax.config import load_config
+  from chorjax.families.recurrent.steps import _train_step, create_train_state
   from chorjax.models import cells, fused, heads
-  from chorjax.run import create_train_state
-  from chorjax.training import _train_step
 
   cells.dense = heads.dense = fused.dense if use_dense else (lambda x, w: x @ w)  # read when traced, below
   cfg = load_config(path, overrides)

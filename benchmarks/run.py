@@ -57,8 +57,7 @@ def random_batch(rng, b: int, t: int, d: int) -> dict:
 
 def jax_train_step(cell, head):
   from chorjax.config import load_config
-  from chorjax.run import create_train_state
-  from chorjax.training import train_step
+  from chorjax.families.recurrent.steps import create_train_state, train_step
 
   cfg = load_config(
     None,
@@ -135,7 +134,7 @@ def sampler_model():
   from flax import nnx
 
   from chorjax.config import load_config
-  from chorjax.models import create_model
+  from chorjax.families.recurrent.recurrent_model import create_model
 
   cfg = load_config(
     None,
@@ -145,7 +144,7 @@ def sampler_model():
 
 
 def jax_sampler(batch):
-  from chorjax.sample import generate
+  from chorjax.families.recurrent.generation import generate
 
   graphdef, params = sampler_model()
   w = jax.nn.one_hot(jnp.zeros(batch, jnp.int32), 10)

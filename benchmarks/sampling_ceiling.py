@@ -6,7 +6,8 @@
 The model of ``benchmarks.run``'s sampling rows (LSTM 3 x 256, 8-component MDN, 48 features), 1,000 frames
 at batch 64, each program one jitted ``lax.scan``, median of 5 runs after a compile:
 
-- ``chorjax``: ``chorjax.sample.generate`` (the LSTM step and the MDN draw), as the benchmark times it;
+- ``chorjax``: the recurrent family's ``generation.generate`` (the LSTM step and the MDN draw), as the benchmark
+  times it;
 - ``chorjax, no draw``: the same model's step, its output fed back without the MDN draw;
 - ``plain LSTM``: the same matmuls and LSTM gates written as a user would (``jnp.split``, sigmoid, tanh);
 - ``matmuls only``: the same matmuls with one tanh on a quarter of each layer's output (no gates): the
@@ -39,7 +40,7 @@ def _median_seconds(fn, *args, reps: int = 5) -> float:
 def chorjax_programs():
   from flax import nnx
 
-  from chorjax.sample import UNROLL, _primed, generate
+  from chorjax.families.recurrent.generation import UNROLL, _primed, generate
 
   graphdef, params = sampler_model()
   motion = jax.nn.one_hot(jnp.zeros(B, jnp.int32), 10)
@@ -59,7 +60,7 @@ def chorjax_programs():
 
 
 def plain_programs():
-  from chorjax.sample import UNROLL
+  from chorjax.families.recurrent.generation import UNROLL
 
   ks = jax.random.split(jax.random.key(0), 2 * L + 1)
   w_x = [0.05 * jax.random.normal(ks[i], (D if i == 0 else H, 4 * H)) for i in range(L)]
@@ -98,21 +99,23 @@ def plain_programs():
 
 
 def unroll_ab(reps: int = 5) -> dict:
-  """``chorjax.sample.generate`` with its loop unrolled by ``UNROLL`` against one frame per iteration,
-  alternating: unroll -> median seconds per 1,000 frames at batch 64."""
-  import chorjax.sample
+  """The recurrent family's ``generation.generate`` with its loop unrolled by ``UNROLL`` against one frame per
+  iteration, alternating: unroll -> median seconds per 1,000 frames at batch 64."""
+  import chorjax.families.recurrent.generation
 
   graphdef, params = sampler_model()
   motion = jax.nn.one_hot(jnp.zeros(B, jnp.int32), 10)
-  pairs, unroll = [], chorjax.sample.UNROLL
+  pairs, unroll = [], chorjax.families.recurrent.generation.UNROLL
   for n in (1, unroll):
-    chorjax.sample.UNROLL = n  # read when the program is traced, just below
+    chorjax.families.recurrent.generation.UNROLL = n  # read when the program is traced, just below
     fn = jax.jit(
-      lambda p: chorjax.sample._generate.__wrapped__(graphdef, p, motion, jax.random.key(0), num_frames=FRAMES)
+      lambda p: chorjax.families.recurrent.generation._generate.__wrapped__(
+        graphdef, p, motion, jax.random.key(0), num_frames=FRAMES
+      )
     )
     compiled = fn.lower(params).compile()  # this program, whatever UNROLL says later
     pairs.append((n, lambda compiled=compiled: compiled(params), jax.block_until_ready))
-  chorjax.sample.UNROLL = unroll
+  chorjax.families.recurrent.generation.UNROLL = unroll
   return alternate(pairs, reps)
 
 

@@ -46,9 +46,9 @@ import jax
 import numpy as np
 
 from chorjax import metrics, scoring
+from chorjax.calibration_file import CALIBRATED, calibration_path, read_calibration  # noqa: F401  (re-exported)
 from chorjax.data.transforms import to_y_up
 from chorjax.errors import UserError, atomic_write
-from chorjax.run import CALIBRATED, calibration_path, read_calibration  # noqa: F401  (re-exported)
 
 GRID = {
   "noise_smoothing": (0.6, 0.75, 0.85, 0.9, 0.95),  # 0.95: a model that trembles (cmu05 seed 1: jitter 3 at 0.9)
@@ -194,7 +194,7 @@ def calibrate(
   """Chooses and records the run's sampling settings (see the module docstring).
 
   Args:
-    workdir: a trained run (rnn family).
+    workdir: a trained run of a family whose draw calibration can change.
     data: the reference takes (default: the run's training takes).
     frames, num, seed: each setting draws ``num`` dancers of ``frames`` frames with sampling seed ``seed``.
     grid: the values tried per control (default ``GRID``; ``foot_lock`` only where the run can lock feet).
@@ -206,14 +206,11 @@ def calibrate(
     What ``calibration.json`` holds: the settings, the reference, and every setting's measurements.
   """
   from chorjax.run import load_run, read_reference
-  from chorjax.sample import dance
 
   if frames < 60 or num < 1:
     raise UserError(f"--frames {frames} / --num {num}: need at least 60 frames and 1 dancer")
-  run = load_run(workdir).generating("calibrate")
+  run = load_run(workdir).serving("calibrate")
   run.check_drawn(frames * num, f"--frames {frames} x --num {num}")
-  if run.is_gan:
-    raise UserError(f"{workdir}: a GAN draws whole sequences from noise; there is nothing to calibrate")
   reference, train = read_reference(run, list(data) if data else None)
   f = run.features
   ids = [run.id_map[m.name] for m in train] or [0]
@@ -230,7 +227,7 @@ def calibrate(
 
   def draw(settings):
     sampling = run.sampling(**settings)
-    return y_up(dance(ranged.graphdef, ranged.params, ranged.features, motion, key, frames, sampling))
+    return y_up(run.family.dance(ranged.graphdef, ranged.params, ranged.features, motion, key, frames, sampling))
 
   log(f"calibrating {workdir} on {'the takes given' if data else 'its training takes'} ({len(reference)} takes)")
   positions = [y_up(m.positions) for m in reference]

@@ -197,7 +197,7 @@ def _train(args) -> int:
     if getattr(args, flag) is not None:
       value = getattr(args, flag)
       overrides.append(f"parallel.{key}={value!r}" if isinstance(value, str) else f"parallel.{key}={value}")
-  from chorjax.vectorized import expand_overrides
+  from chorjax.points import expand_overrides
 
   overrides, points = expand_overrides(overrides)
   cfg = load_config(args.config, overrides)
@@ -229,7 +229,7 @@ def _train_points(args, overrides, points, workdir: Path) -> int:
   """`train CONFIG train.seed=[0,1,2]`: the points as one vectorized program, one run directory each
   (WORKDIR/seed=0, ...)."""
   from chorjax.config import load_config
-  from chorjax.vectorized import train_vectorized
+  from chorjax.points import train_vectorized
 
   tag = lambda p: "-".join(f"{k.split('.')[-1]}={v}" for k, v in p)
   cfgs = [load_config(args.config, [*overrides, *(f"{k}={v!r}" for k, v in p)]) for p in points]
@@ -248,7 +248,7 @@ def _sample(args) -> int:
   _counts(args, frames=1, num=1)
   out, _ = _output(args.output, (".csv", ".npz", ".bvh", ".html"))
   character = _character(args.skeleton, out)
-  run = load_run(args.workdir, args.checkpoint).generating("sample")
+  run = load_run(args.workdir, args.checkpoint).serving("sample")
   if character is not None and run.features.skeleton.name != "mpii16":
     raise UserError(f"--skeleton: {args.workdir} dances on its own skeleton, not the 16 joints it retargets from")
   run.check_drawn(args.frames * args.num, f"--frames {args.frames} x --num {args.num}")  # before naming 10^7 files
@@ -267,9 +267,8 @@ def _sample(args) -> int:
 def _inbetween(args) -> int:
   import jax
 
-  from chorjax.inbetween import read_pose, write_transitions
   from chorjax.run import load_run
-  from chorjax.sample import read_phrase
+  from chorjax.sample import read_phrase, read_pose
 
   frames = list(args.frames)
   if len(frames) == 1:
@@ -285,26 +284,12 @@ def _inbetween(args) -> int:
   out, _ = _output(args.output, (".csv", ".npz", ".bvh", ".html"))
   paths = _sample_paths(out, args.num)
   _refuse_existing(paths, args.force)
-  run = load_run(args.workdir, args.checkpoint)
-  if not run.is_inbetween:
-    raise UserError(
-      f"{args.workdir}: not an in-betweening run (train one with model.family = 'inbetween': configs/inbetween.toml)"
-    )
+  run = load_run(args.workdir, args.checkpoint).serving("inbetween")
   run.check_drawn(sum(frames) * args.num, f"--frames {' '.join(map(str, frames))} x --num {args.num}")
   data_cfg = run.config.data
   context = read_phrase(args.from_, run.features, data_cfg, flag="--from")
   targets = [read_pose(t, run.features, data_cfg) for t in args.to]
-  pieces = write_transitions(
-    run.graphdef,
-    run.params,
-    run.features,
-    run.config.inbetween,
-    context,
-    targets,
-    frames,
-    jax.random.key(args.seed),
-    args.num,
-  )
+  pieces = run.family.transitions(run, context, targets, frames, jax.random.key(args.seed), args.num)
   settings = {
     "workdir": str(args.workdir),
     "checkpoint_step": run.step,

@@ -14,17 +14,18 @@ import math
 import re
 import tomllib
 import typing
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from chorjax.errors import UserError, check_memory
+from chorjax.families.registry import names as family_names
 
 
 def _field(
   default,
   help: str,
-  choices: Sequence | None = None,
+  choices: Sequence | Callable[[], Sequence] | None = None,
   minimum: float | None = None,
   resumable: bool = False,
   below: float | None = None,
@@ -34,7 +35,7 @@ def _field(
   ``below``: an exclusive upper bound."""
   meta = {
     "help": help,
-    "choices": tuple(choices) if choices else None,
+    "choices": choices if callable(choices) else tuple(choices) if choices else None,
     "minimum": minimum,
     "below": below,
     "resumable": resumable,
@@ -42,6 +43,14 @@ def _field(
   if isinstance(default, (list, tuple)):
     return dataclasses.field(default_factory=lambda: tuple(default), metadata=meta)
   return dataclasses.field(default=default, metadata=meta)
+
+
+def field_choices(meta) -> tuple | None:
+  """A field's allowed values (``meta``: its metadata); a callable's are read now (the registered families)."""
+  choices: Any = meta.get("choices")
+  if callable(choices):
+    return tuple(typing.cast(Sequence, choices()))
+  return tuple(choices) if choices else None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -102,7 +111,7 @@ class ModelConfig:
     "configured under [gan]) or 'inbetween' (a transition model that writes the frames between a context "
     "phrase and a target pose, for `chorjax inbetween`; configured under [inbetween], its recurrent core is "
     "model.cell, num_layers, hidden_size and forget_bias)",
-    choices=("rnn", "gan", "inbetween"),
+    choices=family_names,
   )
   cell: str = _field("lnlstm", "recurrent cell", choices=("lstm", "lnlstm", "gru"))
   head: str = _field("mdn", "output head", choices=("mse", "mdn"))
@@ -484,6 +493,11 @@ class Config:
     d = dataclasses.asdict(self)
     return json.loads(json.dumps(d))  # tuples -> lists, a plain JSON tree
 
+  def model_sections(self) -> tuple:
+    """The sections that shape a model and its parameters (a checkpoint restored under others is checked
+    leaf by leaf)."""
+    return (self.model, self.gan, self.inbetween)
+
 
 _SECTION_CLASSES = {
   "data": DataConfig,
@@ -546,11 +560,12 @@ def _check_value(where: str, key: str, field: dataclasses.Field, value: Any):
   if hint is float and not math.isfinite(value):
     raise UserError(f"{where}: key {key!r}: {value!r} is not a finite number")
   items = value if isinstance(value, tuple) else (value,)  # a list (a tuple by now): each element
+  choices = field_choices(meta)
   for item in items:
-    if meta.get("choices") and item not in meta["choices"]:
+    if choices and item not in choices:
       raise UserError(
-        f"{where}: key {key!r}: {item!r} is not one of {', '.join(map(repr, meta['choices']))}"
-        + suggest(str(item), [str(c) for c in meta["choices"]])
+        f"{where}: key {key!r}: {item!r} is not one of {', '.join(map(repr, choices))}"
+        + suggest(str(item), [str(c) for c in choices])
       )
   if meta.get("minimum") is not None and value < meta["minimum"]:
     raise UserError(f"{where}: key {key!r}: {value!r} is below the minimum {meta['minimum']}")

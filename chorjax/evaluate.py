@@ -15,8 +15,6 @@ from chorjax.data.motion import Motion
 from chorjax.data.transforms import to_y_up
 from chorjax.errors import UserError, atomic_write
 from chorjax.run import HELD_OUT, Run, load_run, read_reference  # noqa: F401  (re-exported)
-from chorjax.sample import dance
-from chorjax.training import eval_step
 
 
 def evaluate(
@@ -51,7 +49,7 @@ def evaluate(
     :func:`chorjax.scoring.score` (JSON-ready): the generated motion measured against the takes in
     ``data``, novelty against the run's training takes.
   """
-  run = load_run(workdir, checkpoint).generating("eval")
+  run = load_run(workdir, checkpoint).serving("eval")
   nseeds = len(seeds) if seeds else 1
   run.check_drawn(frames * num * nseeds, f"--frames {frames} x --num {num} x {nseeds} seeds")
   sampling = run.sampling(**controls)
@@ -63,7 +61,7 @@ def evaluate(
     raise UserError(f"--frames {frames}: need at least {2 * window} frames")
 
   scored_takes, loss_takes = held_out(real, run.train_takes)
-  loss = None if run.is_gan else heldout_loss(run, scored_takes)  # a GAN has no likelihood
+  loss = heldout_loss(run, scored_takes) if run.family.likelihood else None
   seeds = list(seeds) if seeds else [seed]
   decoded = [generate_positions(run, train, num, frames, s, sampling) for s in seeds]
   y_up = lambda pos: np.asarray(to_y_up(pos, feats.up_axis))  # data space -> y-up: what the metrics measure
@@ -84,7 +82,7 @@ def evaluate(
     "sampling": {**sampling, "seed": seed, "seeds": seeds},
     # the first dancer, in data space: write_metrics stores it beside the JSON (compare draws its strip)
     "first_sample": Motion(decoded[0][0], fps, sk, feats.up_axis, name=f"{Path(workdir).name} seed {seeds[0]}"),
-    "loss_kind": "none" if run.is_gan else "nll" if run.config.model.head == "mdn" else "mse",
+    "loss_kind": "none" if not run.family.likelihood else "nll" if run.config.model.head == "mdn" else "mse",
     "heldout_loss": loss,
     "loss_takes": loss_takes,
     **scored,
@@ -95,7 +93,7 @@ def generate_positions(run: Run, train, num: int, frames: int, seed: int, sampli
   """``[num, frames, J, 3]`` data-space positions; dancer k is conditioned on the k-th training take."""
   ids = [run.id_map[m.name] for m in train] or [0]
   motion = np.array([ids[k % len(ids)] for k in range(num)])
-  return dance(run.graphdef, run.params, run.features, motion, jax.random.key(seed), frames, sampling)
+  return run.family.dance(run.graphdef, run.params, run.features, motion, jax.random.key(seed), frames, sampling)
 
 
 def held_out(real, train_takes) -> tuple[list, str]:
@@ -111,7 +109,7 @@ def heldout_loss(run: Run, takes) -> float:
   """The model's loss on windows of ``takes`` (teacher forced; NaN if no take is long enough)."""
   enc = [(run.id_map.get(m.name, 0), np.asarray(run.features.encode(m.positions))) for m in takes]
   win = eval_windows(enc, run.config.data.seq_length, max_windows=256)
-  return float(eval_step(run.params, win, run.graphdef)) if win else float("nan")
+  return run.family.window_loss(run.graphdef, run.params, win) if win else float("nan")
 
 
 def metrics_path(workdir) -> Path:

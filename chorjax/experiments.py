@@ -26,7 +26,7 @@ of different recipes is one file::
     "train.seed" = [0, 1, 2]
 
 ``vectorize = ["train.seed", "optim.lr", "train.input_noise"]`` (any of them) trains the points that
-differ only in those keys as one vectorized program (``chorjax.vectorized``): one run's cost for
+differ only in those keys as one vectorized program (``chorjax.points``): one run's cost for
 several seeds on a CPU whose cores one small model leaves idle.
 
 Every point is an ordinary run directory (``<root>/<name>-<key>=<value>...``) with its evaluation in
@@ -50,6 +50,7 @@ import numpy as np
 
 from chorjax.config import SampleConfig, load_config, plain_name, suggest, valid_keys
 from chorjax.errors import UserError, atomic_write
+from chorjax.families import family_of
 from chorjax.scoring import mean_of, upgrade
 
 SWEEP_KEYS = {"name", "base", "root", "grid", "set", "eval", "candidates", "vectorize"}
@@ -86,7 +87,7 @@ def load_sweep(path) -> dict:
     for key in body:
       if key not in valid_keys():
         raise UserError(f"{path}: [candidates.{name}] key {key!r} is not a config key{suggest(key, valid_keys())}")
-  from chorjax.vectorized import VECTOR_KEYS
+  from chorjax.points import VECTOR_KEYS
 
   vec = sweep.get("vectorize", [])
   if not isinstance(vec, list) or any(k not in VECTOR_KEYS for k in vec):
@@ -142,7 +143,7 @@ def sweep_groups(sweep: dict) -> list[list[tuple[str, list[str]]]]:
 def run_sweep(path, log=print, shard: tuple[int, int] = (0, 1)) -> list[Path]:
   """Trains (and evaluates) every point of a sweep; returns the point workdirs.
 
-  Points that differ only in the ``vectorize`` keys train together (``chorjax.vectorized``); points
+  Points that differ only in the ``vectorize`` keys train together (``chorjax.points``); points
   whose checkpoints are at different steps fall back to training one by one. ``shard = (i, n)``: only
   the groups (points, without ``vectorize``) whose index is ``i`` modulo ``n`` (0-based ``i``), so ``n``
   jobs with no coordinator split a sweep (a job array), each skipping what is already finished;
@@ -188,8 +189,8 @@ def _release_compiled() -> None:
 
 def _train_points(points, log) -> None:
   """Trains ``(name, overrides, cfg, workdir)`` points: together when there are several, else alone."""
+  from chorjax.points import NotAligned, train_vectorized
   from chorjax.training import train_and_evaluate
-  from chorjax.vectorized import NotAligned, train_vectorized
 
   if len(points) > 1:
     log(f"{', '.join(n for n, *_ in points)}: training together ({' '.join(points[0][1])} ...)")
@@ -285,7 +286,7 @@ def _read_run(workdir: Path) -> dict:
 def _calibration_objective(workdir: Path) -> float | None:
   """The objective of the settings a run's calibration chose (how far its draws are from its training takes
   on movement, jitter, speed, root travel and poses); None if never calibrated or hand-edited."""
-  from chorjax.run import chosen_calibration_row
+  from chorjax.calibration_file import chosen_calibration_row
 
   row = chosen_calibration_row(workdir)
   try:
@@ -398,7 +399,7 @@ def _loss_plot(plt, runs, path: Path) -> None:
 
   fig, ax = plt.subplots(figsize=(8, 4))
   for r in runs:
-    if r["config"]["model"].get("family") == "gan":  # adversarial losses are no likelihood: not on this axis
+    if not family_of(r["config"]).likelihood:  # adversarial losses are no likelihood: not on this axis
       continue
     steps = [h["step"] for h in r["history"]]
     ax.plot(steps, [h["train_loss"] for h in r["history"]], label=f"{r['name']} train")
@@ -477,9 +478,7 @@ def _table(groups) -> list[str]:
     loss = [k for k, _, _ in COLUMNS].index("heldout_loss")
     if any(_loss_takes(r["eval"]) == "all" for r in g["runs"]) and cells[loss] != "-":
       cells[loss] += " (incl. training takes)"  # measured on every --data take, none held out
-    cell, head = c["model"]["cell"], c["model"]["head"]
-    if c["model"].get("family") == "gan":  # the generator's cell; the adversarial loss in the head column
-      cell, head = c["gan"]["cell"], f"gan ({c['gan']['loss']})"
+    cell, head = family_of(c).columns(c)
     lines.append(f"| {g['name']} | {len(g['runs'])} | {cell} | {head} | " + " | ".join(cells) + " |")
   e0 = groups[0]["runs"][0]["eval"]
   real = lambda k: f"{mean_of(e0[k]):.4g}" if e0.get(k) is not None else "-"

@@ -62,7 +62,7 @@ class Stream:
   """
 
   def __init__(self, run, sampling: dict, weights_M, seed: int, chunk: int):
-    from chorjax.sample import decoding, draw_controls
+    from chorjax.controls import decoding, draw_controls
 
     self.run, self.features, self.chunk = run, run.features, chunk
     self.draw = draw_controls(run.features, sampling)
@@ -78,15 +78,13 @@ class Stream:
     self.state = self._started(None if prime_PxD is None else np.asarray(prime_PxD, np.float32)[None])
 
   def _started(self, prime_1xPxD):
-    from chorjax.sample import start_stream
-
+    start_stream, _ = self.run.family.stream()
     pace = {"pace_lag": self.draw["pace_lag"], "pace_ref": self.draw["pace_target"][0]} if self.draw["pace"] else {}
     return start_stream(self.run.graphdef, self.run.params, self.weights[None], prime_1xPxD, **pace)
 
   def next_chunk(self) -> np.ndarray:
     """The next ``chunk`` frames ``[C, J, 3]`` in data space."""
-    from chorjax.sample import continue_stream
-
+    _, continue_stream = self.run.family.stream()
     key = jax.random.fold_in(self.key, self.count)
     self.count += 1
     self.state, z = continue_stream(
@@ -499,9 +497,7 @@ def run_live(
     raise UserError(f"--alternate {alternate}: must be a number of seconds >= 0")
   if record is not None and Path(record).suffix.lower() != ".npz":
     raise UserError(f"{record}: --record writes an .npz")
-  run = load_run(workdir, checkpoint).generating("live")
-  if run.is_gan:
-    raise UserError(f"{workdir}: a GAN run writes whole sequences from noise; live mode streams the rnn family")
+  run = load_run(workdir, checkpoint).serving("live")
   sampling = run.sampling(**(controls or {}))
   run = run.ranged(sampling)
   weights = motion_weight_vector(run.num_motions, motion, mix)  # --motion ID or --mix ID:W,...; default 0

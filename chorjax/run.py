@@ -1,13 +1,12 @@
-"""A run's state: the optimizer, a fresh train state, the meta saved with it, and a run loaded back.
+"""A run: the meta saved with every checkpoint, and a run directory loaded back.
 
-Training and sampling both stand on this module and it imports neither: data -> models -> run ->
-train, sample -> cli.
+Training and sampling both stand on this module and it imports neither: data -> models -> families ->
+run -> train, sample -> cli.
 
-* :func:`create_train_state` builds ``{params, opt_state, step}`` and the static :class:`StepSpec`
-  the jitted train step needs (graph, optimizer, schedule, noise, dropout).
 * :func:`run_meta` is the JSON that every checkpoint carries (config, features, motion ids, takes).
 * :func:`load_run` reads a run directory back as a typed :class:`Run` with its params restored on
-  their own (no optimizer is built), for sampling and evaluation.
+  their own (no optimizer is built), for sampling and evaluation; its model is built by the run's
+  family (``chorjax.families``).
 """
 
 from __future__ import annotations
@@ -17,162 +16,26 @@ import dataclasses
 import json
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import jax
-import jax.numpy as jnp
 import numpy as np
-import optax
 from flax import nnx
 
 from chorjax import checkpoint as ckpt
+from chorjax.calibration_file import read_calibration
 from chorjax.config import Config, config_from_dict
+from chorjax.controls import with_ceiling
 from chorjax.data.features import Features
 from chorjax.errors import UserError, check_memory
-from chorjax.models import ChorModel, create_model
-from chorjax.models.cvae import TransitionCVAE
-from chorjax.models.gan import GanModel, gan_controls
-from chorjax.models.inbetween import TransitionModel
+from chorjax.families import family_of
 
-
-@dataclasses.dataclass(frozen=True)
-class Feedback:
-  """How training feeds the model's own outputs back as inputs (see ``train.feedback``)."""
-
-  mode: str  # "auto" or "scheduled"
-  ground_truth_frames: int
-  condition_frames: int
-  max_fraction: float
-  warmup: int
-  ramp: int
-  draw: str  # "sample" or "mean"
-  pi_temperature: float
-  sigma_temperature: float
-
-  @classmethod
-  def of(cls, cfg: Config) -> Feedback | None:
-    t = cfg.train
-    if t.feedback == "none":
-      return None
-    return cls(
-      t.feedback,
-      t.ground_truth_frames,
-      t.condition_frames,
-      t.feedback_max,
-      t.feedback_warmup,
-      t.feedback_ramp,
-      t.feedback_draw,
-      cfg.sample.pi_temperature,
-      cfg.sample.sigma_temperature,
-    )
-
-
-@dataclasses.dataclass(frozen=True)
-class StepSpec:
-  """What the train step needs besides its arrays; hashable, so it is a static jit argument.
-
-  Attributes:
-    graphdef: the model's static graph (``nnx.split``).
-    tx: the optax optimizer chain.
-    schedule: learning rate as a function of the step (logged).
-    input_noise: std of Gaussian noise added to the inputs (normalized units).
-    dropout: the model's dropout rate (0 = no dropout key is drawn).
-    feedback: own outputs fed back as inputs (None = teacher forcing only).
-  """
-
-  graphdef: Any
-  tx: optax.GradientTransformation
-  schedule: optax.Schedule
-  input_noise: float
-  dropout: float
-  feedback: Feedback | None = None
-
-
-def create_optimizer(
-  cfg: Config, lr: float | None = None, schedule: optax.Schedule | None = None
-) -> tuple[optax.GradientTransformation, optax.Schedule]:
-  """The optax chain of ``cfg.optim``: optional global-norm clipping, then the optimizer; ``lr``: the peak
-  learning rate instead of ``optim.lr`` (the GAN family's two networks); ``schedule``: a learning-rate
-  schedule instead of ``optim.schedule``'s (the cvae system's stage 1)."""
-  o = cfg.optim
-  peak = o.lr if lr is None else lr
-  if schedule is None and o.schedule == "warmup_cosine":
-    schedule = optax.warmup_cosine_decay_schedule(
-      0.0, peak, o.warmup_steps, max(cfg.train.num_steps, o.warmup_steps + 1), end_value=peak * o.final_lr_ratio
-    )
-  elif schedule is None:
-    schedule = optax.constant_schedule(peak)
-  if o.name == "adam":
-    opt = optax.adam(schedule, b1=o.b1, b2=o.b2)
-  elif o.name == "adamw":
-    opt = optax.adamw(schedule, b1=o.b1, b2=o.b2, weight_decay=o.weight_decay, mask=_decayed)
-  else:
-    opt = optax.amsgrad(schedule, b1=o.b1, b2=o.b2)
-  chain = [optax.clip_by_global_norm(o.clip_norm)] if o.clip_norm > 0 else []
-  return optax.chain(*chain, opt), schedule
-
-
-def _decayed(params):
-  """Weight decay's mask: every parameter but a fixed basis (``model.mdn_basis``), which is never trained."""
-  is_basis = lambda path: any(getattr(k, "key", None) == "basis" for k in path)
-  return jax.tree_util.tree_map_with_path(lambda path, _: not is_basis(path), params)
-
-
-def build_model(
-  cfg: Config, features: Features, num_motions: int
-) -> ChorModel | GanModel | TransitionModel | TransitionCVAE:
-  """``cfg``'s model, of its family (``model.family``), for ``features``; parameters drawn from ``train.seed``.
-  The in-betweening family works on flat joint positions (``3J`` numbers), the others on the features."""
-  if cfg.model.family == "gan":
-    return GanModel(cfg.gan, features.dim, rngs=nnx.Rngs(cfg.train.seed))
-  if cfg.model.family == "inbetween":
-    dim, rngs = 3 * features.skeleton.num_joints, nnx.Rngs(cfg.train.seed)
-    if cfg.inbetween.system == "cvae":
-      return TransitionCVAE(cfg.model, cfg.inbetween, dim, features.skeleton.root, rngs=rngs)
-    return TransitionModel(cfg.model, cfg.inbetween, dim, rngs=rngs)
-  return create_model(cfg.model, features.dim, num_motions, cfg.train.seed)
-
-
-def update_part(state, part: str, tx, loss_fn, *args):
-  """One optimizer step on ``state["params"][part]`` alone (a GAN's critic, a CVAE's sampler, ...):
-  ``loss_fn(part_params, *args) -> (loss, aux)`` is differentiated and ``tx`` updates that part and its
-  optimizer state; the other parts pass through. ``(state, loss, aux, grads)``; the step count is the caller's."""
-  params, opt = state["params"], state["opt_state"]
-  (loss, aux), grads = jax.value_and_grad(loss_fn, has_aux=True)(params[part], *args)
-  updates, part_opt = tx.update(grads, opt[part], params[part])
-  new = optax.apply_updates(params[part], updates)
-  return {**state, "params": {**params, part: new}, "opt_state": {**opt, part: part_opt}}, loss, aux, grads
-
-
-def step_key(key, step):
-  """The train step's PRNG key: ``key`` (a typed key, or raw uint32 key data replicated across processes)
-  folded with ``step``, so a resumed run draws what the uninterrupted one drew."""
-  if not jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
-    key = jax.random.wrap_key_data(key)
-  return jax.random.fold_in(key, step)
-
-
-def create_train_state(cfg: Config, dim: int, num_motions: int, basis=None) -> tuple[dict, StepSpec]:
-  """``({params, opt_state, step}, spec)`` for a fresh run of ``cfg`` (the rnn family) on ``dim`` features;
-  ``basis``: the MDN's ``[D, D]`` coordinates where ``model.mdn_basis = "pca"`` (``features.principal_axes``
-  of the training frames)."""
-  model = create_model(cfg.model, dim, num_motions, cfg.train.seed)
-  graphdef, params = nnx.split(model, nnx.Param)
-  params = nnx.to_pure_dict(params)
-  if cfg.model.pca_basis:
-    if basis is None or np.shape(basis) != (dim, dim):
-      raise ValueError(
-        f"model.mdn_basis = 'pca' needs a [{dim}, {dim}] basis, got {basis if basis is None else np.shape(basis)}"
-      )
-    params["head"]["basis"] = jnp.asarray(basis, jnp.float32)
-  tx, schedule = create_optimizer(cfg)
-  state = {"params": params, "opt_state": tx.init(params), "step": jnp.zeros((), jnp.int32)}
-  return state, StepSpec(graphdef, tx, schedule, cfg.train.input_noise, cfg.model.dropout, Feedback.of(cfg))
+if TYPE_CHECKING:  # (the annotation only: a family reads runs back)
+  from chorjax.families.family import Family
 
 
 def model_template(cfg: Config, features: Features, num_motions: int) -> tuple[Any, dict]:
   """``(graphdef, abstract params)`` of ``cfg``'s model (any family), without computing any parameter."""
-  model = nnx.eval_shape(lambda: build_model(cfg, features, num_motions))
+  model = nnx.eval_shape(lambda: family_of(cfg).build_model(cfg, features, num_motions))
   graphdef, params = nnx.split(model, nnx.Param)
   return graphdef, nnx.to_pure_dict(params)
 
@@ -233,29 +96,26 @@ class Run:
     return self.frame_rate or self.config.data.fps
 
   @property
-  def is_gan(self) -> bool:
-    return self.config.model.family == "gan"
+  def family(self) -> Family:
+    """The run's model family (``model.family``)."""
+    return family_of(self.config)
 
-  @property
-  def is_inbetween(self) -> bool:
-    return self.config.model.family == "inbetween"
-
-  def generating(self, command: str) -> Run:
-    """This run, for ``command``, which generates dance on its own: an in-betweening run cannot (UserError)."""
-    if self.is_inbetween:
-      raise UserError(
-        f"{self.workdir}: an in-betweening run writes the frames between poses, not dance of its own; "
-        f"use `chorjax inbetween` (not `chorjax {command}`)"
-      )
+  def serving(self, command: str) -> Run:
+    """This run, for ``command`` (``sample``, ``eval``, ``calibrate``, ``live``, ``inbetween``): a UserError
+    where its family cannot serve it (an in-betweening run writes no dance of its own, ...)."""
+    why = self.family.refusal(command)
+    if why is not None:
+      raise UserError(f"{self.workdir}: {why}")
     return self
 
   def sampling(self, **given) -> dict:
     """Sampling controls: the ones given (not None), else the run's calibration (``chorjax calibrate``),
-    else its ``[sample]`` config. A GAN draws whole sequences from noise: the frame-by-frame MDN draw
-    controls do not apply and are recorded as off."""
-    calibrated = read_calibration(self.workdir) if self.workdir and not self.is_gan else {}
+    else its ``[sample]`` config, as the run's family applies them (a GAN records the frame-by-frame draw's
+    controls as off, and reads no calibration)."""
+    family = self.family
+    calibrated = read_calibration(self.workdir) if self.workdir and family.calibrated else {}
     controls = self.config.sample.controls(**{**calibrated, **{k: v for k, v in given.items() if v is not None}})
-    return gan_controls(controls) if self.is_gan else controls
+    return family.controls(controls)
 
   def check_drawn(self, frames: int, what: str) -> None:
     """Refuses a draw of ``frames`` frames in all (frames x dancers) that this machine cannot hold: each
@@ -297,61 +157,6 @@ class Run:
     f = dataclasses.replace(f, **stats)
     f = with_ceiling(f, self.graphdef, self.params, ds.train, self.config.data.seq_length, sampling)
     return dataclasses.replace(self, features=f)
-
-
-# What calibration.json's settings may hold: what `chorjax calibrate` chooses, and the noise order and governor
-# gain it was chosen with (runs calibrated before 2026-11-25 hold noise_smoothing and sigma_temperature alone;
-# before 2026-11-27 no noise_order, and before session 27 of that day no pace: they were chosen with the run's
-# sample.noise_order and sample.pace)
-CALIBRATED = ("noise_smoothing", "noise_order", "pace", "sigma_temperature", "persistence", "crossfade", "foot_lock")
-
-
-def calibration_path(workdir) -> Path:
-  return Path(workdir) / "calibration.json"
-
-
-def _damaged_calibration(workdir) -> UserError:
-  return UserError(
-    f"{calibration_path(workdir)}: damaged calibration; run `chorjax calibrate {workdir}` again (or delete it)"
-  )
-
-
-def _calibration(workdir) -> dict | None:
-  """``calibration.json`` as a dict (None when the run was never calibrated); one line if it is not JSON."""
-  path = calibration_path(workdir)
-  if not path.is_file():
-    return None
-  try:
-    return json.loads(path.read_text(errors="replace"))
-  except json.JSONDecodeError:
-    raise _damaged_calibration(workdir) from None
-
-
-def read_calibration(workdir) -> dict:
-  """The calibrated controls of a run (``{}`` when it was never calibrated)."""
-  cal = _calibration(workdir)
-  if cal is None:
-    return {}
-  try:
-    settings = cal["settings"]
-  except (KeyError, TypeError):
-    raise _damaged_calibration(workdir) from None
-  if not isinstance(settings, dict) or set(settings) - set(CALIBRATED):
-    raise _damaged_calibration(workdir)
-  return settings
-
-
-def chosen_calibration_row(workdir) -> dict | None:
-  """The row of ``calibration.json``'s table measured with the settings it chose (its objective and rates
-  against the run's training takes); None if the run was never calibrated or its settings were edited by
-  hand (no measured row is theirs)."""
-  cal = _calibration(workdir)
-  if cal is None:
-    return None
-  try:
-    return next((r for r in cal["table"] if r["settings"] == cal["settings"]), None)
-  except (KeyError, TypeError, AttributeError):
-    raise _damaged_calibration(workdir) from None
 
 
 def _keeps_best(workdir: Path) -> bool:
@@ -421,34 +226,6 @@ def _intact_step(manager, steps) -> int | None:
       _read_step(manager, step)
       return step
   return None
-
-
-def scale_ceiling(graphdef, params, train, seq_length: int, quantile: float):
-  """The ceiling ``sample.scale_cap`` holds MDN draws to: per feature, the ``quantile`` of the scales the
-  model predicts for its own training frames (``train``: ``(motion id, features [T, D])`` per take;
-  teacher forced, the most likely component's scale), ``[S]``; no ceiling (inf) for a head without scales
-  (MSE)."""
-  from chorjax.data.dataset import eval_windows
-  from chorjax.models.heads import MDNHead
-
-  model = nnx.merge(graphdef, params)
-  if not isinstance(getattr(model, "head", None), MDNHead):
-    return np.full(1, np.inf, np.float32)
-  win = eval_windows(train, seq_length, max_windows=256)
-  if not win:
-    raise UserError("scale_cap: the training takes are shorter than one window")
-  logpi, _, scale = model.head.params(model(jnp.asarray(win["inputs"]), jnp.asarray(win["motion_ids"])))
-  top = jnp.argmax(logpi, axis=-1)[..., None, None]
-  scale_NxS = jnp.take_along_axis(scale, top, axis=-2)[..., 0, :].reshape(-1, scale.shape[-1])
-  return np.quantile(np.asarray(scale_NxS), quantile, axis=0).astype(np.float32)
-
-
-def with_ceiling(features, graphdef, params, train, seq_length: int, controls: dict):
-  """``features`` with the scale ceiling that ``controls["scale_cap"]`` asks for (unchanged when off)."""
-  q = controls.get("scale_cap")
-  if not q:
-    return features
-  return dataclasses.replace(features, scale_ceiling=scale_ceiling(graphdef, params, train, seq_length, q))
 
 
 HELD_OUT = "held-out"  # --data held-out: the takes of the run's dataset it did not train on

@@ -1,8 +1,8 @@
-"""Training: the pure jitted ``train_step`` and ``eval_step``, a loop driven by hooks, and the driver
-``train_and_evaluate``.
+"""Training: a loop driven by hooks, and the driver ``train_and_evaluate`` that runs a family's step in it.
 
-The state is a plain pytree ``{params, opt_state, step}``. Randomness comes from
-``fold_in(key(seed), step)`` and batches from ``WindowSampler.batch(step)``, so a run resumed from a
+The state is a plain pytree ``{params, opt_state, step}`` that the run's family (``chorjax.families``)
+builds, with its jitted step, batch sampler and validation loss. Randomness comes from
+``fold_in(key(seed), step)`` and batches from the sampler's ``batch(step)``, so a run resumed from a
 checkpoint at step s repeats exactly what the uninterrupted run did after s.
 
 The loop (:class:`Loop`) only runs steps; everything periodic is a hook with a ``due(step, every,
@@ -16,7 +16,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import fcntl
-import functools
 import json
 import math
 import signal
@@ -28,144 +27,21 @@ from pathlib import Path
 from typing import Any
 
 import jax
-import jax.numpy as jnp
 import numpy as np
-import optax
-from flax import nnx
 
 from chorjax import checkpoint as ckpt
-from chorjax import inbetween
 from chorjax.calibrate import default_grid
 from chorjax.config import Config, config_diff, config_from_dict, resumable_keys
-from chorjax.data.dataset import Dataset, WindowSampler, dataset_notes, eval_windows, load_dataset
-from chorjax.data.features import principal_axes
+from chorjax.controls import with_ceiling
+from chorjax.data.dataset import Dataset, dataset_notes, load_dataset
 from chorjax.errors import Interrupted, UserError, atomic_write
-from chorjax.gan import check_gan, create_gan_state, gan_train_step
+from chorjax.families import family_of
 from chorjax.models import motion_weight_vector
-from chorjax.run import Feedback, StepSpec, create_train_state, run_meta, step_key, with_ceiling
-from chorjax.sample import dance
+from chorjax.run import run_meta
 
 
 class TrainingDiverged(UserError):
   """A non-finite loss; the message names the step and the last good checkpoint."""
-
-
-def _loss_fn(params, batch, key, spec: StepSpec, noise=None):
-  """The teacher-forced loss; ``noise``: the input noise as a traced value (vectorized training,
-  where points differ in it), else ``spec.input_noise``."""
-  model = nnx.merge(spec.graphdef, params)
-  x = batch["inputs"]
-  noise_key, dropout_key = jax.random.split(key)
-  if noise is not None:
-    x = x + noise * jax.random.normal(noise_key, x.shape, x.dtype)
-  elif spec.input_noise > 0:
-    x = x + spec.input_noise * jax.random.normal(noise_key, x.shape, x.dtype)
-  out = model(x, batch["motion_ids"], dropout_key if spec.dropout > 0 else None)
-  return model.loss(out, batch["targets"])
-
-
-def feedback_mask(fb: Feedback, key, step, batch: int, frames: int):
-  """``[B, T]`` True where input frame t is the model's own output (never t = 0).
-
-  The schedule ramps from 0 to 1 over ``fb.ramp`` steps after ``fb.warmup``. Auto-conditioning
-  feeds ``condition_frames`` own frames after every ``ground_truth_frames`` real ones, in a sequence
-  chosen with the schedule's probability; scheduled sampling feeds each frame with probability
-  ``max_fraction`` x the schedule.
-  """
-  after = (step - fb.warmup + 1).astype(jnp.float32)
-  ramp = jnp.clip(after / fb.ramp, 0.0, 1.0) if fb.ramp > 0 else (after > 0).astype(jnp.float32)
-  t = jnp.arange(frames)
-  if fb.mode == "auto":
-    own = (t % (fb.ground_truth_frames + fb.condition_frames)) >= fb.ground_truth_frames
-    chosen = jax.random.uniform(key, (batch, 1)) < ramp
-    mask = own[None] & chosen
-  else:
-    mask = jax.random.uniform(key, (batch, frames)) < fb.max_fraction * ramp
-  return mask & (t > 0)[None]
-
-
-def _feedback_loss_fn(params, batch, key, step, spec: StepSpec):
-  """The loss with the model's own outputs fed back as inputs where ``feedback_mask`` says.
-
-  The window runs frame by frame (``model.step``), since an input may be the previous output. What is
-  fed back is a draw at the run's sample temperatures (as generation feeds itself) or the mixture
-  mean, under ``stop_gradient``: a draw has no gradient, and the gradient through hundreds of fed-back
-  frames would be that of a much deeper, unstable network. Dropout drops the units the whole-window call
-  would with the same key (one mask per window and layer).
-  """
-  assert spec.feedback is not None
-  fb, model = spec.feedback, nnx.merge(spec.graphdef, params)
-  x_BxTxD = batch["inputs"]
-  noise_key, mask_key, draw_key = jax.random.split(key, 3)
-  if spec.input_noise > 0:
-    x_BxTxD = x_BxTxD + spec.input_noise * jax.random.normal(noise_key, x_BxTxD.shape, x_BxTxD.dtype)
-  b, t, _ = x_BxTxD.shape
-  mask_BxT = feedback_mask(fb, mask_key, step, b, t)
-  masks = model.core.dropout_masks(jax.random.split(key)[1], b) if spec.dropout > 0 else None  # _loss_fn's key
-
-  def body(c, inputs):
-    carry, prev_BxP = c
-    x_BxD, own_B, k = inputs
-    if fb.draw == "sample":
-      drawn = model.sample(prev_BxP, k, fb.pi_temperature, fb.sigma_temperature)
-    else:
-      drawn = model.mean(prev_BxP)
-    x_in = jnp.where(own_B[:, None], jax.lax.stop_gradient(drawn), x_BxD)
-    carry, out_BxP = model.step(carry, x_in, masks)
-    return (carry, out_BxP), out_BxP
-
-  init = (model.initial_carry(batch["motion_ids"]), jnp.zeros((b, model.num_outputs), x_BxTxD.dtype))
-  xs = (jnp.swapaxes(x_BxTxD, 0, 1), mask_BxT.T, jax.random.split(draw_key, t))
-  _, out_TxBxP = jax.lax.scan(body, init, xs)
-  loss, aux = model.loss(jnp.swapaxes(out_TxBxP, 0, 1), batch["targets"])
-  return loss, {**aux, "feedback": mask_BxT.mean()}
-
-
-def _train_step(state, batch, key, spec: StepSpec, lr_scale=None, noise=None):
-  """One optimizer step. ``lr_scale`` and ``noise`` (traced; vectorized training, see
-  ``chorjax.vectorized``): the update scaled by ``lr_scale``, the input noise ``noise`` instead of
-  ``spec.input_noise``."""
-  key = step_key(key, state["step"])
-  if spec.feedback is None:  # teacher forcing: the fused layers over whole windows
-    grad_fn = jax.value_and_grad(_loss_fn, has_aux=True)
-    (loss, aux), grads = grad_fn(state["params"], batch, key, spec, noise)
-  else:
-    grad_fn = jax.value_and_grad(_feedback_loss_fn, has_aux=True)
-    (loss, aux), grads = grad_fn(state["params"], batch, key, state["step"], spec)
-  updates, opt_state = spec.tx.update(grads, state["opt_state"], state["params"])
-  if lr_scale is not None:
-    updates = jax.tree.map(lambda u: u * lr_scale.astype(u.dtype), updates)
-  params = optax.apply_updates(state["params"], updates)
-  metrics = {
-    "loss": loss,
-    **aux,
-    "grad_norm": optax.tree.norm(grads),
-    "param_norm": optax.tree.norm(params),
-    "update_norm": optax.tree.norm(updates),
-    "lr": spec.schedule(state["step"]) * (1.0 if lr_scale is None else lr_scale),
-  }
-  return {"params": params, "opt_state": opt_state, "step": state["step"] + 1}, metrics
-
-
-train_step = functools.partial(jax.jit, static_argnums=3, donate_argnums=0)(_train_step)
-train_step.__doc__ = """``train_step(state, batch, key, spec) -> (state, metrics)``; ``state`` is donated,
-``spec`` (a :class:`chorjax.run.StepSpec`) is static."""
-
-
-def sharded_train_step(parallel):
-  """``train_step`` for a data-parallel run: the batch sharded over the mesh's data axis, the rest
-  replicated."""
-  repl, data = parallel.replicated, parallel.batch_sharding
-  return jax.jit(
-    _train_step, static_argnums=3, donate_argnums=0, in_shardings=(repl, data, repl), out_shardings=(repl, repl)
-  )
-
-
-@functools.partial(jax.jit, static_argnums=2)
-def eval_step(params, batch, graphdef):
-  """The model's loss on ``batch`` (no noise, no dropout)."""
-  model = nnx.merge(graphdef, params)
-  return model.loss(model(batch["inputs"], batch["motion_ids"]), batch["targets"])[0]
 
 
 # ---------------------------------------------------------------- the loop
@@ -510,7 +386,7 @@ def figure_hook(writer, graphdef, host_params, ds: Dataset, cfg: Config):
     key = jax.random.key(loop.step)
     params, controls = host_params(loop.state["params"]), s.controls()
     features = with_ceiling(ds.features, graphdef, params, ds.train, cfg.data.seq_length, controls)
-    gen = dance(graphdef, params, features, np.array([real_id]), key, n, controls)
+    gen = family_of(cfg).dance(graphdef, params, features, np.array([real_id]), key, n, controls)
     fig, axes = plt.subplots(1, 2, figsize=(10, 3), sharey=True)
     real = np.asarray(ds.features.decode(real_z[:n]))
     for ax, pos_TxJx3, title in ((axes[0], real, "real"), (axes[1], gen[0], "generated")):  # drawn as samples are
@@ -525,9 +401,8 @@ def figure_hook(writer, graphdef, host_params, ds: Dataset, cfg: Config):
 
 
 def calibrates(cfg: Config) -> bool:
-  """Whether training ends by calibrating (``train.calibrate``; the rnn family, where a control can change
-  the dance)."""
-  return cfg.train.calibrate and cfg.model.family == "rnn" and bool(default_grid(cfg))
+  """Whether training ends by calibrating (``train.calibrate``; a family whose draw a control can change)."""
+  return cfg.train.calibrate and family_of(cfg).calibrated and bool(default_grid(cfg))
 
 
 def calibrate_and_sample(workdir: Path, ds: Dataset, cfg: Config) -> dict:
@@ -543,33 +418,14 @@ def calibrate_and_sample(workdir: Path, ds: Dataset, cfg: Config) -> dict:
 
 
 def write_end_sample(workdir: Path, graphdef, params, ds: Dataset, cfg: Config, controls: dict | None = None) -> dict:
-  """``samples/sample.csv`` and ``samples/player.html``: the dance the run ends with (in-betweening: the
-  piece :func:`chorjax.inbetween.end_sample` writes between key poses of a real take, beside that take)."""
+  """``samples/sample.csv`` and ``samples/player.html``: the dance the run ends with, as its family draws it
+  (``Family.end_sample``: the generated dancers beside a real take, or an in-betweening piece beside its take)."""
   from chorjax.data.csv import write_csv
-  from chorjax.data.motion import Motion
   from chorjax.render.html import write_player
 
-  if cfg.model.family == "inbetween":
-    real, pieces, title = inbetween.end_sample(graphdef, params, ds, cfg)
-    motions = [real] + [Motion(p, real.fps, real.skeleton, real.up_axis, real.units, name=title) for p in pieces]
-    csv = write_csv(pieces[0], workdir / "samples" / "sample.csv")
-    return {"csv": str(csv), "html": str(write_player(motions, workdir / "samples" / "player.html", title=cfg.name))}
-
-  s, controls = cfg.sample, controls or cfg.sample.controls()
-  features = with_ceiling(ds.features, graphdef, params, ds.train, cfg.data.seq_length, controls)
-  pos = dance(graphdef, params, features, np.full((s.num,), s.motion), jax.random.key(s.seed), s.frames, controls)
-  out = workdir / "samples"
-  csv = write_csv(pos[0], out / "sample.csv")
-  name = {v: k for k, v in ds.id_map.items()}[s.motion]
-  sk = ds.features.skeleton
-  real = ds.motions[s.motion]
-  motions = [real.replace(positions=real.positions[: s.frames], name=f"original: {name}")]
-  motions += [
-    Motion(p, real.fps, sk, real.up_axis, real.units, name=f"generated #{i} (motion {s.motion})")
-    for i, p in enumerate(pos)
-  ]
-  html = write_player(motions, out / "player.html", title=f"chorjax: {cfg.name}")  # side by side
-  return {"csv": str(csv), "html": str(html)}
+  positions, motions, title = family_of(cfg).end_sample(graphdef, params, ds, cfg, controls or cfg.sample.controls())
+  csv = write_csv(positions, workdir / "samples" / "sample.csv")
+  return {"csv": str(csv), "html": str(write_player(motions, workdir / "samples" / "player.html", title=title))}
 
 
 # ---------------------------------------------------------------- the driver
@@ -590,13 +446,11 @@ def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=No
       f"{workdir}: holds files and is not a chorjax run (no config.json or checkpoints/); training would "
       "write into it: choose another --workdir, or --force"
     )
-  family = cfg.model.family
-  if family == "gan":  # before anything is written
-    check_gan(cfg, cfg.data.representation)
-  if family == "inbetween":
-    inbetween.check_inbetween(cfg)
-  if parallel is not None and family != "rnn":
-    raise UserError(f"parallel.data_parallel: not available for the {family} family (model.family = {family!r})")
+  family = family_of(cfg)
+  family.check(cfg)  # before anything is written
+  if parallel is not None and not family.data_parallel:
+    name = family.name
+    raise UserError(f"parallel.data_parallel: not available for the {name} family (model.family = {name!r})")
   is_main = parallel is None or parallel.is_main
   before = {p.name for p in workdir.iterdir()} if workdir.is_dir() else None
   try:
@@ -649,13 +503,7 @@ def _restore_or_init(cfg: Config, workdir: Path, ds: Dataset, manager, parallel)
   A damaged checkpoint (a killed write, a truncated file) is moved aside into ``checkpoints-damaged/``
   with a warning line and the next older one is tried; if every one is damaged, a UserError (never a
   silent restart from step 0)."""
-  if cfg.model.family == "gan":
-    state, spec = create_gan_state(cfg, ds.features)
-  elif cfg.model.family == "inbetween":
-    state, spec = inbetween.create_inbetween_state(cfg, ds.features)
-  else:
-    basis = principal_axes(np.concatenate([z for _, z in ds.train])) if cfg.model.pca_basis else None
-    state, spec = create_train_state(cfg, ds.features.dim, ds.num_motions, basis)
+  state, spec = family_of(cfg).create_state(cfg, ds)
   steps = sorted(manager.all_steps(), reverse=True)
   damaged = []
   for start in steps:
@@ -664,7 +512,7 @@ def _restore_or_init(cfg: Config, workdir: Path, ds: Dataset, manager, parallel)
       if meta["id_map"] != ds.id_map:
         raise UserError(f"{workdir}: its checkpoints were trained on other takes ({list(meta['id_map'])[:3]}...)")
       saved = config_from_dict(meta["config"])
-      changed = (saved.model, saved.gan, saved.inbetween) != (cfg.model, cfg.gan, cfg.inbetween)
+      changed = saved.model_sections() != cfg.model_sections()
       sharding = None if parallel is None else parallel.replicated
       restored = ckpt.restore(manager, start, state, sharding, mismatch=changed)
     except ckpt.Damaged as e:
@@ -681,23 +529,6 @@ def _restore_or_init(cfg: Config, workdir: Path, ds: Dataset, manager, parallel)
   return state, spec, 0
 
 
-def _family_parts(cfg: Config, ds: Dataset) -> tuple:
-  """``(jitted train step, batch sampler, validation batch, its loss: fn(params, val, spec))`` of the family."""
-  if cfg.model.family == "inbetween":
-    space, ib = inbetween.Space.of(ds.features), cfg.inbetween
-    sampler = inbetween.TransitionSampler(
-      inbetween.training_takes(ds, cfg.data.augment), space, ib, cfg.train.batch_size, cfg.train.seed
-    )
-    val = inbetween.validation_batch(inbetween.held_out_takes(ds), space, ib, cfg.train.val_windows)
-    return inbetween.inbetween_train_step, sampler, val, inbetween.validation_loss
-  gan = cfg.model.family == "gan"  # batches of critic_steps x batch_size windows; no likelihood to validate
-  per_step = cfg.train.batch_size * (cfg.gan.critic_steps if gan else 1)
-  sampler = WindowSampler(ds.train, cfg.data.seq_length, per_step, cfg.train.seed)
-  val = {} if gan else eval_windows(ds.val, cfg.data.seq_length, cfg.train.val_windows)
-  val_loss = lambda params, val, spec: eval_step(params, val, spec.graphdef)
-  return gan_train_step if gan else train_step, sampler, val, val_loss
-
-
 def _train(
   cfg: Config, workdir: Path, ds: Dataset, manager, parallel, cleanup: contextlib.ExitStack, keep_old_config=False
 ) -> dict:
@@ -709,12 +540,13 @@ def _train(
   if is_main:
     _write_config(workdir, cfg)
     _truncate_metrics(workdir / "metrics.jsonl", start)
-  jitted, sampler, val, val_loss = _family_parts(cfg, ds)
+  family = family_of(cfg)
+  jitted, sampler, val, val_loss = family.parts(cfg, ds)
   key: Any = jax.random.key(cfg.train.seed)
   get_batch, host_params = sampler.batch, lambda p: p
   if parallel is not None:
     state, val, key = parallel.replicate(state), parallel.replicate(val), parallel.replicate(jax.random.key_data(key))
-    jitted = sharded_train_step(parallel)
+    jitted = family.parallel_step(parallel)
     get_batch, host_params = (lambda s: parallel.global_batch(sampler, s)), parallel.local_copy
   step_fn = lambda state, batch, key: jitted(state, batch, key, spec)
   total = cfg.train.num_steps
@@ -730,7 +562,7 @@ def _train(
   loop.add_hook(save, cfg.train.checkpoint_every)
   if cfg.train.keep == "best" and val:  # the best is kept where it happens, not at the next checkpoint_every
     loop.add_hook(best_checkpoint_hook(manager, save), cfg.train.eval_every or total)
-  if log is not None and log.writer is not None and cfg.train.figure_every and cfg.model.family != "inbetween":
+  if log is not None and log.writer is not None and cfg.train.figure_every and family.figures:
     loop.add_hook(figure_hook(log.writer, spec.graphdef, host_params, ds, cfg), cfg.train.figure_every, at_last=False)
   loop.end_hooks.append(lambda loop: ckpt.wait(manager))
 

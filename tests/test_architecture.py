@@ -1,5 +1,6 @@
-"""The package's shape: imports run one way (no cycle, imports inside functions included) and every
-function stays short enough to read at once."""
+"""The package's shape: imports run one way (no cycle, imports inside functions included), model families
+are parts that plug in (nothing outside ``chorjax/families/`` names one), no two modules share a file name,
+and every function stays short enough to read at once."""
 
 import ast
 from pathlib import Path
@@ -13,10 +14,20 @@ def _module_name(path: Path) -> str:
   return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
+def _runtime_nodes(tree: ast.AST):
+  """Every node of ``tree`` but those under ``if TYPE_CHECKING:`` (imports for annotations, never run)."""
+  todo = [tree]
+  while todo:
+    node = todo.pop()
+    yield node
+    if not (isinstance(node, ast.If) and getattr(node.test, "id", None) == "TYPE_CHECKING"):
+      todo.extend(ast.iter_child_nodes(node))
+
+
 def _imports(path: Path, modules: set[str]) -> set[str]:
   """The chorjax modules that ``path`` imports anywhere in its body (inside functions too)."""
   found = set()
-  for node in ast.walk(ast.parse(path.read_text())):
+  for node in _runtime_nodes(ast.parse(path.read_text())):
     if isinstance(node, ast.Import):
       names = [a.name for a in node.names]
     elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
@@ -64,7 +75,7 @@ def test_the_cycle_finder_finds_a_cycle():
 
 def test_no_import_cycle_among_chorjax_modules():
   graph = import_graph()
-  assert "chorjax.training" in graph["chorjax.evaluate"]  # the parser sees real imports
+  assert "chorjax.run" in graph["chorjax.evaluate"]  # the parser sees real imports
   assert find_cycle(graph) is None, f"import cycle: {' -> '.join(find_cycle(graph) or [])}"
 
 
@@ -86,3 +97,61 @@ def test_no_function_is_longer_than_70_lines():
         if n > MAX_FUNCTION_LINES:
           long.append(f"{path.relative_to(PACKAGE.parent)}:{node.lineno} {node.name} ({n} lines)")
   assert not long, "functions over 70 lines: " + ", ".join(long)
+
+
+FAMILIES = PACKAGE / "families"
+# The config schema keeps the public keys of the families' sections ([gan], [inbetween], model.family).
+SCHEMA = {PACKAGE / "config.py"}
+
+
+def _family_words() -> set[str]:
+  from chorjax.families.registry import BUILTIN
+
+  return set(BUILTIN)
+
+
+def family_mentions(path: Path, words: set[str]) -> list[str]:
+  """Where ``path`` names a family: imports a family's package (the registry and the ``Family`` base class are
+  for all), compares a value with a family's name, or
+  reads a ``Run.is_<family>`` flag."""
+  found = []
+  for node in ast.walk(ast.parse(path.read_text())):
+    modules = []
+    if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+      modules = [node.module] if node.module != "chorjax.families" else [f"{node.module}.{a.name}" for a in node.names]
+    elif isinstance(node, ast.Import):
+      modules = [a.name for a in node.names]
+    family = [m for m in modules if m.startswith("chorjax.families.") and m.split(".")[2] in words | FOLDERS]
+    found += [f"{path.name}:{node.lineno} imports {m}" for m in family[:1]]
+    if isinstance(node, ast.Compare):
+      consts = [c.value for c in [node.left, *node.comparators] if isinstance(c, ast.Constant)]
+      found += [f"{path.name}:{node.lineno} compares with {c!r}" for c in consts if c in words]
+    if isinstance(node, ast.Attribute) and node.attr.startswith("is_") and node.attr[3:] in words:
+      found.append(f"{path.name}:{node.lineno} reads .{node.attr}")
+  return found
+
+
+FOLDERS = {p.name for p in FAMILIES.iterdir() if p.is_dir() and p.name != "__pycache__"}
+
+
+def test_the_family_check_finds_a_branch(tmp_path):
+  code = tmp_path / "m.py"
+  code.write_text("from chorjax.families.gan import networks\nif cfg.model.family == 'gan':\n  x = run.is_gan\n")
+  assert len(family_mentions(code, {"gan", "rnn"})) == 3
+  code.write_text("from chorjax.families import family_of\nfrom chorjax.families.family import Family\n")
+  assert family_mentions(code, {"gan", "rnn"}) == []
+
+
+def test_no_module_outside_the_families_names_a_family():
+  words = _family_words()
+  outside = [p for p in PACKAGE.rglob("*.py") if FAMILIES not in p.parents and p not in SCHEMA]
+  found = [m for p in outside for m in family_mentions(p, words)]
+  assert not found, "family named outside chorjax/families/: " + ", ".join(found)
+
+
+def test_no_two_modules_share_a_file_name():
+  seen: dict[str, list[str]] = {}
+  for p in PACKAGE.rglob("*.py"):
+    if p.name != "__init__.py":
+      seen.setdefault(p.name, []).append(str(p.relative_to(PACKAGE.parent)))
+  assert not {k: v for k, v in seen.items() if len(v) > 1}

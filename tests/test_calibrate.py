@@ -11,11 +11,12 @@ from helpers import QUICKSTART_SAMPLING, tiny_config
 
 from chorjax import calibrate, cli
 from chorjax.calibrate import calibration_path, search
+from chorjax.calibration_file import CALIBRATED, chosen_calibration_row
 from chorjax.data.npz import read_npz
 from chorjax.data.transforms import to_y_up
 from chorjax.errors import UserError
-from chorjax.run import CALIBRATED, chosen_calibration_row, load_run
-from chorjax.sample import dance
+from chorjax.families.recurrent.generation import dance
+from chorjax.run import load_run
 from chorjax.training import train_and_evaluate
 
 GRID = {"noise_smoothing": (0.6, 0.75, 0.85, 0.95), "sigma_temperature": (0.8, 0.9, 1.0, 1.15, 1.3, 1.5)}
@@ -234,8 +235,8 @@ def test_the_governor_holds_what_the_judge_measures_turning_included(run_dir):
   by that measure: told half or twice the free dancer's pace, it holds back or pushes on."""
   from chorjax.data.dataset import load_dataset
   from chorjax.data.features import Features, take_joint_pace
+  from chorjax.families.recurrent.generation import generate
   from chorjax.metrics import displacement
-  from chorjax.sample import generate
 
   run = load_run(run_dir)
   f, m, lag = run.features, run.features.joint_motion, run.features.pace_lag

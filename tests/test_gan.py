@@ -16,8 +16,8 @@ from chorjax import cli
 from chorjax.config import load_config
 from chorjax.data.dataset import WindowSampler, load_dataset
 from chorjax.errors import UserError
-from chorjax.gan import create_gan_state, critic_loss, critic_step, generator_loss, generator_step
-from chorjax.models.gan import Critic, GanModel, Generator, pose_layer
+from chorjax.families.gan.adversarial import create_gan_state, critic_loss, critic_step, generator_loss, generator_step
+from chorjax.families.gan.networks import Critic, GanModel, Generator, pose_layer
 from chorjax.models.rnn import RecurrentCore
 from chorjax.run import load_run
 from chorjax.scoring import mean_of
@@ -129,7 +129,7 @@ def test_generated_bones_are_unit_directions_at_the_takes_lengths(setup, fresh):
   state, spec = fresh
   model = nnx.merge(spec.graphdef, state["params"])
   assert isinstance(model, GanModel) and spec.projection is not None
-  from chorjax.models.gan import fake_sequences
+  from chorjax.families.gan.networks import fake_sequences
 
   x = fake_sequences(model.generator, jax.random.key(0), 2, 30, spec.projection)
   raw = np.asarray(x) * ds.features.std + ds.features.mean

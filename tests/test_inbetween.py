@@ -12,11 +12,12 @@ from flax import nnx
 from helpers import tiny_config
 
 from chorjax import cli
-from chorjax import inbetween as ib
 from chorjax.data.dataset import bundled_path, load_dataset
 from chorjax.data.npz import read_npz
+from chorjax.families.inbetween import inbetweening as ib
+from chorjax.families.inbetween.cvae_model import transition_model
+from chorjax.families.inbetween.lstm_model import noise_strength, rollout, tta_embedding
 from chorjax.metrics import foot_skate, l2p, npss, position_error
-from chorjax.models.inbetween import noise_strength, rollout, tta_embedding
 from chorjax.run import load_run
 from chorjax.training import train_and_evaluate
 
@@ -80,7 +81,7 @@ def test_training_batches_are_real_windows_with_lengths_in_range_and_repeatable(
 
 def test_an_untrained_model_is_linear_interpolation_and_its_embeddings(setup):
   cfg, ds, space = setup
-  graphdef, params = nnx.split(ib.build_model(cfg, ds.features, 1), nnx.Param)
+  graphdef, params = nnx.split(transition_model(cfg, ds.features), nnx.Param)
   sampler = ib.TransitionSampler(ib.training_takes(ds, ()), space, cfg.inbetween, 4, seed=0)
   win = sampler.batch(0)["window"]
   out = ib.model_transitions(graphdef, params, cfg.inbetween, win[:, :4], win[:, 10], 6, jax.random.key(0))
@@ -105,7 +106,7 @@ def test_a_train_step_lowers_the_loss_on_a_fixed_batch(setup):
 
 def test_rollout_gives_each_row_its_own_length(setup):
   cfg, ds, _ = setup
-  model = ib.build_model(cfg, ds.features, 1)
+  model = transition_model(cfg, ds.features)
   ctx = jnp.asarray(np.random.default_rng(0).normal(size=(2, 4, 48)), jnp.float32)
   target, z = ctx[:, -1] + 1.0, jnp.zeros((2, 32))
   out = np.asarray(rollout(model, ctx, target, jnp.array([5, 3]), 7, z))
@@ -230,7 +231,7 @@ CVAE = [
 
 @pytest.fixture(scope="module")
 def cvae_setup(setup):
-  from chorjax import cvae
+  from chorjax.families.inbetween import cvae_training as cvae
 
   _, ds, space = setup
   cfg = tiny_config(*IB, *CVAE)
@@ -242,7 +243,7 @@ def cvae_setup(setup):
 
 
 def test_cvae_schedules_sampling_chance_loss_ramp_and_learning_rate(cvae_setup):
-  from chorjax import cvae
+  from chorjax.families.inbetween import cvae_training as cvae
 
   _, _, spec, _ = cvae_setup  # manifold_steps 40, sampling_ramp 20, physics_start 20
   p = [float(cvae.own_frame_chance(s, spec)) for s in (0, 10, 20, 30)]
@@ -261,7 +262,7 @@ def _run_steps(state, batch, spec, steps):
 
 
 def test_cvae_decoder_uses_z_and_stage_two_leaves_it_bit_identical(cvae_setup):
-  from chorjax.models.cvae import split
+  from chorjax.families.inbetween.cvae_model import split
 
   _cfg, state, spec, batch = cvae_setup
   state = jax.tree.map(jnp.copy, state)  # the fixture's arrays stay (train steps donate theirs)

@@ -85,7 +85,7 @@ def test_stream_continues_without_jumps_and_takes_steering(live_run):
   with pytest.raises(UserError, match="prime: expected at least 2 frames"):
     stream.prime(np.zeros((5, 3, 3)))
   # primes of any length run one of a few programs compiled at warm-up: no client stalls the others
-  from chorjax.sample import start_stream
+  from chorjax.families.recurrent.generation import start_stream
 
   stream.warm_up()
   compiled = start_stream._cache_size()

@@ -11,7 +11,8 @@ from helpers import tiny_config
 from scipy.special import logsumexp
 from scipy.stats import norm
 
-from chorjax.models import as_weights, create_model
+from chorjax.families.recurrent.recurrent_model import create_model
+from chorjax.models import as_weights
 from chorjax.models.heads import mdn_log_prob, mdn_params, mdn_sample
 from chorjax.models.rnn import RecurrentCore, dropout_mask
 
@@ -269,9 +270,8 @@ def test_fused_layer_equals_the_plain_scan_in_outputs_and_gradients(real_batch, 
 def test_model_gradients_through_the_fused_layer_equal_the_plain_scan(real_batch, monkeypatch, cell_name):
   from flax import nnx
 
+  from chorjax.families.recurrent.steps import StepSpec, _loss_fn
   from chorjax.models.cells import CELLS
-  from chorjax.run import StepSpec
-  from chorjax.training import _loss_fn
 
   batch, num_motions = real_batch
   cfg = tiny_config(

@@ -14,13 +14,14 @@ import pytest
 from flax import nnx
 from helpers import headless, tiny_config
 
-from chorjax import cli, sample
+from chorjax import cli
 from chorjax.data.csv import read_csv
 from chorjax.data.dataset import bundled_path, load_dataset
 from chorjax.data.npz import read_npz
+from chorjax.families.recurrent import generation
+from chorjax.families.recurrent.generation import generate
 from chorjax.models import as_weights, parse_mix
 from chorjax.run import load_run
-from chorjax.sample import generate
 from chorjax.training import train_and_evaluate
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -55,12 +56,12 @@ def test_shapes_seeds_and_greedy(loaded):
 def test_the_unrolled_loop_draws_what_one_frame_per_iteration_draws(loaded, monkeypatch):
   w = jnp.tile(as_weights(jnp.array([3]), 10), (4, 1))
   draw = lambda: np.asarray(
-    jax.jit(sample._generate.__wrapped__, static_argnames=("graphdef", "num_frames"))(
+    jax.jit(generation._generate.__wrapped__, static_argnames=("graphdef", "num_frames"))(
       loaded.graphdef, loaded.params, w, jax.random.key(0), num_frames=102
     )
   )
   unrolled = draw()
-  monkeypatch.setattr(sample, "UNROLL", 1)
+  monkeypatch.setattr(generation, "UNROLL", 1)
   np.testing.assert_allclose(unrolled, draw(), rtol=0, atol=1e-5)  # 102 frames: not a multiple of 4
   assert not np.allclose(unrolled[:, :50], unrolled[:, 50:100])  # a dance, not a still pose
 
@@ -321,7 +322,7 @@ def test_sample_and_eval_print_nothing_on_stderr_for_a_good_run(run_dir, tmp_pat
 
 
 def test_smooth_noise_has_unit_variance_and_is_smooth_and_white_at_zero():
-  from chorjax.sample import MAX_NOISE_ORDER, smooth_noise
+  from chorjax.families.recurrent.generation import MAX_NOISE_ORDER, smooth_noise
 
   def draw(rho, order=2, n=4000):
     step = lambda s, k: smooth_noise(s, k, rho, order)
@@ -384,7 +385,7 @@ def test_clamp_keeps_every_frame_in_the_training_range(loaded, run_dir, tmp_path
   import dataclasses
 
   from chorjax.errors import UserError
-  from chorjax.sample import dance
+  from chorjax.families.recurrent.generation import dance
 
   f = loaded.features
   every = np.concatenate([x for _, x in load_dataset(loaded.config.data).train])  # what training windows show
@@ -416,7 +417,7 @@ def test_clamp_keeps_every_frame_in_the_training_range(loaded, run_dir, tmp_path
 def test_clamp_steps_holds_every_change_to_the_training_changes(loaded, run_dir, tmp_path):
   import dataclasses
 
-  from chorjax.sample import draw_controls
+  from chorjax.controls import draw_controls
 
   f = loaded.features
   train = [x for _, x in load_dataset(loaded.config.data).train]
@@ -469,7 +470,7 @@ def test_pace_governor_drives_the_dancer_towards_the_training_pace(loaded, run_d
 
 
 def test_off_pace_the_governor_changes_the_scale_and_lets_go_of_the_component():
-  from chorjax.sample import _governed
+  from chorjax.families.recurrent.generation import _governed
 
   controls = {"sigma_temperature": 1.2, "persistence": 6.0, "crossfade": 0.8}
   own = jnp.array([1.0, 0.5, 2.0, 0.01])  # on pace, calm, racing, nearly still (training pace 1)
@@ -480,10 +481,10 @@ def test_off_pace_the_governor_changes_the_scale_and_lets_go_of_the_component():
 
 
 def test_scale_cap_holds_draws_to_the_scales_the_model_predicts_on_its_data(loaded, run_dir, tmp_path, capsys):
+  from chorjax.controls import scale_ceiling
   from chorjax.errors import UserError
+  from chorjax.families.recurrent.generation import dance
   from chorjax.models.heads import MDNHead
-  from chorjax.run import scale_ceiling
-  from chorjax.sample import dance
 
   train = load_dataset(loaded.config.data).train
   seq = loaded.config.data.seq_length

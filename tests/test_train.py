@@ -23,8 +23,9 @@ from chorjax.config import load_config, to_toml
 from chorjax.data.csv import read_csv
 from chorjax.data.dataset import WindowSampler, load_dataset
 from chorjax.errors import UserError
-from chorjax.run import create_train_state, load_run
-from chorjax.training import due, eval_step, train_and_evaluate, train_step, workdir_lock
+from chorjax.families.recurrent.steps import create_train_state, eval_step, train_step
+from chorjax.run import load_run
+from chorjax.training import due, train_and_evaluate, workdir_lock
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -337,7 +338,7 @@ def test_root_motion_representations_train_and_sample(tmp_path, representation):
 
 
 def _feedback(**kw):
-  from chorjax.run import Feedback
+  from chorjax.families.recurrent.steps import Feedback
 
   base = {
     "mode": "auto",
@@ -354,7 +355,7 @@ def _feedback(**kw):
 
 
 def test_feedback_masks_follow_the_mode_and_the_schedule():
-  from chorjax.training import feedback_mask
+  from chorjax.families.recurrent.steps import feedback_mask
 
   key, step = jax.random.key(0), jnp.asarray(10)
   auto = np.asarray(feedback_mask(_feedback(), key, step, 4, 12))
@@ -368,8 +369,7 @@ def test_feedback_masks_follow_the_mode_and_the_schedule():
 
 
 def test_feedback_replaces_inputs_with_own_outputs_and_is_teacher_forcing_when_off(tiny_setup):
-  from chorjax.run import StepSpec
-  from chorjax.training import _feedback_loss_fn, _loss_fn
+  from chorjax.families.recurrent.steps import StepSpec, _feedback_loss_fn, _loss_fn
 
   cfg, ds = tiny_setup
   state, spec = create_train_state(cfg, 48, ds.num_motions)
@@ -391,7 +391,7 @@ def test_feedback_replaces_inputs_with_own_outputs_and_is_teacher_forcing_when_o
 def test_feedback_drops_the_units_the_whole_window_would_and_is_teacher_forcing_when_off(tiny_setup):
   """Dropout with feedback: run frame by frame with the window's masks, the cells give the fused window's
   dropped-out loss to the last bit of float32 when nothing is fed back, and another loss without masks."""
-  from chorjax.training import _feedback_loss_fn, _loss_fn
+  from chorjax.families.recurrent.steps import _feedback_loss_fn, _loss_fn
 
   _, ds = tiny_setup
   cfg = tiny_config("model.dropout=0.3")
@@ -417,8 +417,7 @@ def test_training_with_feedback_lowers_the_loss_and_samples(tmp_path, feedback):
 
 def test_the_aclstm_config_loads_and_feeds_its_own_outputs_on_5_of_every_10_frames():
   from chorjax.config import load_config
-  from chorjax.run import Feedback
-  from chorjax.training import feedback_mask
+  from chorjax.families.recurrent.steps import Feedback, feedback_mask
 
   cfg = load_config(Path(__file__).resolve().parents[1] / "configs" / "aclstm.toml")
   assert (cfg.model.cell, cfg.model.head, cfg.model.num_layers, cfg.model.hidden_size) == ("lstm", "mse", 3, 1024)

@@ -22,7 +22,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from chorjax import inbetween as ib
+from chorjax.families.inbetween import inbetweening as ib
 from chorjax.data.dataset import conform, load_dataset, read_takes, to_rate
 from chorjax.data.features import leg_length
 from chorjax.experiments import machine_info

@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 from flax import nnx
 
-from chorjax.models.inbetween import MLP, add_encoders_and_core, encode_step
+from chorjax.families.inbetween.lstm_model import MLP, TransitionModel, add_encoders_and_core, encode_step
 from chorjax.models.rnn import RecurrentCore
 
 POSE_GAIN, STEP_GAIN, OFFSET_GAIN, OUT_SCALE = 2.0, 50.0, 4.0, 0.02  # inputs / output at about unit size
@@ -164,3 +164,12 @@ def sampler_rollout(model: TransitionCVAE, context_BxCxK, target_BxK, length_B, 
   first = context_BxCxK[:, 0]
   _, (out, mu, logvar) = jax.lax.scan(body, (model.sampler.initial_carry(b), first, first), jnp.arange(1, c + frames))
   return tuple(jnp.swapaxes(a[c - 1 :], 0, 1) for a in (out, mu, logvar))
+
+
+def transition_model(cfg, features) -> TransitionModel | TransitionCVAE:
+  """The in-betweening model of ``inbetween.system`` for ``features``; parameters drawn from ``train.seed``. It
+  works on flat joint positions (``3J`` numbers), not on the features."""
+  dim, rngs = 3 * features.skeleton.num_joints, nnx.Rngs(cfg.train.seed)
+  if cfg.inbetween.system == "cvae":
+    return TransitionCVAE(cfg.model, cfg.inbetween, dim, features.skeleton.root, rngs=rngs)
+  return TransitionModel(cfg.model, cfg.inbetween, dim, rngs=rngs)

@@ -31,14 +31,15 @@ import numpy as np
 import optax
 from flax import nnx
 
-from chorjax import cvae
 from chorjax.config import Config
 from chorjax.data.features import Features, hips
 from chorjax.data.motion import chain_length
 from chorjax.errors import UserError
+from chorjax.families.inbetween import cvae_training as cvae
+from chorjax.families.inbetween.cvae_model import transition_model
+from chorjax.families.inbetween.lstm_model import balanced, rollout, transition_l1, up_to_target, window_target
 from chorjax.metrics import foot_skate, l2p, npss, position_error
-from chorjax.models.inbetween import balanced, rollout, transition_l1, up_to_target, window_target
-from chorjax.run import build_model, create_optimizer, step_key
+from chorjax.optimizer import create_optimizer, step_key
 
 VAL_LENGTHS = (5, 15, 30)  # transition lengths of the validation windows (cycled; at most max_frames)
 BENCHMARK_LENGTHS = (5, 15, 30, 45)  # the LaFAN1 protocol's transition lengths
@@ -212,7 +213,7 @@ def create_inbetween_state(cfg: Config, features: Features) -> tuple[dict, Inbet
   check_inbetween(cfg)
   if cfg.inbetween.system == "cvae":
     return cvae.create_cvae_state(cfg, features, Space.of(features))
-  graphdef, params = nnx.split(build_model(cfg, features, 1), nnx.Param)
+  graphdef, params = nnx.split(transition_model(cfg, features), nnx.Param)
   params = nnx.to_pure_dict(params)
   tx, schedule = create_optimizer(cfg)
   ib = cfg.inbetween
@@ -323,19 +324,6 @@ def write_transitions(graphdef, params, f: Features, ib, context_CxJx3, targets,
     between = np.asarray(f.uncanonical(space.from_local(local, anchor)), np.float32)
     piece = np.concatenate([piece, between, np.repeat(np.asarray(target, np.float32)[None, None], num, 0)], 1)
   return piece
-
-
-def read_pose(spec: str, features, data_cfg, flag: str = "--to") -> np.ndarray:
-  """``FILE[:FRAME]`` (frame 0 unless given) -> that frame's positions ``[J, 3]`` in the run's data space."""
-  from chorjax.sample import read_phrase
-
-  path, colon, frame = spec.rpartition(":")
-  if not colon or not frame.isdigit():
-    path, frame = spec, "0"
-  take = read_phrase(path, features, data_cfg, flag=flag)
-  if int(frame) >= len(take):
-    raise UserError(f"{flag} {spec}: frame {frame} is not inside the take's {len(take)} frames")
-  return take[int(frame)]
 
 
 def end_sample(graphdef, params, ds, cfg: Config) -> tuple:

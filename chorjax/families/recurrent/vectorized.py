@@ -22,7 +22,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import functools
-import json
 import sys
 import time
 from pathlib import Path
@@ -35,7 +34,9 @@ from chorjax import checkpoint as ckpt
 from chorjax.config import Config
 from chorjax.data.dataset import WindowSampler, dataset_notes, eval_windows, load_dataset
 from chorjax.errors import UserError
-from chorjax.run import StepSpec, run_meta
+from chorjax.families.recurrent.steps import StepSpec, _train_step, eval_step
+from chorjax.points import NotAligned
+from chorjax.run import run_meta
 from chorjax.training import (
   Loop,
   MetricsLog,
@@ -43,61 +44,15 @@ from chorjax.training import (
   _check_saved_config,
   _keep_aside,
   _restore_or_init,
-  _train_step,
   _truncate_metrics,
   _write_config,
   best_checkpoint_hook,
   calibrate_and_sample,
   calibrates,
-  eval_step,
   stop_on_signals,
   workdir_lock,
   write_end_sample,
 )
-
-VECTOR_KEYS = ("train.seed", "optim.lr", "train.input_noise")
-_FREE = ("name",)  # keys that change only what a point writes
-_FREE_SECTIONS = ("sample.", "log.")
-
-
-class NotAligned(UserError):
-  """The points' latest checkpoints are at different steps: they cannot continue as one program."""
-
-
-def flat_config(cfg: Config) -> dict:
-  """``{"section.key": value}`` of a config."""
-  out = {}
-  for k, v in cfg.to_dict().items():
-    if isinstance(v, dict):
-      out.update({f"{k}.{kk}": vv for kk, vv in v.items()})
-    else:
-      out[k] = v
-  return out
-
-
-def check_group(cfgs) -> list[str]:
-  """The vectorizable keys in which ``cfgs`` differ; a UserError names any other key that differs."""
-  flats = [flat_config(c) for c in cfgs]
-  differ = [k for k in flats[0] if len({json.dumps(f[k], sort_keys=True) for f in flats}) > 1]
-  for key in differ:
-    if key in VECTOR_KEYS or key in _FREE or key.startswith(_FREE_SECTIONS):
-      continue
-    what = "changes the model's shapes" if key.startswith("model.") else "changes the program or the data"
-    a, b = (f[key] for f in flats[:2]) if flats[0][key] != flats[1][key] else (flats[0][key], flats[-1][key])
-    raise UserError(
-      f"cannot vectorize {key} ({a!r} vs {b!r}): it {what}; only {', '.join(VECTOR_KEYS)} "
-      "can differ between points trained together (train the others apart)"
-    )
-  if cfgs[0].optim.lr <= 0 and "optim.lr" in differ:
-    raise UserError("optim.lr: vectorized learning rates need a positive first rate")
-  if cfgs[0].train.feedback != "none" and "train.input_noise" in differ:
-    raise UserError("train.input_noise cannot differ between vectorized points with train.feedback")
-  if cfgs[0].parallel.distributed:
-    raise UserError("vectorized training runs in one process (parallel.distributed = false)")
-  family = cfgs[0].model.family
-  if family != "rnn":
-    raise NotAligned(f"model.family = {family!r}: vectorized training covers the rnn family; train these points apart")
-  return [k for k in differ if k in VECTOR_KEYS]
 
 
 @functools.partial(jax.jit, static_argnums=4, donate_argnums=0)
@@ -151,11 +106,10 @@ def train_vectorized(cfgs, workdirs, *, force: bool = False) -> list[dict]:
   returns each point's summary, as ``train.train_and_evaluate`` does.
 
   Raises:
-    UserError: points that differ in a key that cannot be vectorized (``check_group``).
-    NotAligned: points whose latest checkpoints are at different steps.
+    NotAligned: points whose latest checkpoints are at different steps (the points were checked by
+      ``points.check_group``: ``points.train_vectorized`` is the way in).
   """
   cfgs, workdirs = list(cfgs), [Path(w).absolute() for w in workdirs]
-  check_group(cfgs)
   with contextlib.ExitStack() as stack:
     for w in workdirs:
       if w.exists() and not w.is_dir():
@@ -281,22 +235,3 @@ def _summary(loop: VecLoop, k: int, start: int, t_start: float, samples: dict) -
   if samples:
     out["samples"] = samples
   return out
-
-
-def expand_overrides(overrides) -> tuple[list[str], list[list[tuple[str, object]]]]:
-  """``train.seed=[0,1,2]`` (a list for a vectorizable key) -> the plain overrides and the points:
-  one ``[(key, value), ...]`` per combination (a single point, ``[[]]``, when no list is given)."""
-  import itertools
-
-  from chorjax.config import parse_override
-
-  plain, lists = [], []
-  for text in overrides:
-    key, value = parse_override(text)
-    if isinstance(value, list) and key in VECTOR_KEYS:
-      if not value:
-        raise UserError(f"{key}: an empty list of values")
-      lists.append([(key, v) for v in value])
-    else:
-      plain.append(text)
-  return plain, [list(p) for p in itertools.product(*lists)] if lists else [[]]

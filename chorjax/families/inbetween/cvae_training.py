@@ -28,9 +28,9 @@ import optax
 from flax import nnx
 
 from chorjax.config import Config
-from chorjax.models.cvae import TransitionCVAE, manifold_rollout, sampler_rollout
-from chorjax.models.inbetween import balanced, transition_l1, up_to_target, window_target
-from chorjax.run import build_model, create_optimizer, update_part
+from chorjax.families.inbetween.cvae_model import TransitionCVAE, manifold_rollout, sampler_rollout, transition_model
+from chorjax.families.inbetween.lstm_model import balanced, transition_l1, up_to_target, window_target
+from chorjax.optimizer import create_optimizer, update_part
 
 LEGS, BONES, FEET = 0.5, 0.5, 0.5  # stage-2 loss weights beside the pose (1) and the steps (velocity_weight)
 SKATE_HEIGHT = 0.1  # leg lengths above a window's lowest foot at which skating stops counting
@@ -80,7 +80,7 @@ def own_frame_chance(step, spec: CvaeSpec):
 
 def create_cvae_state(cfg: Config, features, space) -> tuple[dict, CvaeSpec]:
   ib, sk = cfg.inbetween, features.skeleton
-  model = build_model(cfg, features, 1)
+  model = transition_model(cfg, features)
   assert isinstance(model, TransitionCVAE)
   graphdef, params = nnx.split(model, nnx.Param)
   manifold_def = nnx.split(model.manifold, nnx.Param)[0]

@@ -1,5 +1,5 @@
 """Training the LSTM-GAN family (``model.family = "gan"``): its state, the critic and generator steps, and
-the jitted train step that :func:`chorjax.training.train_and_evaluate` runs in its loop.
+the jitted train step that the training loop runs.
 
 The state is ``{params: {generator, critic}, opt_state: {generator, critic}, step}``: one checkpoint,
 one exact resume, as for the other families. One train step makes ``gan.critic_steps`` critic updates,
@@ -27,8 +27,8 @@ from flax import nnx
 
 from chorjax.config import Config
 from chorjax.errors import UserError
-from chorjax.models.gan import GanModel, fake_sequences, pose_layer
-from chorjax.run import build_model, create_optimizer, step_key, update_part
+from chorjax.families.gan.networks import GanModel, fake_sequences, pose_layer
+from chorjax.optimizer import create_optimizer, step_key, update_part
 
 
 @dataclasses.dataclass(frozen=True)
@@ -74,8 +74,7 @@ def check_gan(cfg: Config, representation: str) -> None:
 def create_gan_state(cfg: Config, features) -> tuple[dict, GanSpec]:
   """``({params, opt_state, step}, spec)`` for a fresh GAN run on ``features`` (the run's ``Features``)."""
   check_gan(cfg, features.representation)
-  model = build_model(cfg, features, 1)
-  assert isinstance(model, GanModel)
+  model = GanModel(cfg.gan, features.dim, rngs=nnx.Rngs(cfg.train.seed))
   graphdef = nnx.split(model, nnx.Param)[0]
   gen_def, gen = nnx.split(model.generator, nnx.Param)
   critic_def, critic = nnx.split(model.critic, nnx.Param)

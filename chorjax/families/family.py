@@ -1,0 +1,113 @@
+"""What a model family is to the rest of chorjax: the :class:`Family` base class, whose defaults describe a
+family that generates dance frame by frame from motion ids, as the recurrent one does.
+
+A family (``model.family``) brings its model, its train step, how it draws and the commands it serves; it
+registers itself with ``families.registry.register``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+
+class Family:
+  """A model family. Subclasses set ``name`` and override what they do; the defaults describe a family that
+  generates dance frame by frame from motion ids, like the recurrent one.
+
+  Attributes:
+    name: the ``model.family`` value.
+    likelihood: it has a held-out loss to report (``chorjax eval``, ``compare``'s axis).
+    figures: training draws TensorBoard figures of its dance (``train.figure_every``).
+    data_parallel: it trains data-parallel over processes (``[parallel]``).
+    calibrated: its draw has the controls ``chorjax calibrate`` chooses (the run's calibration.json applies).
+  """
+
+  name: str = ""
+  likelihood: bool = True
+  figures: bool = True
+  data_parallel: bool = False
+  calibrated: bool = False
+
+  def refusal(self, command: str) -> str | None:
+    """Why this family's runs cannot serve ``command`` (``sample``, ``eval``, ``calibrate``, ``live``,
+    ``inbetween``), or None where they can (``Run.serving``)."""
+    return (
+      "not an in-betweening run (train one with model.family = 'inbetween': configs/inbetween.toml)"
+      if command == "inbetween"
+      else None
+    )
+
+  def columns(self, config: dict) -> tuple[str, str]:
+    """``(cell, head)``: what a comparison report's table says of a run's model (``config``: its saved dict)."""
+    return config["model"]["cell"], config["model"]["head"]
+
+  def check(self, cfg) -> None:
+    """Raises UserError, naming the key, for a config this family cannot train (before anything is written)."""
+
+  def build_model(self, cfg, features, num_motions: int):
+    """The family's model for ``features`` (an ``nnx.Module``), parameters drawn from ``train.seed``."""
+    raise NotImplementedError
+
+  def create_state(self, cfg, ds) -> tuple[dict, Any]:
+    """``({params, opt_state, step}, spec)`` of a fresh run on the dataset ``ds``; ``spec`` is static."""
+    raise NotImplementedError
+
+  def parts(self, cfg, ds) -> tuple[Callable, Any, dict, Callable]:
+    """``(jitted step(state, batch, key, spec), batch sampler, validation batch, val_loss(params, val, spec))``."""
+    raise NotImplementedError
+
+  def window_loss(self, graphdef, params, windows: dict) -> float:
+    """The model's teacher-forced loss on ``windows`` (``data.dataset.eval_windows``), no noise, no dropout
+    (families with ``likelihood``: ``chorjax eval``'s held-out loss)."""
+    raise NotImplementedError
+
+  def parallel_step(self, parallel) -> Callable:
+    """The jitted step of a data-parallel run (families with ``data_parallel``)."""
+    raise NotImplementedError
+
+  def controls(self, controls: dict) -> dict:
+    """The sampling controls as this family's draw applies them (what does not apply recorded as off)."""
+    return controls
+
+  def dance(self, graphdef, params, features, motion, key, num_frames: int, controls: dict, prime=None):
+    """Dancers in data space ``[B, T, J, 3]`` (``motion``: ids ``[B]`` or weights ``[B, M]``)."""
+    raise NotImplementedError
+
+  def end_sample(self, graphdef, params, ds, cfg, controls: dict) -> tuple:
+    """What a run ends with: ``(positions of samples/sample.csv, the motions of the player, its title)``;
+    here ``sample.num`` dancers of ``sample.frames`` conditioned on take ``sample.motion`` (seed
+    ``sample.seed``), the first in the CSV, all beside that take in the player."""
+    import jax
+    import numpy as np
+
+    from chorjax.controls import with_ceiling
+    from chorjax.data.motion import Motion
+
+    s = cfg.sample
+    features = with_ceiling(ds.features, graphdef, params, ds.train, cfg.data.seq_length, controls)
+    key = jax.random.key(s.seed)
+    pos = self.dance(graphdef, params, features, np.full((s.num,), s.motion), key, s.frames, controls)
+    name = {v: k for k, v in ds.id_map.items()}[s.motion]
+    sk, real = ds.features.skeleton, ds.motions[s.motion]
+    motions = [real.replace(positions=real.positions[: s.frames], name=f"original: {name}")]
+    motions += [
+      Motion(p, real.fps, sk, real.up_axis, real.units, name=f"generated #{i} (motion {s.motion})")
+      for i, p in enumerate(pos)
+    ]
+    return pos[0], motions, f"chorjax: {cfg.name}"
+
+  def transitions(self, run, context, targets, frames, key, num: int):
+    """``num`` pieces ``[num, C + sum(frames) + len(targets), J, 3]``: the ``context`` phrase, then for each
+    target pose its transition of ``frames[i]`` frames and the target (``chorjax inbetween``; a family whose
+    runs serve that command)."""
+    raise NotImplementedError
+
+  def stream(self):
+    """``(start_stream, continue_stream)``: live mode's endless draw (``chorjax.live``)."""
+    raise NotImplementedError
+
+  def train_together(self):
+    """``(keys, train_vectorized, NotAligned)``: sweep points that differ only in ``keys`` train as one program;
+    None where the family trains every point apart."""
+    return None

@@ -1,0 +1,79 @@
+"""The LSTM-GAN family (``model.family = "gan"``): a generator turns a noise vector into a whole sequence, a
+critic tells real from generated.
+
+* ``networks.py``: the generator, the critic, the pose layers, and the draw of whole sequences.
+* ``adversarial.py``: its state, the critic and generator steps, and the jitted train step.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from flax import nnx
+
+from chorjax.families.family import Family
+from chorjax.families.registry import register
+
+
+class Gan(Family):
+  name = "gan"
+  likelihood = False
+
+  def refusal(self, command: str) -> str | None:
+    if command == "calibrate":
+      return "a GAN draws whole sequences from noise; there is nothing to calibrate"
+    if command == "live":
+      return "a GAN run writes whole sequences from noise; live mode streams the rnn family"
+    return super().refusal(command)
+
+  def columns(self, config: dict) -> tuple[str, str]:
+    """The generator's cell; the adversarial loss in the head column."""
+    return config["gan"]["cell"], f"gan ({config['gan']['loss']})"
+
+  def check(self, cfg) -> None:
+    from chorjax.families.gan.adversarial import check_gan
+
+    check_gan(cfg, cfg.data.representation)
+
+  def build_model(self, cfg, features, num_motions: int):
+    from chorjax.families.gan.networks import GanModel
+
+    return GanModel(cfg.gan, features.dim, rngs=nnx.Rngs(cfg.train.seed))
+
+  def create_state(self, cfg, ds):
+    from chorjax.families.gan.adversarial import create_gan_state
+
+    return create_gan_state(cfg, ds.features)
+
+  def parts(self, cfg, ds):
+    from chorjax.data.dataset import WindowSampler
+    from chorjax.families.gan.adversarial import gan_train_step
+
+    # batches of critic_steps x batch_size windows; no likelihood to validate
+    per_step = cfg.train.batch_size * cfg.gan.critic_steps
+    sampler = WindowSampler(ds.train, cfg.data.seq_length, per_step, cfg.train.seed)
+    return gan_train_step, sampler, {}, None
+
+  def controls(self, controls: dict) -> dict:
+    from chorjax.families.gan.networks import gan_controls
+
+    return gan_controls(controls)
+
+  def dance(self, graphdef, params, features, motion, key, num_frames, controls, prime=None):
+    """Each dancer one sequence from noise (``motion`` only counts them; no prime)."""
+    from chorjax.controls import decoding, draw_controls
+    from chorjax.errors import UserError
+    from chorjax.families.gan.networks import GanModel, gan_controls, generate_sequences, pose_layer
+
+    if prime is not None:
+      raise UserError("--prime: a GAN draws whole sequences from noise; it cannot continue a phrase")
+    controls = gan_controls(controls)
+    model = nnx.merge(graphdef, params)
+    assert isinstance(model, GanModel)
+    projection = pose_layer(features, model.pose)
+    bounds = draw_controls(features, controls).get("bounds")
+    num = int(np.shape(motion)[0])
+    z = generate_sequences(graphdef, params, key, num=num, num_frames=num_frames, projection=projection, bounds=bounds)
+    return np.asarray(features.decode(z, **decoding(controls)))
+
+
+register(Gan())

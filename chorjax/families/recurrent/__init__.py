@@ -1,0 +1,69 @@
+"""The recurrent family (``model.family = "rnn"``): chor-rnn's deep recurrent core over joint features,
+predicting every next frame through a mixture-density (or MSE) head, sampled frame by frame.
+
+* ``recurrent_model.py``: the model (core + head, conditioned on motion ids).
+* ``steps.py``: its state, loss and jitted train / evaluation steps.
+* ``generation.py``: the frame-by-frame draw, its controls, and live mode's endless stream.
+* ``vectorized.py``: K runs of one shape trained as one program (seeds, learning rates, input noise).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from chorjax.families.family import Family
+from chorjax.families.registry import register
+
+
+class Recurrent(Family):
+  name = "rnn"
+  data_parallel = True
+  calibrated = True
+
+  def build_model(self, cfg, features, num_motions: int):
+    from chorjax.families.recurrent.recurrent_model import create_model
+
+    return create_model(cfg.model, features.dim, num_motions, cfg.train.seed)
+
+  def create_state(self, cfg, ds):
+    from chorjax.data.features import principal_axes
+    from chorjax.families.recurrent.steps import create_train_state
+
+    basis = principal_axes(np.concatenate([z for _, z in ds.train])) if cfg.model.pca_basis else None
+    return create_train_state(cfg, ds.features.dim, ds.num_motions, basis)
+
+  def parts(self, cfg, ds):
+    from chorjax.data.dataset import WindowSampler, eval_windows
+    from chorjax.families.recurrent.steps import eval_step, train_step
+
+    sampler = WindowSampler(ds.train, cfg.data.seq_length, cfg.train.batch_size, cfg.train.seed)
+    val = eval_windows(ds.val, cfg.data.seq_length, cfg.train.val_windows)
+    return train_step, sampler, val, lambda params, val, spec: eval_step(params, val, spec.graphdef)
+
+  def window_loss(self, graphdef, params, windows: dict) -> float:
+    from chorjax.families.recurrent.steps import eval_step
+
+    return float(eval_step(params, windows, graphdef))
+
+  def parallel_step(self, parallel):
+    from chorjax.families.recurrent.steps import sharded_train_step
+
+    return sharded_train_step(parallel)
+
+  def dance(self, graphdef, params, features, motion, key, num_frames, controls, prime=None):
+    from chorjax.families.recurrent.generation import dance
+
+    return dance(graphdef, params, features, motion, key, num_frames, controls, prime)
+
+  def stream(self):
+    from chorjax.families.recurrent.generation import continue_stream, start_stream
+
+    return start_stream, continue_stream
+
+  def train_together(self):
+    from chorjax.families.recurrent.vectorized import train_vectorized
+
+    return train_vectorized
+
+
+register(Recurrent())

@@ -1,0 +1,338 @@
+"""The recurrent family's draw: one jit-compiled ``lax.scan`` over frames, K dancers as a batch.
+
+The model's own ``step`` (the same cell code that training scans) consumes the previous frame and
+the head draws the next one. Priming runs the model teacher-forced over a real phrase and continues
+from its state: chor-rnn's collaboration mode. Results go back to data space through the exact
+inverse of the feature pipeline (:func:`dance`); live mode continues an endless dance chunk by chunk
+(:func:`start_stream`, :func:`continue_stream`).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import nnx
+
+from chorjax.config import MAX_NOISE_ORDER
+from chorjax.controls import decoding, draw_controls
+from chorjax.data.features import JointMotion, joint_pace
+
+# Frames per iteration of the plain generation loop: an iteration's fixed cost (the loop's bookkeeping, one
+# dispatch per operation) then serves four frames; 6% faster at batch 64 (benchmarks.sampling_ceiling), the
+# same frames to the bit. The smoothed loop stays at one: no faster there (batch 1-4), and unrolled its
+# rounding differs, which a free-running dance grows into another dance.
+UNROLL = 4
+
+# What a compiled sampling program is specialized on. The draw's other controls (temperatures, persistence,
+# crossfade, bounds, scale ceiling) are its arguments: calibration's 180 settings compiled 30 programs when
+# persistence and crossfade were in this list, 5 since.
+_STATIC = ("graphdef", "num_frames", "greedy", "noise_smoothing", "noise_order", "pace", "pace_lag")
+
+
+def generate(
+  graphdef,
+  params,
+  motion,
+  key,
+  *,
+  num_frames: int,
+  prime_BxPxD=None,
+  pi_temperature=1.0,
+  sigma_temperature=1.0,
+  greedy: bool = False,
+  noise_smoothing: float = 0.0,
+  noise_order: int = 2,
+  persistence: float = 0.0,
+  crossfade: float = 0.0,
+  bounds=None,
+  pace: float = 0.0,
+  pace_lag: int = 15,
+  pace_target=None,
+  scale_cap=None,
+):
+  """Generates ``num_frames`` normalized frames per dancer.
+
+  Args:
+    graphdef: the model's static graph (``nnx.split``).
+    params: the model parameters (an argument, not a closure, so the program stays small).
+    motion: per dancer, what conditions it: motion ids ``[B]`` or weights ``[B, M]`` (a blend).
+    key: PRNG key; the same key gives the same dance.
+    num_frames: frames to generate after the prime.
+    prime_BxPxD: optional real phrase (normalized); generation continues after its last frame.
+      Without it, generation starts from the zero frame (the mean pose) and the id's state.
+    pi_temperature, sigma_temperature, greedy: MDN sampling controls (see ``heads.mdn_sample``).
+    noise_smoothing, noise_order: the MDN noise passes ``noise_order`` cascaded AR(1) filters with coefficient
+      ``noise_smoothing`` (:func:`smooth_noise`; 0 = independent per frame).
+    persistence: added to the log-weight of the previous frame's mixture component.
+    crossfade: a change of component glides: the jump between the means decays by this factor per frame.
+    bounds: optional ``(low [D], high [D])``: every drawn frame is clipped to them before it is fed back
+      and returned (``Features.low``/``high``: the training range; ``sample.clamp``); with
+      ``(step_low [D], step_high [D])`` after them, its change from the previous frame is clipped to those
+      first (``sample.clamp_steps``; the first frame's change counts from the mean pose or the prime's last frame).
+    pace, pace_lag, pace_target: the pace governor (0 = off; :func:`_generate_smoothly`); ``pace_target``
+      is ``(the training pace over pace_lag frames, its measure)``: a ``JointMotion`` (the judge's measure,
+      ``Features.pace_joints``) or ``[D]`` weights that average the pose features (``Features.pace``).
+    scale_cap: optional ``[S]`` ceiling on the MDN scales (``run.scale_ceiling``; ``sample.scale_cap``).
+
+  Returns:
+    ``[B, num_frames, D]`` normalized frames.
+  """
+  plain = bool(greedy or (noise_smoothing == persistence == crossfade == pace == 0 and scale_cap is None))
+  return _generate(
+    graphdef,
+    params,
+    motion,
+    key,
+    num_frames=num_frames,
+    prime_BxPxD=prime_BxPxD,
+    pi_temperature=pi_temperature,
+    sigma_temperature=sigma_temperature,
+    greedy=greedy,
+    noise_smoothing=noise_smoothing,
+    noise_order=noise_order,
+    persistence=persistence,
+    crossfade=crossfade,
+    bounds=bounds,
+    pace=pace,
+    pace_lag=pace_lag,
+    pace_target=pace_target,
+    scale_cap=scale_cap,
+    plain=plain,
+  )
+
+
+@functools.partial(jax.jit, static_argnames=(*_STATIC, "plain"))
+def _generate(
+  graphdef,
+  params,
+  motion,
+  key,
+  *,
+  num_frames: int,
+  prime_BxPxD=None,
+  pi_temperature=1.0,
+  sigma_temperature=1.0,
+  greedy: bool = False,
+  noise_smoothing: float = 0.0,
+  noise_order: int = 2,
+  persistence=0.0,
+  crossfade=0.0,
+  bounds=None,
+  pace: float = 0.0,
+  pace_lag: int = 15,
+  pace_target=None,
+  scale_cap=None,
+  plain: bool = True,
+):
+  """:func:`generate`'s program (the same defaults); ``plain``: no smoothing, persistence, crossfade, governor
+  or scale ceiling (decided before tracing, where persistence and crossfade are still numbers)."""
+  model = nnx.merge(graphdef, params)
+  carry, x0 = _primed(model, motion, prime_BxPxD)
+
+  if plain:
+
+    def body(c, k):
+      carry, x = c
+      carry, out = model.step(carry, x)
+      x = _clip(model.sample(out, k, pi_temperature, sigma_temperature, greedy), bounds, x)
+      return (carry, x), x
+
+    _, xs_NxBxD = jax.lax.scan(body, (carry, x0), jax.random.split(key, num_frames), unroll=UNROLL)
+    return jnp.swapaxes(xs_NxBxD, 0, 1)
+
+  controls = _draw_args(pi_temperature, sigma_temperature, persistence, crossfade, scale_cap)
+  if pace and pace_target is None:
+    raise ValueError("pace needs pace_target = (the training pace, the pose weights): Features.pace")
+  pacing = (pace, pace_lag, *pace_target) if pace and pace_target is not None else None
+  noise = (noise_smoothing, noise_order)
+  return _generate_smoothly(model, carry, x0, key, num_frames, noise, controls, bounds, pacing)
+
+
+def _primed(model, motion, prime_BxPxD):
+  """``(carry, first input)``: the motion's initial state, teacher forced over the prime if there is one
+  (generation continues after its last frame); without one, the zero frame (the mean pose)."""
+  carry = model.initial_carry(motion)
+  if prime_BxPxD is None:
+    return carry, jnp.zeros((jnp.shape(motion)[0], model.dim), jnp.float32)
+  _, carry = model.teacher_force(prime_BxPxD[:, :-1], carry)
+  return carry, prime_BxPxD[:, -1]
+
+
+def _draw_args(pi_temperature, sigma_temperature, persistence, crossfade, scale_cap) -> dict:
+  """The MDN draw's keyword arguments (``heads.MDNHead.draw``)."""
+  return {
+    "pi_temperature": pi_temperature,
+    "sigma_temperature": sigma_temperature,
+    "persistence": persistence,
+    "crossfade": crossfade,
+    "scale_cap": scale_cap,
+  }
+
+
+def _clip(x_BxD, bounds, previous_BxD=None):
+  """``x`` held to ``bounds``: ``(low, high)``, or ``(low, high, step_low, step_high)`` where its change from
+  ``previous`` is held to the steps first (``sample.clamp_steps``)."""
+  if bounds is None:
+    return x_BxD
+  if len(bounds) == 4 and previous_BxD is not None:
+    x_BxD = previous_BxD + jnp.clip(x_BxD - previous_BxD, bounds[2], bounds[3])
+  return jnp.clip(x_BxD, bounds[0], bounds[1])
+
+
+def _generate_smoothly(model, carry, x0_BxD, key, num_frames: int, noise: tuple, controls: dict, bounds, pacing):
+  """The scan of :func:`generate` with smoothed noise and the draw's state (component, offset) carried.
+
+  With ``pacing = (gain, lag, ref, measure)`` a governor holds the dancer to the training pace ``ref``
+  (how far it moves over ``lag`` frames, :func:`_moved`; the own pace a running mean over about ten lags):
+  off pace, the scale temperature rises or falls and the component is let go sooner (:func:`_governed`)."""
+  state = _smooth_start(carry, x0_BxD, pacing)
+  return _smooth_scan(model, state, key, num_frames, noise, controls, bounds, pacing)[1]
+
+
+def _smooth_start(carry, x0_BxD, pacing):
+  """The state of :func:`_smooth_scan` before the first frame: ``(carry, previous frame, noise filters
+  [MAX_NOISE_ORDER, B, D], (component, offset), (the governor's recent frames, where the next goes, own pace))``."""
+  b = x0_BxD.shape[0]
+  lag, ref = (pacing[1], pacing[2]) if pacing else (1, 1.0)
+  none = (jnp.full((b,), -1, jnp.int32), jnp.zeros_like(x0_BxD))  # no component yet, no offset
+  at = jnp.zeros((), jnp.int32)  # an array from the start: a resumed state keeps its type (no retrace)
+  governor = (jnp.broadcast_to(x0_BxD, (lag, *x0_BxD.shape)), at, jnp.full((b,), ref, jnp.float32))
+  filters = jnp.zeros((MAX_NOISE_ORDER, *x0_BxD.shape), x0_BxD.dtype)
+  return (carry, x0_BxD, filters, none, governor)
+
+
+def _smooth_scan(model, state, key, num_frames: int, noise: tuple, controls: dict, bounds, pacing):
+  """``num_frames`` smoothed draws from ``state`` with ``noise = (noise_smoothing, noise_order)``: ``(the state
+  after them, frames [B, N, D])``."""
+  gain, lag, ref, weights = pacing or (0.0, 1, 1.0, jnp.zeros(state[1].shape[-1]))
+  keep = 1.0 - 1.0 / (10 * lag)  # the running pace forgets over about ten lags (5 s)
+
+  def body(c, k):
+    carry, previous, filters, drawn, (recent, at, own) = c
+    carry, out = model.step(carry, previous)
+    k_comp, k_noise = jax.random.split(k)
+    filters, eps_BxD = smooth_noise(filters, k_noise, *noise)
+    governed = _governed(controls, own, ref, gain) if pacing else controls
+    x, drawn = model.draw(out, k_comp, eps_BxD, drawn, **governed)
+    x = _clip(x, bounds, previous)
+    if pacing:
+      own = keep * own + (1 - keep) * _moved(x, recent, at, weights)
+      recent, at = recent.at[at].set(x), (at + 1) % lag
+    return (carry, x, filters, drawn, (recent, at, own)), x
+
+  state, xs_NxBxD = jax.lax.scan(body, state, jax.random.split(key, num_frames))
+  return state, jnp.swapaxes(xs_NxBxD, 0, 1)
+
+
+def _governed(controls: dict, own_B, ref, gain) -> dict:
+  """The draw's controls as the pace governor sets them for dancers at ``own`` pace (training pace ``ref``): the
+  scale temperature times ``m = (ref / own) ** gain`` within 0.5-2x (a dancer who slows down gets more energy,
+  one who races less), and the persistence times ``min(m, 1 / m) ** 2`` (off pace either way, the component
+  it holds is what keeps it there: it lets go sooner). On martial, judged against its training takes, the
+  scale alone left one seed's calmest 1,000 frames at 0.47 of their movement, another's busiest at 1.29;
+  letting go of the component too: 0.84 / 1.13 (experiments/dancers, 2026-11-27)."""
+  m = jnp.clip((ref / jnp.maximum(own_B, 1e-6)) ** gain, 0.5, 2.0)[:, None]
+  sigma, hold = controls["sigma_temperature"] * m, controls["persistence"] * jnp.minimum(m, 1 / m) ** 2
+  return {**controls, "sigma_temperature": sigma, "persistence": hold}
+
+
+def _moved(x_BxD, recent_LxBxD, at, measure):
+  """How far each dancer moved over the governor's lag (``recent[at]`` is the frame ``lag`` frames before
+  ``x``): with ``measure`` a ``JointMotion``, the judge's measure (``features.joint_pace``: joints relative
+  to the root, the turn over the lag summed from the heading changes); else the weighted mean absolute
+  change of the features (``measure``: ``[D]`` weights)."""
+  then = recent_LxBxD[at]
+  if not isinstance(measure, JointMotion):
+    return jnp.abs(x_BxD - then) @ measure
+  lag = recent_LxBxD.shape[0]
+  heading = recent_LxBxD[..., 0].sum(0) - then[:, 0] + x_BxD[:, 0]  # the changes of the lag frames up to x
+  return joint_pace(x_BxD, then, heading * measure.std[0] + lag * measure.mean[0], measure)
+
+
+def smooth_noise(filters_KxBxD, key, rho: float, order: int = 2):
+  """Standard-normal noise correlated over frames: white noise through ``order`` cascaded AR(1) filters with
+  coefficient ``rho``, scaled to unit stationary variance (:func:`noise_gain`). ``rho = 0``: white noise.
+  Two filters (the default) give a smooth, low-pass process whose second difference still carries every
+  frequency (its spectrum falls as the fourth power, which the second difference undoes); four or more
+  leave far less frame-to-frame tremble at the same speed and forget sooner (at the same first difference,
+  four at 0.8 have a third of two at 0.9's second difference, and half its correlation over a second).
+  ``filters_KxBxD`` holds the filters' states (``K >= order``; the first ``order`` are used); returns
+  ``(filters, noise [B, D])``."""
+  x = jax.random.normal(key, filters_KxBxD.shape[1:], filters_KxBxD.dtype)
+  states = []
+  for k in range(order):
+    x = rho * filters_KxBxD[k] + x
+    states.append(x)
+  return filters_KxBxD.at[:order].set(jnp.stack(states)), x * noise_gain(rho, order)
+
+
+@functools.cache
+def noise_gain(rho: float, order: int) -> float:
+  """The factor that gives ``order`` cascaded AR(1) filters with coefficient ``rho`` unit stationary variance:
+  one over the root energy of their impulse response ``C(k + order - 1, k) rho^k`` (for two filters
+  ``(1 + rho^2) / (1 - rho^2)^3``)."""
+  if order < 1 or not 0.0 <= rho < 1.0:
+    raise ValueError(f"noise filters: need order >= 1 and 0 <= rho < 1, got {order}, {rho}")
+  if order == 2:  # the closed form: the draws of runs before other orders existed, to the bit
+    return ((1 - rho**2) ** 3 / (1 + rho**2)) ** 0.5
+  k = np.arange(1, int(60 * order / (1 - rho)) + 100)  # the response has fallen below 1e-20 of its peak by then
+  h = np.cumprod(np.r_[1.0, rho * (k + order - 1) / k])  # h_k = h_(k-1) rho (k + order - 1) / k
+  return float(np.sum(h**2) ** -0.5)
+
+
+def dance(graphdef, params, features, motion, key, num_frames: int, controls: dict, prime_BxPxD=None) -> np.ndarray:
+  """Dancers in data space ``[B, T, J, 3]``: :func:`generate` with ``controls`` (``SampleConfig.controls``;
+  clipped to the training range if asked), decoded (with rigid bones and locked feet if asked). A prime
+  phrase comes first, decoded as one with its continuation (root-motion features integrate across the
+  seam)."""
+  drawn = draw_controls(features, controls)
+  z = generate(graphdef, params, motion, key, num_frames=num_frames, prime_BxPxD=prime_BxPxD, **drawn)
+  if prime_BxPxD is not None:
+    z = np.concatenate([prime_BxPxD, np.asarray(z)], axis=1)
+  return np.asarray(features.decode(z, **decoding(controls)))
+
+
+@functools.partial(jax.jit, static_argnames=("graphdef", "pace_lag"))
+def start_stream(graphdef, params, motion, prime_BxPxD=None, *, pace_lag: int | None = None, pace_ref=1.0):
+  """The state of an endless dance (:func:`continue_stream`) before its first frame: conditioned on
+  ``motion`` and, with a prime, after its last frame (teacher forced over the phrase as
+  :func:`generate` primes). ``pace_lag``/``pace_ref``: the governor's lag and the training pace, where
+  the stream will be paced (None: it will not)."""
+  model = nnx.merge(graphdef, params)
+  carry, x0 = _primed(model, motion, prime_BxPxD)
+  return _smooth_start(carry, x0, None if pace_lag is None else (None, pace_lag, pace_ref, None))
+
+
+@functools.partial(jax.jit, static_argnames=_STATIC)
+def continue_stream(
+  graphdef,
+  params,
+  state,
+  key,
+  *,
+  num_frames: int,
+  pi_temperature=1.0,
+  sigma_temperature=1.0,
+  greedy: bool = False,
+  noise_smoothing: float = 0.0,
+  noise_order: int = 2,
+  persistence: float = 0.0,
+  crossfade: float = 0.0,
+  bounds=None,
+  pace: float = 0.0,
+  pace_lag: int = 15,
+  pace_target=None,
+  scale_cap=None,
+):
+  """The next ``num_frames`` of an endless dance: ``(state, normalized frames [B, N, D])``. The same draw
+  as :func:`generate`'s smoothed path (``greedy``: the most likely component's mean), resumable chunk
+  by chunk from :func:`start_stream`'s state; the temperatures may change between chunks."""
+  model = nnx.merge(graphdef, params)
+  if greedy:
+    pi_temperature = sigma_temperature = 0.0
+  controls = _draw_args(pi_temperature, sigma_temperature, persistence, crossfade, scale_cap)
+  pacing = (pace, pace_lag, *pace_target) if pace and pace_target is not None else None
+  return _smooth_scan(model, state, key, num_frames, (noise_smoothing, noise_order), controls, bounds, pacing)

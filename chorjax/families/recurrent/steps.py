@@ -1,0 +1,212 @@
+"""The recurrent family's training: its state and static spec, the teacher-forced loss (and the loss with
+its own outputs fed back, ``train.feedback``), the jitted train and evaluation steps.
+
+The state is a plain pytree ``{params, opt_state, step}``. Randomness comes from
+``fold_in(key(seed), step)`` (``optimizer.step_key``), so a run resumed at step s repeats exactly what the
+uninterrupted run did after s.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+from flax import nnx
+
+from chorjax.config import Config
+from chorjax.families.recurrent.recurrent_model import create_model
+from chorjax.optimizer import create_optimizer, step_key
+
+
+@dataclasses.dataclass(frozen=True)
+class Feedback:
+  """How training feeds the model's own outputs back as inputs (see ``train.feedback``)."""
+
+  mode: str  # "auto" or "scheduled"
+  ground_truth_frames: int
+  condition_frames: int
+  max_fraction: float
+  warmup: int
+  ramp: int
+  draw: str  # "sample" or "mean"
+  pi_temperature: float
+  sigma_temperature: float
+
+  @classmethod
+  def of(cls, cfg: Config) -> Feedback | None:
+    t = cfg.train
+    if t.feedback == "none":
+      return None
+    return cls(
+      t.feedback,
+      t.ground_truth_frames,
+      t.condition_frames,
+      t.feedback_max,
+      t.feedback_warmup,
+      t.feedback_ramp,
+      t.feedback_draw,
+      cfg.sample.pi_temperature,
+      cfg.sample.sigma_temperature,
+    )
+
+
+@dataclasses.dataclass(frozen=True)
+class StepSpec:
+  """What the train step needs besides its arrays; hashable, so it is a static jit argument.
+
+  Attributes:
+    graphdef: the model's static graph (``nnx.split``).
+    tx: the optax optimizer chain.
+    schedule: learning rate as a function of the step (logged).
+    input_noise: std of Gaussian noise added to the inputs (normalized units).
+    dropout: the model's dropout rate (0 = no dropout key is drawn).
+    feedback: own outputs fed back as inputs (None = teacher forcing only).
+  """
+
+  graphdef: Any
+  tx: optax.GradientTransformation
+  schedule: optax.Schedule
+  input_noise: float
+  dropout: float
+  feedback: Feedback | None = None
+
+
+def create_train_state(cfg: Config, dim: int, num_motions: int, basis=None) -> tuple[dict, StepSpec]:
+  """``({params, opt_state, step}, spec)`` for a fresh run of ``cfg`` (the rnn family) on ``dim`` features;
+  ``basis``: the MDN's ``[D, D]`` coordinates where ``model.mdn_basis = "pca"`` (``features.principal_axes``
+  of the training frames)."""
+  model = create_model(cfg.model, dim, num_motions, cfg.train.seed)
+  graphdef, params = nnx.split(model, nnx.Param)
+  params = nnx.to_pure_dict(params)
+  if cfg.model.pca_basis:
+    if basis is None or np.shape(basis) != (dim, dim):
+      raise ValueError(
+        f"model.mdn_basis = 'pca' needs a [{dim}, {dim}] basis, got {basis if basis is None else np.shape(basis)}"
+      )
+    params["head"]["basis"] = jnp.asarray(basis, jnp.float32)
+  tx, schedule = create_optimizer(cfg)
+  state = {"params": params, "opt_state": tx.init(params), "step": jnp.zeros((), jnp.int32)}
+  return state, StepSpec(graphdef, tx, schedule, cfg.train.input_noise, cfg.model.dropout, Feedback.of(cfg))
+
+
+def _loss_fn(params, batch, key, spec: StepSpec, noise=None):
+  """The teacher-forced loss; ``noise``: the input noise as a traced value (vectorized training,
+  where points differ in it), else ``spec.input_noise``."""
+  model = nnx.merge(spec.graphdef, params)
+  x = batch["inputs"]
+  noise_key, dropout_key = jax.random.split(key)
+  if noise is not None:
+    x = x + noise * jax.random.normal(noise_key, x.shape, x.dtype)
+  elif spec.input_noise > 0:
+    x = x + spec.input_noise * jax.random.normal(noise_key, x.shape, x.dtype)
+  out = model(x, batch["motion_ids"], dropout_key if spec.dropout > 0 else None)
+  return model.loss(out, batch["targets"])
+
+
+def feedback_mask(fb: Feedback, key, step, batch: int, frames: int):
+  """``[B, T]`` True where input frame t is the model's own output (never t = 0).
+
+  The schedule ramps from 0 to 1 over ``fb.ramp`` steps after ``fb.warmup``. Auto-conditioning
+  feeds ``condition_frames`` own frames after every ``ground_truth_frames`` real ones, in a sequence
+  chosen with the schedule's probability; scheduled sampling feeds each frame with probability
+  ``max_fraction`` x the schedule.
+  """
+  after = (step - fb.warmup + 1).astype(jnp.float32)
+  ramp = jnp.clip(after / fb.ramp, 0.0, 1.0) if fb.ramp > 0 else (after > 0).astype(jnp.float32)
+  t = jnp.arange(frames)
+  if fb.mode == "auto":
+    own = (t % (fb.ground_truth_frames + fb.condition_frames)) >= fb.ground_truth_frames
+    chosen = jax.random.uniform(key, (batch, 1)) < ramp
+    mask = own[None] & chosen
+  else:
+    mask = jax.random.uniform(key, (batch, frames)) < fb.max_fraction * ramp
+  return mask & (t > 0)[None]
+
+
+def _feedback_loss_fn(params, batch, key, step, spec: StepSpec):
+  """The loss with the model's own outputs fed back as inputs where ``feedback_mask`` says.
+
+  The window runs frame by frame (``model.step``), since an input may be the previous output. What is
+  fed back is a draw at the run's sample temperatures (as generation feeds itself) or the mixture
+  mean, under ``stop_gradient``: a draw has no gradient, and the gradient through hundreds of fed-back
+  frames would be that of a much deeper, unstable network. Dropout drops the units the whole-window call
+  would with the same key (one mask per window and layer).
+  """
+  assert spec.feedback is not None
+  fb, model = spec.feedback, nnx.merge(spec.graphdef, params)
+  x_BxTxD = batch["inputs"]
+  noise_key, mask_key, draw_key = jax.random.split(key, 3)
+  if spec.input_noise > 0:
+    x_BxTxD = x_BxTxD + spec.input_noise * jax.random.normal(noise_key, x_BxTxD.shape, x_BxTxD.dtype)
+  b, t, _ = x_BxTxD.shape
+  mask_BxT = feedback_mask(fb, mask_key, step, b, t)
+  masks = model.core.dropout_masks(jax.random.split(key)[1], b) if spec.dropout > 0 else None  # _loss_fn's key
+
+  def body(c, inputs):
+    carry, prev_BxP = c
+    x_BxD, own_B, k = inputs
+    if fb.draw == "sample":
+      drawn = model.sample(prev_BxP, k, fb.pi_temperature, fb.sigma_temperature)
+    else:
+      drawn = model.mean(prev_BxP)
+    x_in = jnp.where(own_B[:, None], jax.lax.stop_gradient(drawn), x_BxD)
+    carry, out_BxP = model.step(carry, x_in, masks)
+    return (carry, out_BxP), out_BxP
+
+  init = (model.initial_carry(batch["motion_ids"]), jnp.zeros((b, model.num_outputs), x_BxTxD.dtype))
+  xs = (jnp.swapaxes(x_BxTxD, 0, 1), mask_BxT.T, jax.random.split(draw_key, t))
+  _, out_TxBxP = jax.lax.scan(body, init, xs)
+  loss, aux = model.loss(jnp.swapaxes(out_TxBxP, 0, 1), batch["targets"])
+  return loss, {**aux, "feedback": mask_BxT.mean()}
+
+
+def _train_step(state, batch, key, spec: StepSpec, lr_scale=None, noise=None):
+  """One optimizer step. ``lr_scale`` and ``noise`` (traced; vectorized training, see
+  ``families.recurrent.vectorized``): the update scaled by ``lr_scale``, the input noise ``noise`` instead of
+  ``spec.input_noise``."""
+  key = step_key(key, state["step"])
+  if spec.feedback is None:  # teacher forcing: the fused layers over whole windows
+    grad_fn = jax.value_and_grad(_loss_fn, has_aux=True)
+    (loss, aux), grads = grad_fn(state["params"], batch, key, spec, noise)
+  else:
+    grad_fn = jax.value_and_grad(_feedback_loss_fn, has_aux=True)
+    (loss, aux), grads = grad_fn(state["params"], batch, key, state["step"], spec)
+  updates, opt_state = spec.tx.update(grads, state["opt_state"], state["params"])
+  if lr_scale is not None:
+    updates = jax.tree.map(lambda u: u * lr_scale.astype(u.dtype), updates)
+  params = optax.apply_updates(state["params"], updates)
+  metrics = {
+    "loss": loss,
+    **aux,
+    "grad_norm": optax.tree.norm(grads),
+    "param_norm": optax.tree.norm(params),
+    "update_norm": optax.tree.norm(updates),
+    "lr": spec.schedule(state["step"]) * (1.0 if lr_scale is None else lr_scale),
+  }
+  return {"params": params, "opt_state": opt_state, "step": state["step"] + 1}, metrics
+
+
+train_step = functools.partial(jax.jit, static_argnums=3, donate_argnums=0)(_train_step)
+train_step.__doc__ = """``train_step(state, batch, key, spec) -> (state, metrics)``; ``state`` is donated,
+``spec`` (a :class:`chorjax.run.StepSpec`) is static."""
+
+
+def sharded_train_step(parallel):
+  """``train_step`` for a data-parallel run: the batch sharded over the mesh's data axis, the rest
+  replicated."""
+  repl, data = parallel.replicated, parallel.batch_sharding
+  return jax.jit(
+    _train_step, static_argnums=3, donate_argnums=0, in_shardings=(repl, data, repl), out_shardings=(repl, repl)
+  )
+
+
+@functools.partial(jax.jit, static_argnums=2)
+def eval_step(params, batch, graphdef):
+  """The model's loss on ``batch`` (no noise, no dropout)."""
+  model = nnx.merge(graphdef, params)
+  return model.loss(model(batch["inputs"], batch["motion_ids"]), batch["targets"])[0]

@@ -1,0 +1,208 @@
+"""A model family plugs in: a toy family defined only here (its model, train step, draw and stream, and one
+registry call) trains, samples, evaluates and streams through the command line and the Python API, with
+no edit to any other file. The built-in families are asked the same way."""
+
+import dataclasses
+import functools
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+import pytest
+from flax import nnx
+from helpers import tiny_config
+
+import chorjax
+from chorjax import cli
+from chorjax.families import family_of, get, names, register
+from chorjax.families.family import Family
+
+TOY = ["model.family=toy", "train.num_steps=4", "log.tensorboard=false", "train.eval_every=2"]
+
+
+class Drift(nnx.Module):
+  """The toy model: the next frame is the frame plus a learned linear drift."""
+
+  def __init__(self, dim: int, *, rngs: nnx.Rngs):
+    self.drift = nnx.Linear(dim, dim, rngs=rngs)
+
+  def __call__(self, x):
+    return x + 0.1 * self.drift(x)
+
+
+@dataclasses.dataclass(frozen=True)
+class ToySpec:
+  graphdef: object
+  tx: optax.GradientTransformation
+
+
+def _loss(params, batch, graphdef):
+  return jnp.mean((nnx.merge(graphdef, params)(batch["inputs"]) - batch["targets"]) ** 2)
+
+
+@functools.partial(jax.jit, static_argnums=3, donate_argnums=0)
+def toy_step(state, batch, key, spec: ToySpec):
+  loss, grads = jax.value_and_grad(_loss)(state["params"], batch, spec.graphdef)
+  updates, opt_state = spec.tx.update(grads, state["opt_state"], state["params"])
+  new = {"params": optax.apply_updates(state["params"], updates), "opt_state": opt_state, "step": state["step"] + 1}
+  return new, {"loss": loss}
+
+
+@functools.partial(jax.jit, static_argnames=("graphdef", "num_frames"))
+def _roll(graphdef, params, x_BxD, key, *, num_frames: int, sigma):
+  model = nnx.merge(graphdef, params)
+
+  def body(x, k):
+    x = model(x) + 0.05 * sigma * jax.random.normal(k, x.shape)
+    return x, x
+
+  x, xs = jax.lax.scan(body, x_BxD, jax.random.split(key, num_frames))
+  return x, jnp.swapaxes(xs, 0, 1)
+
+
+def start_stream(graphdef, params, motion, prime_BxPxD=None, *, pace_lag=None, pace_ref=1.0):
+  if prime_BxPxD is None:
+    return jnp.zeros((np.shape(motion)[0], params["drift"]["bias"].shape[0]))
+  return jnp.asarray(prime_BxPxD[:, -1])
+
+
+def continue_stream(graphdef, params, state, key, *, num_frames: int, sigma_temperature=1.0, **draw):
+  return _roll(graphdef, params, state, key, num_frames=num_frames, sigma=sigma_temperature)
+
+
+class Toy(Family):
+  name = "toy"
+
+  def build_model(self, cfg, features, num_motions):
+    return Drift(features.dim, rngs=nnx.Rngs(cfg.train.seed))
+
+  def create_state(self, cfg, ds):
+    from chorjax.optimizer import create_optimizer
+
+    graphdef, params = nnx.split(self.build_model(cfg, ds.features, ds.num_motions), nnx.Param)
+    params = nnx.to_pure_dict(params)
+    tx, _ = create_optimizer(cfg)
+    return {"params": params, "opt_state": tx.init(params), "step": jnp.zeros((), jnp.int32)}, ToySpec(graphdef, tx)
+
+  def parts(self, cfg, ds):
+    from chorjax.data.dataset import WindowSampler, eval_windows
+
+    sampler = WindowSampler(ds.train, cfg.data.seq_length, cfg.train.batch_size, cfg.train.seed)
+    val = eval_windows(ds.val, cfg.data.seq_length, cfg.train.val_windows)
+    return toy_step, sampler, val, lambda params, val, spec: _loss(params, val, spec.graphdef)
+
+  def window_loss(self, graphdef, params, windows):
+    return float(_loss(params, windows, graphdef))
+
+  def dance(self, graphdef, params, features, motion, key, num_frames, controls, prime=None):
+    from chorjax.controls import decoding
+
+    x0 = jnp.zeros((np.shape(motion)[0], features.dim)) if prime is None else jnp.asarray(prime[:, -1])
+    _, z = _roll(graphdef, params, x0, key, num_frames=num_frames, sigma=controls["sigma_temperature"])
+    if prime is not None:
+      z = np.concatenate([prime, np.asarray(z)], axis=1)
+    return np.asarray(features.decode(z, **decoding(controls)))
+
+  def stream(self):
+    return start_stream, continue_stream
+
+
+register(Toy())
+
+
+@pytest.fixture(scope="module")
+def toy_run(tmp_path_factory):
+  """The toy family trained through the API (its end sample written)."""
+  workdir = tmp_path_factory.mktemp("toy") / "api"
+  return chorjax.train(tiny_config(*TOY), workdir)
+
+
+def test_a_toy_family_trains_and_samples_through_the_api(toy_run):
+  assert toy_run.family.name == "toy" and toy_run.step == 4
+  assert (toy_run.workdir / "samples" / "sample.csv").is_file()
+  rows = [json.loads(line) for line in (toy_run.workdir / "metrics.jsonl").read_text().splitlines()]
+  assert any("val_loss" in r for r in rows)
+  dance = toy_run.sample(frames=20, seed=1)
+  again = chorjax.load_run(toy_run.workdir).sample(frames=20, seed=1)
+  assert dance.positions.shape == (20, 16, 3) and np.isfinite(dance.positions).all()
+  np.testing.assert_array_equal(dance.positions, again.positions)  # loaded back, the same draw
+  assert not np.allclose(dance.positions, toy_run.sample(frames=20, seed=2).positions)
+
+
+def test_a_toy_family_trains_samples_and_evaluates_through_the_cli(tmp_path, capsys):
+  config = tmp_path / "toy.toml"
+  config.write_text(cli_toml())
+  workdir = tmp_path / "cli"
+  assert cli.main(["train", str(config), *TOY, "--workdir", str(workdir)]) == 0
+  out = tmp_path / "dance.csv"
+  assert cli.main(["sample", str(workdir), "-o", str(out), "--frames", "30", "--sigma-temperature", "0.5"]) == 0
+  assert np.loadtxt(out, delimiter=",").shape == (30, 48)
+  assert cli.main(["eval", str(workdir), "--data", "cmu94", "--frames", "120", "--num", "2"]) == 0
+  metrics = json.loads((workdir / "eval" / "metrics.json").read_text())
+  assert metrics["loss_kind"] == "nll" and np.isfinite(metrics["heldout_loss"])  # its own window loss
+  between = ["inbetween", str(workdir), "--from", "x", "--to", "y", "--frames", "3", "-o", str(tmp_path / "i.csv")]
+  assert cli.main(between) == 2
+  assert "not an in-betweening run" in capsys.readouterr().err
+
+
+def cli_toml() -> str:
+  from chorjax.config import to_toml
+
+  return to_toml(tiny_config())
+
+
+def test_a_toy_family_streams_through_the_api_and_the_live_command(toy_run):
+  from websockets.sync.client import connect
+
+  from chorjax.live import Stream
+  from chorjax.models import motion_weight_vector
+
+  sampling = toy_run.sampling()
+  stream = Stream(toy_run, sampling, motion_weight_vector(toy_run.num_motions), seed=0, chunk=4)
+  frames = np.concatenate([stream.next_chunk() for _ in range(3)])
+  assert frames.shape == (12, 16, 3) and np.isfinite(frames).all()
+  # the command, in a process that registers the toy family as this file does
+  here = Path(__file__).resolve().parent
+  code = "import sys, test_families; from chorjax.cli import main; sys.exit(main(sys.argv[1:]))"
+  env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(here), os.environ.get("PYTHONPATH", "")])}
+  proc = subprocess.Popen(
+    [sys.executable, "-c", code, "live", str(toy_run.workdir), "--port", "0", "--fps", "30"],
+    stdout=subprocess.PIPE,
+    stderr=subprocess.PIPE,
+    text=True,
+    env=env,
+  )
+  try:
+    assert proc.stdout is not None
+    line = proc.stdout.readline()
+    assert line.startswith("serving http://"), (line, proc.stderr.read() if proc.stderr else "")
+    with connect(line.split()[1].replace("http://", "ws://") + "/ws") as ws:
+      assert json.loads(ws.recv())["hello"]["joints"] == 16
+      got = [json.loads(ws.recv()) for _ in range(10)]
+    assert [m["frame"] for m in got] == list(range(got[0]["frame"], got[0]["frame"] + 10))
+    assert all(np.isfinite(m["positions"]).all() for m in got)
+  finally:
+    proc.terminate()
+    proc.wait(timeout=30)
+
+
+def test_the_registry_names_every_family_and_asks_each_what_it_serves():
+  assert {"rnn", "gan", "inbetween", "toy"} <= set(names())
+  assert get("gan").refusal("live") and get("inbetween").refusal("sample") and get("rnn").refusal("sample") is None
+  assert get("toy").refusal("inbetween") and get("toy").refusal("sample") is None
+  assert not get("gan").likelihood and get("rnn").calibrated and not get("toy").calibrated
+  assert family_of(tiny_config("model.family=inbetween")).name == "inbetween"
+  assert family_of({"model": {}}).name == "rnn"  # a config saved before model.family existed
+
+
+def test_an_unknown_family_is_one_line_naming_the_known_ones():
+  from chorjax.errors import UserError
+
+  with pytest.raises(UserError, match=r"'gann' is not one of 'rnn', 'gan', 'inbetween'.*did you mean 'gan'"):
+    tiny_config("model.family=gann")
