@@ -21,12 +21,38 @@ from typing import Any  # noqa: F401  (the inherited fields' annotations name th
 
 import numpy as np  # noqa: F401
 
-from chorjax.config import Config  # noqa: F401
+# What every command does, as functions (the command line calls these and prints what they return).
+from chorjax.calibrate import calibrate_run  # noqa: F401
+from chorjax.calibration_file import CALIBRATED  # noqa: F401
+from chorjax.config import (  # noqa: F401
+  Config,
+  check_sample_control,
+  key_docs,
+  key_help,
+  load_config,
+  to_toml,
+  toml_value,
+)
+from chorjax.controls import FLAGS as CONTROL_SWITCHES  # noqa: F401
+from chorjax.controls import Controls  # noqa: F401
+from chorjax.convert import convert  # noqa: F401
 from chorjax.data import motion as _motion
 from chorjax.data.features import Features  # noqa: F401
 from chorjax.data.motion import Skeleton  # noqa: F401
-from chorjax.errors import UserError
+from chorjax.errors import (
+  Interrupted,  # noqa: F401
+  UserError,
+)
+from chorjax.evaluate import evaluate_to  # noqa: F401
+from chorjax.experiments import compare_to, run_sweep  # noqa: F401
+from chorjax.live import run_live  # noqa: F401
+from chorjax.render.files import plot_file, render  # noqa: F401
+from chorjax.reports import METRIC_KEYS, check_report, metric_lines, takes_table  # noqa: F401
 from chorjax.run import Run as _Run
+from chorjax.runtime import keep_freed_memory  # noqa: F401
+from chorjax.sample import write_inbetween, write_sample  # noqa: F401
+from chorjax.scoring import score_to  # noqa: F401
+from chorjax.training import train_command  # noqa: F401
 
 __all__ = ["Motion", "Player", "Run", "UserError", "load_dataset", "load_run", "read_motion", "score", "train"]
 
@@ -45,45 +71,14 @@ class Motion(_motion.Motion):
     """Writes the motion as ``path``'s suffix says: ``.csv``, ``.npz``, ``.bvh`` (with ``skeleton``, a
     character BVH: the dance on its hierarchy, as ``chorjax sample --skeleton``) or ``.html`` (the player).
     An existing file is not replaced unless ``force``."""
-    from chorjax.data.npz import write_npz
-    from chorjax.render.html import write_player
+    from chorjax.output import check_output, refuse_existing, write_motions
 
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in (".csv", ".npz", ".bvh", ".html"):
-      raise UserError(f"{path}: output must end in .csv, .npz, .bvh or .html")
-    if path.exists() and not force:
-      raise UserError(f"{path}: already exists (use force=True to overwrite)")
+    path, suffix = check_output(path)
+    refuse_existing([path], force, how="force=True")
     if skeleton is not None and suffix != ".bvh":
       raise UserError(f"{path}: a character skeleton is for .bvh output")
-    if suffix == ".csv":
-      from chorjax.data.csv import write_csv
-
-      return write_csv(self, path)
-    if suffix == ".npz":
-      settings = {"name": self.name}
-      return write_npz(
-        path,
-        self.positions[None],
-        fps=self.fps,
-        skeleton=self.skeleton,
-        up_axis=self.up_axis,
-        units=self.units,
-        settings=settings,
-      )
-    if suffix == ".html":
-      return write_player([self], path, title=self.name or "chorjax")
-    return self._write_bvh(path, skeleton)
-
-  def _write_bvh(self, path: Path, skeleton) -> Path:
-    from chorjax.data.bvh import write_bvh
-
-    if skeleton is None:
-      return write_bvh(self, path)
-    from chorjax.data.mapping import to_mpii16
-    from chorjax.data.retarget import write_retargeted
-
-    return write_retargeted(to_mpii16(self), skeleton, path)  # a character BVH file (or a retarget.Character)
+    title = self.name or "chorjax"
+    return write_motions(path, [self], settings={"name": self.name}, character=skeleton, title=title)[0]
 
   def show(self, *others: _motion.Motion, title: str | None = None) -> Player:
     """The HTML player with this motion and ``others`` side by side; shown inline by Jupyter (and kept in
@@ -181,7 +176,6 @@ def train(config, workdir=None, overrides: Sequence[str] | None = None, *, force
   """Trains ``config`` (a TOML path or a loaded ``chorjax.config.Config``; ``overrides``: ``"key=value"``
   strings) in ``workdir`` (default ``runs/<name>``), resuming from its latest checkpoint as ``chorjax
   train`` does, and returns the run at the checkpoint it keeps."""
-  from chorjax.config import load_config
   from chorjax.training import default_workdir, train_and_evaluate
 
   cfg = load_config(config, list(overrides or []))

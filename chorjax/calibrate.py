@@ -245,3 +245,18 @@ def calibrate(
   said = ", ".join(f"{k.replace('_', ' ')} {v:.3f}" for k, v in row[1].items())
   log(f"calibrated: {best} ({said}); wrote {calibration_path(workdir)}")
   return result
+
+
+def calibrate_run(workdir, data=None, *, force: bool = False, noise_order=None, pace=None, **kw) -> dict:
+  """``chorjax calibrate``: :func:`calibrate` (``kw``: ``frames``, ``num``, ``seed``), refused before any draw
+  where the run already has a calibration.json (unless ``force``) or ``noise_order`` / ``pace`` are not what
+  ``[sample]`` allows."""
+  from chorjax.config import check_sample_control
+  from chorjax.output import refuse_existing
+
+  refuse_existing([calibration_path(workdir)], force)
+  if noise_order is not None:
+    check_sample_control("noise_order", noise_order, "--noise-order")
+  if pace is not None:
+    check_sample_control("pace", pace, "--pace")
+  return calibrate(workdir, data, noise_order=noise_order, pace=pace, **kw)

@@ -12,552 +12,153 @@ import os
 import sys
 from pathlib import Path
 
-from chorjax.errors import Interrupted, UserError
-from chorjax.runtime import keep_freed_memory
+from rich.console import Console
+
+from chorjax import api
+from chorjax.api import Interrupted, UserError
 
 
 def _data_info(args) -> int:
-  import numpy as np
-  from rich.console import Console
-  from rich.table import Table
-
-  from chorjax.data.dataset import read_takes
-  from chorjax.data.motion import bone_length_cv
-
-  motions = read_takes(args.inputs)
-  table = Table(title="takes", show_lines=False)
-  for col in (
-    "take",
-    "frames",
-    "joints",
-    "fps",
-    "x range",
-    "y range",
-    "z range",
-    "bone len (mean)",
-    "bone CV median",
-    "bone CV max",
-  ):
-    table.add_column(col, justify="left" if col == "take" else "right")
-  for m in motions:
-    lo, hi = m.positions.min(axis=(0, 1)), m.positions.max(axis=(0, 1))
-    bones = ["-"] * 3  # marker sets (C3D) have no bones
-    if m.skeleton.bones:
-      cv = bone_length_cv(m.positions, m.skeleton) * 100
-      bones = [f"{m.bone_lengths().mean():.4g}", f"{np.median(cv):.2f}%", f"{cv.max():.2f}%"]
-    table.add_row(
-      m.name,
-      str(m.num_frames),
-      str(m.skeleton.num_joints),
-      f"{m.fps:g}",
-      *[f"{lo[i]:.4g}..{hi[i]:.4g}" for i in range(3)],
-      *bones,
-    )
-  Console(width=200).print(table)
+  Console(width=200).print(api.takes_table(args.inputs))
   return 0
 
 
 def _data_plot(args) -> int:
-  from chorjax.data.dataset import read_takes
-  from chorjax.render.plot import plot_trajectories
-
-  motions = read_takes([args.input])
-  if len(motions) != 1:
-    raise UserError(f"{args.input}: holds {len(motions)} takes; plot one file at a time")
-  out = plot_trajectories(motions[0], args.output, split=args.split)
-  print(f"wrote {out}")
+  print(f"wrote {api.plot_file(args.input, args.output, split=args.split)}")
   return 0
 
 
 def _data_check(args) -> int:
-  from rich.console import Console
-  from rich.table import Table
-
-  from chorjax.data.check import check_paths
-
-  reports, config = check_paths(args.inputs, joint_map=args.joint_map, fps=args.fps)
-  table = Table(title="takes", show_lines=False)
-  for col in ("take", "frames", "fps", "seconds", "joints", "up", "units", "bone CV", "held", "jumps"):
-    table.add_column(col, justify="left" if col in ("take", "up", "units", "bone CV") else "right")
-  good = [r for r in reports if not r.fatal]
-  for r in good:
-    row = (r.frames, f"{r.fps:g}", f"{r.duration:.1f}", r.joints, r.up_axis, r.units, r.bone_cv or "-")
-    table.add_row(Path(r.path).name, *map(str, row), str(r.held_frames), str(r.teleports))
-  console = Console(width=200)
-  console.print(table)
-  for r in good:
-    print(f"{r.path}:")
-    print(f"  up axis {r.up_axis}: {r.up_evidence}")
-    print(f"  units {r.units}: {r.units_evidence}")
-    print(f"  skeleton {r.skeleton} ({r.joints} joints), mapped by {r.mapping or '-'}")
-    print(f"  floor under the feet, first -> last second: {r.floor}")
-    for note in r.notes:
-      print(f"  note: {note}")
-  total = sum(r.frames for r in good)
-  seconds = sum(r.duration for r in good)
-  print(f"{len(good)} of {len(reports)} takes readable: {total} frames, {seconds / 60:.1f} minutes")
-  if config:
-    print("config keys for these takes:")
-    for line in config:
-      print(f"  {line}")
-  for r in reports:
-    for line in r.fatal:
-      print(f"chorjax: error: {line}", file=sys.stderr)
-  return 2 if any(r.fatal for r in reports) else 0
+  table, lines, fatal = api.check_report(args.inputs, joint_map=args.joint_map, fps=args.fps)
+  Console(width=200).print(table)
+  print("\n".join(lines))
+  for line in fatal:
+    print(f"chorjax: error: {line}", file=sys.stderr)
+  return 2 if fatal else 0
 
 
 def _data_convert(args) -> int:
-  import numpy as np
-
-  from chorjax.data import transforms
-  from chorjax.data.csv import write_csv
-  from chorjax.data.dataset import read_motions, read_takes, resolve_files, to_rate, to_up_axis
-  from chorjax.data.mapping import map_takes, to_mpii16
-  from chorjax.metrics import body_size
-
-  character = _character(args.skeleton, Path(args.output))
-  motions = [
-    m
-    for spec in args.inputs
-    for f in resolve_files(spec)
-    for m in read_motions(f, fps=args.fps, asf=args.asf, amc_fps=args.amc_fps)
-  ]
-  if args.drop_first_frame:
-    motions = [m.replace(positions=m.positions[1:]) for m in motions]
-  elif not args.keep_rest_frames:
-    from chorjax.data.rest import drop_leading_rests
-
-    motions, note = drop_leading_rests(motions, "--keep-rest-frames")
-    if note:
-      print(note)
-  if args.joints == "mpii16":
-    motions, used = map_takes(motions, args.joint_map)
-    for how in dict.fromkeys(m.describe() for m in used.values()):
-      print(f"joints mapped {how}")
-  if args.like:
-    ref = read_takes([args.like])
-    canon = lambda m: np.asarray(transforms.to_y_up(m.positions, m.up_axis))
-    ref_size = np.mean([body_size(canon(r), r.skeleton) for r in ref])
-    motions = [to_up_axis(m, ref[0].up_axis) for m in motions]
-    motions = [
-      m.replace(positions=m.positions * np.float32(ref_size / body_size(canon(m), m.skeleton)), units=ref[0].units)
-      for m in motions
-    ]
-    # same frame rate, and the same average place of the root (the root is absolute in the features)
-    motions = [to_rate(m, ref[0].fps) for m in motions]
-    ref_root = np.mean([r.positions[:, r.skeleton.root].mean(0) for r in ref], axis=0)
-    motions = [m.replace(positions=m.positions - m.positions[:, m.skeleton.root].mean(0) + ref_root) for m in motions]
-  if args.up_axis:
-    motions = [to_up_axis(m, args.up_axis) for m in motions]
-  if args.scale != 1.0:
-    motions = [m.replace(positions=m.positions * np.float32(args.scale)) for m in motions]
-  out = Path(args.output)
-  if out.suffix.lower() == ".bvh":
-    if len(motions) != 1:
-      raise UserError(f"{out}: one .bvh holds one motion; give one input or an output folder")
-    from chorjax.data.bvh import write_bvh
-    from chorjax.data.retarget import write_retargeted
-
-    _refuse_existing([out], args.force)
-    if character is not None:
-      written = [write_retargeted(to_mpii16(motions[0], args.joint_map), character, out)]
-    else:
-      written = [write_bvh(motions[0], out, exact=not args.rigid)]
-  else:
-    targets = [out / f"{m.name}.csv" for m in motions]
-    _refuse_existing(targets, args.force)
-    written = [write_csv(m, t) for m, t in zip(motions, targets)]
-  for w, m in zip(written, motions):
-    print(f"wrote {w} ({m.num_frames} frames, {m.skeleton.num_joints} joints, {m.fps:g} fps, up {m.up_axis})")
+  options = {k: getattr(args, k) for k in CONVERT_OPTIONS}
+  for path, m in api.convert(args.inputs, args.output, **options):
+    print(f"wrote {path} ({m.num_frames} frames, {m.skeleton.num_joints} joints, {m.fps:g} fps, up {m.up_axis})")
   return 0
+
+
+CONVERT_OPTIONS = (
+  "joints",
+  "joint_map",
+  "like",
+  "up_axis",
+  "scale",
+  "asf",
+  "amc_fps",
+  "fps",
+  "drop_first_frame",
+  "keep_rest_frames",
+  "rigid",
+  "skeleton",
+  "force",
+)
 
 
 def _config_show(args) -> int:
-  from chorjax.config import load_config, to_toml
-
   config, overrides = args.config, list(args.overrides)
   if config and "=" in config and not Path(config).exists():  # only overrides of the defaults
     config, overrides = None, [config, *overrides]
-  print(to_toml(load_config(config, overrides)), end="")
+  print(api.to_toml(api.load_config(config, overrides)), end="")
   return 0
+
+
+def _config_keys(args) -> int:
+  for row in api.key_docs(args.prefix):
+    print(f"{row['key']} = {api.toml_value(row['default'])}\n    {api.key_help(row['key'])}")
+    if args.more and row["more"]:
+      print(f"    {row['more']}")
+  return 0
+
+
+PARALLEL_FLAGS = (
+  ("coordinator", "coordinator_address"),
+  ("num_processes", "num_processes"),
+  ("process_id", "process_id"),
+)
 
 
 def _train(args) -> int:
-  from chorjax.config import load_config
-  from chorjax.training import default_workdir, train_and_evaluate
-
-  overrides = list(args.overrides)
-  if args.distributed:
-    overrides.append("parallel.distributed=true")
-  for flag, key in (
-    ("coordinator", "coordinator_address"),
-    ("num_processes", "num_processes"),
-    ("process_id", "process_id"),
-  ):
-    if getattr(args, flag) is not None:
-      value = getattr(args, flag)
+  overrides = [*args.overrides, *(["parallel.distributed=true"] if args.distributed else [])]
+  for flag, key in PARALLEL_FLAGS:
+    value = getattr(args, flag)
+    if value is not None:
       overrides.append(f"parallel.{key}={value!r}" if isinstance(value, str) else f"parallel.{key}={value}")
-  from chorjax.points import expand_overrides
-
-  overrides, points = expand_overrides(overrides)
-  cfg = load_config(args.config, overrides)
-  workdir = Path(args.workdir) if args.workdir else default_workdir(cfg)
-  if len(points) > 1:
-    return _train_points(args, overrides, points, workdir)
-  from chorjax.parallel import setup_parallel
-
-  parallel = setup_parallel(cfg)
-  summary = train_and_evaluate(cfg, workdir, force=args.force, parallel=parallel)
-  if parallel is not None and not parallel.is_main:
-    print(
-      f"process {parallel.process_index}/{parallel.process_count}: steps {summary['start_step']}->"
-      f"{summary['final_step']}, final train loss {summary.get('final_train_loss', float('nan')):.6g}"
-    )
-    return 0
-  print(
-    f"trained {cfg.name}: steps {summary['start_step']}->{summary['final_step']}"
-    + (f", train loss {summary['final_train_loss']:.4g}" if "final_train_loss" in summary else "")
-    + (f", val loss {summary['final_val_loss']:.4g}" if "final_val_loss" in summary else "")
-    + f", {summary['seconds']:.0f} s; workdir {workdir}"
-  )
-  if "samples" in summary:
-    print(f"sample: {summary['samples']['csv']}\nwatch it: {summary['samples']['html']}")
-  return 0
-
-
-def _train_points(args, overrides, points, workdir: Path) -> int:
-  """`train CONFIG train.seed=[0,1,2]`: the points as one vectorized program, one run directory each
-  (WORKDIR/seed=0, ...)."""
-  from chorjax.config import load_config
-  from chorjax.points import train_vectorized
-
-  tag = lambda p: "-".join(f"{k.split('.')[-1]}={v}" for k, v in p)
-  cfgs = [load_config(args.config, [*overrides, *(f"{k}={v!r}" for k, v in p)]) for p in points]
-  dirs = [workdir / tag(p) for p in points]
-  for d, s in zip(dirs, train_vectorized(cfgs, dirs, force=args.force)):
-    loss = f", train loss {s['final_train_loss']:.4g}" if "final_train_loss" in s else ""
-    val = f", val loss {s['final_val_loss']:.4g}" if "final_val_loss" in s else ""
-    print(f"trained {d.name}: steps {s['start_step']}->{s['final_step']}{loss}{val}; workdir {d}")
+  api.train_command(args.config, overrides, workdir=args.workdir, force=args.force, log=print)
   return 0
 
 
 def _sample(args) -> int:
-  from chorjax.run import load_run
-  from chorjax.sample import sample_dancers
-
   _counts(args, frames=1, num=1)
-  out, _ = _output(args.output, (".csv", ".npz", ".bvh", ".html"))
-  character = _character(args.skeleton, out)
-  run = load_run(args.workdir, args.checkpoint).serving("sample")
-  if character is not None and run.features.skeleton.name != "mpii16":
-    raise UserError(f"--skeleton: {args.workdir} dances on its own skeleton, not the 16 joints it retargets from")
-  run.check_drawn(args.frames * args.num, f"--frames {args.frames} x --num {args.num}")  # before naming 10^7 files
-  paths = _sample_paths(out, args.num)
-  _refuse_existing(paths, args.force)  # the files really written (OUT_k.csv for several dancers)
-  pos, settings = sample_dancers(
-    run, args.frames, args.num, args.seed, args.prime, args.motion, args.mix, _controls(args)
-  )
-  settings["workdir"] = str(args.workdir)
-  f = run.features
-  written = _write_sample(out, paths, pos, run.fps, f.skeleton, f.up_axis, settings, character)
+  draw = {k: getattr(args, k) for k in ("frames", "num", "seed", "prime", "motion", "mix", "checkpoint", "skeleton")}
+  written = api.write_sample(args.workdir, args.output, **draw, controls=_controls(args), force=args.force)
   print("wrote " + ", ".join(map(str, written)))
   return 0
 
 
 def _inbetween(args) -> int:
-  import jax
-
-  from chorjax.run import load_run
-  from chorjax.sample import read_phrase, read_pose
-
-  frames = list(args.frames)
-  if len(frames) == 1:
-    frames *= len(args.to)
-  if len(frames) != len(args.to):
-    raise UserError(
-      f"--frames: give one count for every --to, or one for all ({len(args.to)} --to, {len(frames)} --frames)"
-    )
-  for n in frames:
-    if n < 1:
-      raise UserError(f"--frames {n}: must be at least 1")
   _counts(args, num=1)
-  out, _ = _output(args.output, (".csv", ".npz", ".bvh", ".html"))
-  paths = _sample_paths(out, args.num)
-  _refuse_existing(paths, args.force)
-  run = load_run(args.workdir, args.checkpoint).serving("inbetween")
-  run.check_drawn(sum(frames) * args.num, f"--frames {' '.join(map(str, frames))} x --num {args.num}")
-  data_cfg = run.config.data
-  context = read_phrase(args.from_, run.features, data_cfg, flag="--from")
-  targets = [read_pose(t, run.features, data_cfg) for t in args.to]
-  pieces = run.family.transitions(run, context, targets, frames, jax.random.key(args.seed), args.num)
-  settings = {
-    "workdir": str(args.workdir),
-    "checkpoint_step": run.step,
-    "from": args.from_,
-    "to": list(args.to),
-    "frames": frames,
-    "seed": args.seed,
-  }
-  written = _write_sample(out, paths, pieces, run.fps, run.features.skeleton, run.features.up_axis, settings)
+  kw = {"start": args.from_, "to": args.to, "frames": args.frames, "seed": args.seed, "num": args.num}
+  written = api.write_inbetween(args.workdir, args.output, **kw, checkpoint=args.checkpoint, force=args.force)
   print("wrote " + ", ".join(map(str, written)))
   return 0
 
 
 def _live(args) -> int:
-  from chorjax.live import run_live
-
-  _counts(args, port=0)
-  if args.port > 65535:
-    raise UserError(f"--port {args.port}: must be at most 65535")
-  if args.record:
-    _output(args.record, (".npz",))
-    _refuse_existing([args.record], args.force)
-
-  def ready(line: str) -> None:
-    print(line, flush=True)
-
-  return run_live(
-    args.workdir,
-    host=args.host,
-    port=args.port,
-    fps=args.fps,
-    seed=args.seed,
-    controls=_controls(args),
-    motion=args.motion,
-    mix=args.mix,
-    osc=args.osc,
-    osc_in=args.osc_in,
-    alternate=args.alternate,
-    input_spec=args.input,
-    record=args.record,
-    checkpoint=args.checkpoint,
-    allow_origins=args.allow_origin,
-    on_ready=ready,
-  )
-
-
-# The keys `chorjax metrics` and `chorjax eval` print (every one is in the JSON; see chorjax/scoring.py).
-METRIC_KEYS = (
-  "movement_first",
-  "movement_last",
-  "movement_min",
-  "movement_max",
-  "jitter",
-  "jitter_max",
-  "bone_cv_mean",
-  "bone_cv_max",
-  "root_step_max",
-  "fid_k",
-  "div_k",
-  "fid_g",
-  "div_g",
-  "pfc",
-  "foot_sliding",
-  "airborne",
-  "novelty",
-  "speed",
-  "root_travel",
-)
-
-
-def _print_metrics(result: dict, keys) -> None:
-  from chorjax.scoring import mean_of
-
-  if "segment_frames" in result:
-    print(f"segments of {result['segment_frames']} frames (movement_first/last/min/max, jitter_max)")
-  for k in keys:
-    real = result.get(k + "_real")
-    if result.get(k) is None:
-      print(f"{k:22s} {'-':>10s}   (none: a GAN has no likelihood)" if k == "heldout_loss" else f"{k:22s} -")
-      continue
-    note = f"   (real: {mean_of(real):.4g})" if real is not None else ""
-    if result.get(k + "_train") is not None:  # the training takes against the held-out ones
-      note += f"   (training takes: {mean_of(result[k + '_train']):.4g})"
-    if k == "heldout_loss" and result.get("loss_takes") == "all":
-      note = "   (on the run's own training takes: --data holds no other)"
-    print(f"{k:22s} {mean_of(result[k]):10.4g}{note}")
-
-
-def _output(path, allowed) -> tuple[Path, str]:
-  """The output path and its suffix, checked to be an allowed kind."""
-  out = Path(path)
-  suffix = out.suffix.lower()
-  if suffix not in allowed:
-    raise UserError(f"{out}: output must end in {', '.join(allowed[:-1])} or {allowed[-1]}")
-  return out, suffix
-
-
-def _character(path, out: Path):
-  """The ``--skeleton`` character (read and mapped now, before any long work), or None."""
-  if path is None:
-    return None
-  if out.suffix.lower() != ".bvh":
-    raise UserError(f"--skeleton {path}: retargeting writes BVH; give -o OUT.bvh (not {out.name})")
-  from chorjax.data.retarget import Character
-
-  return Character(path)
-
-
-def _sample_paths(out: Path, num: int) -> list[Path]:
-  """The files a sample of ``num`` dancers writes: OUT itself, or OUT_k per dancer for CSV/BVH."""
-  if num == 1 or out.suffix.lower() in (".npz", ".html"):
-    return [out]
-  return [out.with_name(f"{out.stem}_{k}{out.suffix}") for k in range(num)]
-
-
-def _refuse_existing(paths, force: bool):
-  for p in paths:
-    if Path(p).exists() and not force:
-      raise UserError(f"{p}: already exists (use --force to overwrite)")
-
-
-def _write_sample(out: Path, paths, pos, fps, sk, up, settings, character=None) -> list:
-  from chorjax.data.csv import write_csv
-  from chorjax.data.motion import Motion
-  from chorjax.data.npz import write_npz
-  from chorjax.render.html import write_player
-
-  suffix = out.suffix.lower()
-  if suffix == ".npz":
-    return [write_npz(out, pos, fps=fps, skeleton=sk, up_axis=up, units="data", settings=settings)]
-  if suffix == ".html":
-    ms = [Motion(p, fps, sk, up, name=f"dancer {k}") for k, p in enumerate(pos)]
-    return [write_player(ms, out, title=f"chorjax sample ({settings['workdir']})")]
-  if suffix == ".bvh":
-    from chorjax.data.bvh import write_bvh
-    from chorjax.data.retarget import write_retargeted
-
-    ms = [Motion(p, fps, sk, up, name=out.stem) for p in pos]
-    if character is not None:
-      return [write_retargeted(m, character, path) for m, path in zip(ms, paths)]
-    return [write_bvh(m, path) for m, path in zip(ms, paths)]
-  return [write_csv(p, path) for p, path in zip(pos, paths)]
+  served = {k: getattr(args, k) for k in ("host", "port", "fps", "seed", "motion", "mix", "osc", "osc_in", "alternate")}
+  served |= {"input_spec": args.input, "record": args.record, "checkpoint": args.checkpoint, "force": args.force}
+  ready = lambda line: print(line, flush=True)
+  return api.run_live(args.workdir, **served, controls=_controls(args), allow_origins=args.allow_origin, on_ready=ready)
 
 
 def _render(args) -> int:
-  from chorjax.data.dataset import read_motions, resolve_files
-
   _counts(args, frames=1, every=1, poses=1)
-  if args.poses > MAX_POSES:
-    raise UserError(f"--poses {args.poses}: at most {MAX_POSES} poses in a row")
-  out, suffix = _output(args.output, (".png", ".gif", ".mp4", ".html"))
-  if args.strip and suffix != ".png":
-    raise UserError(f"{out}: --strip draws a PNG")
-  _refuse_existing([out], args.force)
-  motions = [m for spec in args.inputs for f in resolve_files(spec) for m in read_motions(f, fps=args.fps)]
-  if args.frames:
-    motions = [m.replace(positions=m.positions[: args.frames]) for m in motions]
-  if suffix == ".html":
-    from chorjax.render.html import write_player
-
-    written = write_player(motions, out, title=args.title or out.stem, columns=args.columns)
-  elif suffix in (".gif", ".mp4"):
-    from chorjax.render.video import write_animation
-
-    written = write_animation(motions, out, size=_size(args.size))
-  else:
-    if len(motions) > 1:
-      print(f"note: {suffix} shows one motion; rendering {motions[0].name}", file=sys.stderr)
-    if args.strip:
-      from chorjax.render.plot import plot_strip
-
-      written = plot_strip(motions[0], out, every=args.every, poses=args.poses)
-    else:
-      from chorjax.render.plot import plot_trajectories
-
-      written = plot_trajectories(motions[0], out)
-  print(f"wrote {written}")
+  options = {k: getattr(args, k) for k in ("frames", "fps", "size", "columns", "title", "strip", "every", "poses")}
+  warn = lambda line: print(line, file=sys.stderr)
+  print(f"wrote {api.render(args.inputs, args.output, **options, force=args.force, warn=warn)}")
   return 0
 
 
-MAX_SIDE = 7680
-MAX_POSES = 200  # --strip: poses per row (a row of 200 is already wider than any screen)
-
-
-def _size(text: str) -> tuple[int, int]:
-  """``WxH`` -> (W, H), both even and at least 64 (video codecs want even sizes)."""
-  w, _, h = text.lower().partition("x")
-  if not (w.isdigit() and h.isdigit()) or not (64 <= int(w) <= MAX_SIDE and 64 <= int(h) <= MAX_SIDE):
-    raise UserError(
-      f"--size {text}: expected WIDTHxHEIGHT in pixels, e.g. 1280x720 (each side 64 to {MAX_SIDE}, 8K video's width)"
-    )
-  return int(w) // 2 * 2, int(h) // 2 * 2
-
-
 def _eval(args) -> int:
-  from chorjax.evaluate import evaluate, metrics_path, sample_path, write_metrics
-
   _counts(args, frames=2, num=1)
-  out = Path(args.output) if args.output else metrics_path(args.workdir)
-  _refuse_existing([out, sample_path(out)], args.force)
-  result = evaluate(
-    args.workdir,
-    args.data,
-    frames=args.frames,
-    num=args.num,
-    checkpoint=args.checkpoint,
-    seed=args.seed,
-    seeds=args.seeds,
-    **_controls(args),
-  )
-  write_metrics(result, out)
-  _print_metrics(result, ("heldout_loss", *METRIC_KEYS))
+  kw = {k: getattr(args, k) for k in ("frames", "num", "checkpoint", "seed", "seeds")}
+  result, out = api.evaluate_to(args.workdir, args.data, args.output, force=args.force, **kw, **_controls(args))
+  print("\n".join(api.metric_lines(result, ("heldout_loss", *api.METRIC_KEYS))))
   print(f"wrote {out}")
   return 0
 
 
 def _calibrate(args) -> int:
-  from chorjax.calibrate import calibrate, calibration_path
-  from chorjax.config import check_sample_control
-
   _counts(args, frames=60, num=1)
-  _refuse_existing([calibration_path(args.workdir)], args.force)
-  if args.noise_order is not None:
-    check_sample_control("noise_order", args.noise_order, "--noise-order")
-  if args.pace is not None:
-    check_sample_control("pace", args.pace, "--pace")
-  kw = {"noise_order": args.noise_order, "pace": args.pace}
-  calibrate(args.workdir, args.data, frames=args.frames, num=args.num, seed=args.seed, **kw)
+  kw = {k: getattr(args, k) for k in ("frames", "num", "seed", "noise_order", "pace", "force")}
+  api.calibrate_run(args.workdir, args.data, **kw)
   return 0
 
 
 def _metrics(args) -> int:
-  import json
-
-  from chorjax.errors import atomic_write
-  from chorjax.scoring import score_files
-
   _counts(args, window=4, splits=1)
-  for name, most in (("window", 10_000), ("splits", 1_000)):  # beyond: minutes of work that say nothing more
-    if getattr(args, name) > most:
-      raise UserError(f"--{name} {getattr(args, name)}: at most {most}")
-  out = Path(args.output) if args.output else None
+  kw = {"window": args.window, "splits": args.splits, "seed": args.seed}
+  result, out = api.score_to(args.motions, args.data, args.output, force=args.force, **kw)
+  print("\n".join(api.metric_lines(result, api.METRIC_KEYS)))
   if out is not None:
-    _refuse_existing([out], args.force)
-  result = score_files(args.motions, args.data, window=args.window, splits=args.splits, seed=args.seed)
-  _print_metrics(result, METRIC_KEYS)
-  if out is not None:
-    atomic_write(out, lambda p: p.write_text(json.dumps(result, indent=2)))
     print(f"wrote {out}")
   return 0
 
 
 def _sweep(args) -> int:
-  from chorjax.experiments import run_sweep
-
-  workdirs = run_sweep(args.sweep, shard=args.shard)
+  workdirs = api.run_sweep(args.sweep, shard=args.shard)
   print("points: " + " ".join(map(str, workdirs)))
   return 0
 
 
 def _compare(args) -> int:
-  from chorjax.experiments import compare
-
-  stem = Path(args.output).with_suffix("")
-  images = sorted(stem.parent.glob(f"{stem.name}_loss.png")) + sorted(stem.parent.glob(f"{stem.name}_movement.png"))
-  images += sorted(stem.parent.glob(f"{stem.name}_strip*.png"))
-  _refuse_existing([args.output, *images], args.force)  # the report's images are written beside it
-  print(f"wrote {compare(args.workdirs, args.output)}")
+  print(f"wrote {api.compare_to(args.workdirs, args.output, force=args.force)}")
   return 0
 
 
@@ -571,23 +172,14 @@ def _counts(args, **minimum) -> None:
 
 def _controls(args) -> dict:
   """The sampling flags given on the command line, checked as the same keys are in a config file
-  (unset ones are None: the run's config)."""
-  from chorjax.config import SampleConfig, check_sample_control
-
-  numbers = [k for k in SampleConfig.CONTROLS if k not in SampleConfig.FLAGS]
+  (unset ones are None: the run's calibration, then its config)."""
+  numbers = [k for k in api.Controls.names() if k not in api.CONTROL_SWITCHES]
   given = {k: getattr(args, k) for k in numbers}
   for name, value in given.items():
     if value is not None:
-      check_sample_control(name, value, f"--{name.replace('_', '-')}")
-  return {
-    **given,
-    "greedy": True if args.greedy else None,
-    "rigid_bones": args.rigid_bones,
-    "foot_lock": args.foot_lock,
-    "ground": args.ground,
-    "clamp": args.clamp,
-    "clamp_steps": args.clamp_steps,
-  }
+      api.check_sample_control(name, value, f"--{name.replace('_', '-')}")
+  switches = {k: getattr(args, k) for k in api.CONTROL_SWITCHES}
+  return {**given, **switches, "greedy": True if args.greedy else None}
 
 
 def _add_motion_args(p) -> None:
@@ -611,71 +203,36 @@ def _add_checkpoint_args(p) -> None:
   p.add_argument("--force", action="store_true", help="overwrite the output if it exists")
 
 
-# The on/off sampling controls: --FLAG / --no-FLAG (sample, eval).
-SWITCHES = (
-  ("rigid-bones", "decode with the training takes' bone lengths"),
-  ("foot-lock", "canonical runs: feet in contact do not slide"),
-  ("ground", "canonical runs: feet in contact stand on the floor, no floating"),
-  ("clamp", "clip every generated frame to the training features' range"),
-  ("clamp-steps", "clip every frame's change to the training frames' changes"),
+# The numeric sampling controls' flags and metavars; their help comes from the [sample] keys they set.
+SAMPLING_FLAGS = (
+  ("pi_temperature", "T"),
+  ("sigma_temperature", "S"),
+  ("noise_smoothing", "RHO"),
+  ("noise_order", "N"),
+  ("persistence", "P"),
+  ("crossfade", "F"),
+  ("pace", "GAIN"),
+  ("scale_cap", "Q"),
 )
+
+
+def _control_help(name: str) -> str:
+  """A sampling flag's help: its ``[sample]`` key's, and where an unset flag's value comes from."""
+  where = "the run's calibration, else " if name in api.CALIBRATED else "the run's "
+  return f"{api.key_help(f'sample.{name}')} (default: {where}sample.{name})"
 
 
 def _add_sampling_args(p) -> None:
   """Sampling controls shared by `sample` and `eval`; unset ones come from the run's calibration.json
   (`chorjax calibrate`), else its [sample] config."""
-  p.add_argument(
-    "--pi-temperature",
-    type=float,
-    help="mixture-weight temperature, 0 = most likely component (default: the run's sample.pi_temperature)",
-  )
-  p.add_argument(
-    "--sigma-temperature",
-    type=float,
-    help="MDN scale multiplier (default: the run's calibration, else its sample.sigma_temperature)",
-  )
-  p.add_argument("--greedy", action="store_true", help="mean of the most likely component (no noise)")
-  p.add_argument(
-    "--noise-smoothing",
-    type=float,
-    metavar="RHO",
-    help="MDN noise correlated over frames, 0 <= RHO < 1 (default: the run's calibration, else sample.noise_smoothing)",
-  )
-  p.add_argument(
-    "--noise-order",
-    type=int,
-    metavar="N",
-    help="AR(1) filters the MDN noise passes, 1-8 (default: the run's calibration, else sample.noise_order)",
-  )
-  p.add_argument(
-    "--persistence",
-    type=float,
-    help="bonus to the previous frame's mixture component, >= 0 (default: the run's sample.persistence)",
-  )
-  p.add_argument(
-    "--crossfade",
-    type=float,
-    metavar="F",
-    help="MDN component switches glide, the jump decaying by F per frame, 0 <= F < 1 "
-    "(default: the run's sample.crossfade)",
-  )
-  p.add_argument(
-    "--pace",
-    type=float,
-    metavar="GAIN",
-    help="hold the dancer to the training pace: scale temperature x m = (training / own pace)^GAIN, "
-    "persistence x min(m, 1/m)^2, >= 0 (default: the run's calibration, else sample.pace)",
-  )
-  p.add_argument(
-    "--scale-cap",
-    type=float,
-    metavar="Q",
-    help="hold the MDN scales at most at their Q quantile on the training frames, 0 <= Q < 1, 0 = off "
-    "(default: the run's sample.scale_cap)",
-  )
-  for flag, what in SWITCHES:
-    key = flag.replace("-", "_")
-    p.add_argument(f"--{flag}", action=argparse.BooleanOptionalAction, help=f"{what} (default: the run's sample.{key})")
+  for name, metavar in SAMPLING_FLAGS:
+    kind = int if name == "noise_order" else float
+    p.add_argument(f"--{name.replace('_', '-')}", type=kind, metavar=metavar, help=_control_help(name))
+  p.add_argument("--greedy", action="store_true", help=_control_help("greedy"))
+  for name in api.CONTROL_SWITCHES:
+    if name != "greedy":
+      flag = name.replace("_", "-")
+      p.add_argument(f"--{flag}", action=argparse.BooleanOptionalAction, help=_control_help(name))
   p.add_argument("--seed", type=int, default=0, help="sampling seed: the same seed draws the same dance (default 0)")
   _add_checkpoint_args(p)
 
@@ -769,6 +326,10 @@ def _add_data_commands(sub) -> None:
   show.add_argument("config", nargs="?", metavar="CONFIG", help="a TOML config (default: the built-in defaults)")
   show.add_argument("overrides", nargs="*", metavar="KEY=VALUE", help="dotted overrides, e.g. model.cell=gru")
   show.set_defaults(func=_config_show)
+  keys = csub.add_parser("keys", help="every config key with its default and help (PREFIX: a section or key)")
+  keys.add_argument("prefix", nargs="?", default="", metavar="PREFIX", help="e.g. sample or model.cell (default: all)")
+  keys.add_argument("--more", action="store_true", help="also the longer notes some keys carry")
+  keys.set_defaults(func=_config_keys)
 
 
 def _add_run_commands(sub) -> None:
@@ -1174,7 +735,7 @@ def _quiet_closed_loop(hook):
 
 
 def main(argv=None) -> int:
-  keep_freed_memory()  # before the first JAX computation; see chorjax/runtime.py
+  api.keep_freed_memory()  # before the first JAX computation; see chorjax/runtime.py
   if not getattr(sys.unraisablehook, "chorjax", False):
     sys.unraisablehook = _quiet_closed_loop(sys.unraisablehook)
     sys.unraisablehook.chorjax = True  # type: ignore[attr-defined]

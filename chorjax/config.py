@@ -29,12 +29,15 @@ def _field(
   minimum: float | None = None,
   resumable: bool = False,
   below: float | None = None,
+  more: str | None = None,
 ) -> Any:
-  """A config field: its default, help text and checks. ``choices`` of a list field apply to each of its
-  elements; ``resumable`` keys may change when a run is continued without --force (e.g. to train longer);
-  ``below``: an exclusive upper bound."""
+  """A config field: its default, help text (one or two lines: ``chorjax config keys`` and the flags that set
+  it show it) and checks; ``more``: what the docs' reference says besides (the reasoning, the measurements).
+  ``choices`` of a list field apply to each of its elements; ``resumable`` keys may change when a run is
+  continued without --force (e.g. to train longer); ``below``: an exclusive upper bound."""
   meta = {
     "help": help,
+    "more": more,
     "choices": choices if callable(choices) else tuple(choices) if choices else None,
     "minimum": minimum,
     "below": below,
@@ -58,8 +61,11 @@ class DataConfig:
   dataset: str = _field("cmu94", "a bundled dataset name (cmu94), a folder of takes, or one file")
   skeleton: str = _field(
     "mpii16",
-    "joint layout of CSV takes: mpii16, or a skeleton file (FILE.skeleton.json, as `data convert --joints "
-    "native` writes beside each CSV; such a sidecar is found by itself)",
+    "joint layout of CSV takes: mpii16, or a FILE.skeleton.json (a sidecar beside a CSV is found by itself)",
+    more=(
+      "joint layout of CSV takes: mpii16, or a skeleton file (FILE.skeleton.json, as `data convert --joints "
+      "native` writes beside each CSV; such a sidecar is found by itself)"
+    ),
   )
   joints: str = _field(
     "mpii16",
@@ -68,8 +74,11 @@ class DataConfig:
   )
   joint_map: str = _field(
     "",
-    'a TOML file, one `target = "source joint"` line per training joint, for skeletons whose joints '
-    "cannot be placed automatically (default: by family, names, then topology)",
+    "a TOML file mapping each training joint to a source joint, for skeletons that cannot be placed automatically",
+    more=(
+      'a TOML file, one `target = "source joint"` line per training joint, for skeletons whose joints '
+      "cannot be placed automatically (default: by family, names, then topology)"
+    ),
   )
   fps: float = _field(30.0, "frame rate of CSV takes (CSV files do not record it), 1-1000", minimum=1.0, below=1000.5)
   resample_fps: float = _field(
@@ -85,17 +94,23 @@ class DataConfig:
   scale: float = _field(0.01, "multiplies lengths before training (cmu94 units: thigh ~94)", minimum=1e-12)
   representation: str = _field(
     "bone_relative",
-    "features the model sees: per-frame positions (absolute, bone_relative, root_relative), or the root's "
-    "motion plus the pose: canonical (HumanML3D-style: facing frame, joint steps, foot contacts) or "
-    "directions (unit bone directions at the training takes' mean lengths: bones cannot stretch)",
+    "features the model sees: absolute, bone_relative, root_relative, canonical (root motion + pose) or directions",
+    more=(
+      "features the model sees: per-frame positions (absolute, bone_relative, root_relative), or the root's "
+      "motion plus the pose: canonical (HumanML3D-style: facing frame, joint steps, foot contacts) or "
+      "directions (unit bone directions at the training takes' mean lengths: bones cannot stretch)"
+    ),
     choices=("absolute", "bone_relative", "root_relative", "canonical", "directions"),
   )
   seq_length: int = _field(100, "frames per training window (inputs; targets are shifted by one)", minimum=1)
   val_takes: tuple = _field(("auto",), "held-out take names; 'auto' = the last take by name; [] = none")
   keep_rest_frames: bool = _field(
     False,
-    "keep a take's leading rest pose (a converter's arms-out frame 0 and the blend out of it, found by the "
-    "jump it makes: see `chorjax data check`); by default training drops it and says so",
+    "keep a take's leading rest pose (by default training drops it and says so)",
+    more=(
+      "keep a take's leading rest pose (a converter's arms-out frame 0 and the blend out of it, found by "
+      "the jump it makes: see `chorjax data check`); by default training drops it and says so"
+    ),
   )
   augment: tuple = _field(
     (), "training augmentations: 'reverse' (time) and/or 'mirror' (left/right)", choices=("reverse", "mirror")
@@ -106,11 +121,14 @@ class DataConfig:
 class ModelConfig:
   family: str = _field(
     "rnn",
-    "model family: 'rnn' (a recurrent core predicting every next frame through model.head) or 'gan' (an "
-    "LSTM-GAN: a generator turns a noise vector into a whole sequence, a critic tells real from generated; "
-    "configured under [gan]) or 'inbetween' (a transition model that writes the frames between a context "
-    "phrase and a target pose, for `chorjax inbetween`; configured under [inbetween], its recurrent core is "
-    "model.cell, num_layers, hidden_size and forget_bias)",
+    "model family: 'rnn' (recurrent core + head), 'gan' (LSTM-GAN, [gan]) or 'inbetween' (transitions, [inbetween])",
+    more=(
+      "model family: 'rnn' (a recurrent core predicting every next frame through model.head) or 'gan' (an "
+      "LSTM-GAN: a generator turns a noise vector into a whole sequence, a critic tells real from "
+      "generated; configured under [gan]) or 'inbetween' (a transition model that writes the frames between "
+      "a context phrase and a target pose, for `chorjax inbetween`; configured under [inbetween], its "
+      "recurrent core is model.cell, num_layers, hidden_size and forget_bias)"
+    ),
     choices=family_names,
   )
   cell: str = _field("lnlstm", "recurrent cell", choices=("lstm", "lnlstm", "gru"))
@@ -123,10 +141,14 @@ class ModelConfig:
   )
   mdn_basis: str = _field(
     "features",
-    "the coordinates the MDN's diagonal Gaussians live in: 'features' (each normalized feature: a draw's noise "
-    "is independent per feature) or 'pca' (the principal axes of the training frames' features, fixed at the "
-    "start of training and saved with the run: a draw varies the pose along directions the data varies "
-    "together; the likelihood is the same quantity, the basis is a rotation); an MSE head ignores it",
+    "the coordinates of the MDN's diagonal Gaussians: 'features' or 'pca' (the training frames' principal axes)",
+    more=(
+      "the coordinates the MDN's diagonal Gaussians live in: 'features' (each normalized feature: a draw's "
+      "noise is independent per feature) or 'pca' (the principal axes of the training frames' features, "
+      "fixed at the start of training and saved with the run: a draw varies the pose along directions the "
+      "data varies together; the likelihood is the same quantity, the basis is a rotation); an MSE head "
+      "ignores it"
+    ),
     choices=("features", "pca"),
   )
   min_scale: float = _field(1e-3, "floor of MDN scales (normalized units)", minimum=0.0)
@@ -137,10 +159,13 @@ class ModelConfig:
   )
   lstm_kernel: str = _field(
     "fused",
-    "how model.cell = 'lstm' runs over a training window: 'fused' (chorjax's own scan, every backend) or "
-    "'cudnn' (NVIDIA cuDNN through jax.experimental.rnn where JAX runs on a CUDA GPU, the fused scan "
-    "elsewhere: the same parameters, so a run trained on a GPU samples anywhere; not yet timed on a GPU, "
-    "see BENCHMARKS.md)",
+    "how model.cell = 'lstm' runs: 'fused' (every backend) or 'cudnn' (cuDNN on a CUDA GPU, fused elsewhere)",
+    more=(
+      "how model.cell = 'lstm' runs over a training window: 'fused' (chorjax's own scan, every backend) or "
+      "'cudnn' (NVIDIA cuDNN through jax.experimental.rnn where JAX runs on a CUDA GPU, the fused scan "
+      "elsewhere: the same parameters, so a run trained on a GPU samples anywhere; not yet timed on a GPU, "
+      "see BENCHMARKS.md)"
+    ),
     choices=("fused", "cudnn"),
   )
 
@@ -165,9 +190,12 @@ class GanConfig:
   generator_dense: tuple = _field((128,), "the generator's dense ReLU layers between the noise and its LSTM")
   frame_noise: int = _field(
     0,
-    "channels of fresh noise fed to the generator's LSTM at every frame beside the repeated vector (0 = the "
-    "tutorial's generator: one noise vector, repeated; an LSTM driven by a constant input tends to settle "
-    "into one still pose, as in a trial run in experiments/families)",
+    "channels of fresh noise fed to the generator's LSTM at every frame (0 = one repeated noise vector)",
+    more=(
+      "channels of fresh noise fed to the generator's LSTM at every frame beside the repeated vector (0 = "
+      "the tutorial's generator: one noise vector, repeated; an LSTM driven by a constant input tends to "
+      "settle into one still pose, as in a trial run in experiments/families)"
+    ),
     minimum=0,
   )
   generator_layers: int = _field(2, "the generator's stacked recurrent layers", minimum=1)
@@ -178,8 +206,11 @@ class GanConfig:
   cell: str = _field("lstm", "recurrent cell of generator and critic", choices=("lstm", "lnlstm", "gru"))
   loss: str = _field(
     "bce",
-    "adversarial loss: 'bce' (the tutorial's: binary cross-entropy, a non-saturating generator loss) or "
-    "'wgan-gp' (Wasserstein critic with gradient penalty, the stable alternative)",
+    "adversarial loss: 'bce' (binary cross-entropy) or 'wgan-gp' (Wasserstein critic with gradient penalty)",
+    more=(
+      "adversarial loss: 'bce' (the tutorial's: binary cross-entropy, a non-saturating generator loss) or "
+      "'wgan-gp' (Wasserstein critic with gradient penalty, the stable alternative)"
+    ),
     choices=("bce", "wgan-gp"),
   )
   gp_weight: float = _field(10.0, "weight of the gradient penalty (wgan-gp)", minimum=0.0)
@@ -188,12 +219,15 @@ class GanConfig:
   critic_lr: float = _field(1e-4, "critic learning rate (peak, under optim.schedule)", minimum=0.0)
   pose: str = _field(
     "directions",
-    "what the generator writes: 'directions' (every bone's direction, made a unit vector after the "
-    "generator: the positions-only stand-in for quaternions), 'rotations' (every joint's local rotation as "
-    "a quaternion, made unit length, through forward kinematics from the takes' mean rest directions, as "
-    "the tutorial does; chorjax reads BVH/AMC/C3D as positions, so the rotations are the generator's own, "
-    "not the files'), both with data.representation = directions (bones keep the takes' mean lengths), "
-    "or 'features' (the run's data.representation as it is)",
+    "what the generator writes: bone 'directions', joint 'rotations' (quaternions, forward kinematics) or 'features'",
+    more=(
+      "what the generator writes: 'directions' (every bone's direction, made a unit vector after the "
+      "generator: the positions-only stand-in for quaternions), 'rotations' (every joint's local rotation "
+      "as a quaternion, made unit length, through forward kinematics from the takes' mean rest directions, "
+      "as the tutorial does; chorjax reads BVH/AMC/C3D as positions, so the rotations are the generator's "
+      "own, not the files'), both with data.representation = directions (bones keep the takes' mean "
+      "lengths), or 'features' (the run's data.representation as it is)"
+    ),
     choices=("directions", "rotations", "features"),
   )
 
@@ -205,10 +239,13 @@ class InbetweenConfig:
 
   system: str = _field(
     "lstm",
-    "the transition model: 'lstm' (the recurrent core conditioned on the target pose and the time to arrival, "
-    "as in Harvey et al. 2020, writing each frame's deviation from linear interpolation) or 'cvae' (Tang et "
-    "al. 2022: a conditional VAE motion manifold with a mixture-of-experts decoder, trained first, then a "
-    "recurrent transition sampler that writes its latents with the decoder frozen)",
+    "the transition model: 'lstm' (Harvey et al. 2020) or 'cvae' (Tang et al. 2022: a motion manifold and a sampler)",
+    more=(
+      "the transition model: 'lstm' (the recurrent core conditioned on the target pose and the time to "
+      "arrival, as in Harvey et al. 2020, writing each frame's deviation from linear interpolation) or "
+      "'cvae' (Tang et al. 2022: a conditional VAE motion manifold with a mixture-of-experts decoder, "
+      "trained first, then a recurrent transition sampler that writes its latents with the decoder frozen)"
+    ),
     choices=("lstm", "cvae"),
   )
   context: int = _field(10, "frames of the phrase the model sees before a transition", minimum=2)
@@ -220,9 +257,12 @@ class InbetweenConfig:
   decoder_sizes: tuple = _field((256,), "ELU layers of the decoder before its output (which starts at zero)")
   target_noise: float = _field(
     0.5,
-    "lstm: std of the noise added to the target and offset encodings (once per transition, fading over the "
-    "last 5-30 frames before arrival, as Harvey et al.'s z_target); cvae: the sampler's latents are drawn as "
-    "mu + target_noise x sigma x eps. Either way, different seeds write different transitions",
+    "std of the noise on the target (lstm) or of the sampler's latents (cvae): seeds write different transitions",
+    more=(
+      "lstm: std of the noise added to the target and offset encodings (once per transition, fading over "
+      "the last 5-30 frames before arrival, as Harvey et al.'s z_target); cvae: the sampler's latents are "
+      "drawn as mu + target_noise x sigma x eps. Either way, different seeds write different transitions"
+    ),
     minimum=0.0,
   )
   velocity_weight: float = _field(
@@ -245,16 +285,22 @@ class InbetweenConfig:
   )
   kl_weight: float = _field(
     1e-5,
-    "cvae: weight of the KL term of stage 1, beside a reconstruction that is a mean L1 per coordinate in leg "
-    "lengths (about 0.003-0.01): on cmu94, 0.1 and 5e-4 collapsed the posterior (KL under 1 nat, the decoder "
-    "ignoring z); 1e-5 keeps it some 70 nats",
+    "cvae: weight of stage 1's KL term",
+    more=(
+      "cvae: weight of the KL term of stage 1, beside a reconstruction that is a mean L1 per coordinate in "
+      "leg lengths (about 0.003-0.01): on cmu94, 0.1 and 5e-4 collapsed the posterior (KL under 1 nat, the "
+      "decoder ignoring z); 1e-5 keeps it some 70 nats"
+    ),
     minimum=0.0,
   )
   physics_start: int = _field(
     1000,
-    "cvae: the stage-1 step from which the foot-skating and bone-length losses join (their weight ramping from 0 "
-    "to 1 over the rest of stage 1, while the learning rate, decayed to optim.final_lr_ratio, is warmed again "
-    "from 0)",
+    "cvae: the stage-1 step from which the foot-skating and bone-length losses join",
+    more=(
+      "cvae: the stage-1 step from which the foot-skating and bone-length losses join (their weight ramping "
+      "from 0 to 1 over the rest of stage 1, while the learning rate, decayed to optim.final_lr_ratio, is "
+      "warmed again from 0)"
+    ),
     minimum=0,
   )
 
@@ -288,24 +334,33 @@ class TrainConfig:
   val_windows: int = _field(64, "most validation windows evaluated", minimum=1)
   keep: str = _field(
     "last",
-    "the checkpoint that sample, eval, calibrate and live use unless told (--checkpoint kept, their default): "
-    "the last, or the best by validation loss (a small dataset over-fits: its held-out NLL rises late); "
-    "the last where nothing is held out",
+    "the checkpoint sample, eval, calibrate and live use by default: the 'last', or the 'best' by validation loss",
+    more=(
+      "the checkpoint that sample, eval, calibrate and live use unless told (--checkpoint kept, their "
+      "default): the last, or the best by validation loss (a small dataset over-fits: its held-out NLL "
+      "rises late); the last where nothing is held out"
+    ),
     choices=("last", "best"),
     resumable=True,
   )
   calibrate: bool = _field(
     False,
-    "after training, choose the sampling's noise_smoothing, sigma_temperature, persistence, crossfade and "
-    "foot_lock on the training takes (`chorjax calibrate`; the end sample is drawn with them)",
+    "after training, choose the sampling settings on the training takes (`chorjax calibrate`)",
+    more=(
+      "after training, choose the sampling's noise_smoothing, sigma_temperature, persistence, crossfade and "
+      "foot_lock on the training takes (`chorjax calibrate`; the end sample is drawn with them)"
+    ),
     resumable=True,
   )
   feedback: str = _field(
     "none",
-    "against exposure bias, feed the model's own outputs back as inputs during training: 'auto' "
-    "(auto-conditioning, Zhou et al. 2018: ground_truth_frames real frames, then condition_frames own "
-    "ones, repeating) or 'scheduled' (scheduled sampling: each frame is the model's own with probability "
-    "feedback_max x the schedule); 'none' = teacher forcing only",
+    "feed the model's own outputs back in training: 'auto' (auto-conditioning), 'scheduled' or 'none'",
+    more=(
+      "against exposure bias, feed the model's own outputs back as inputs during training: 'auto' (auto- "
+      "conditioning, Zhou et al. 2018: ground_truth_frames real frames, then condition_frames own ones, "
+      "repeating) or 'scheduled' (scheduled sampling: each frame is the model's own with probability "
+      "feedback_max x the schedule); 'none' = teacher forcing only"
+    ),
     choices=("none", "auto", "scheduled"),
   )
   ground_truth_frames: int = _field(5, "auto-conditioning: real input frames per cycle", minimum=1)
@@ -340,117 +395,127 @@ class SampleConfig:
   greedy: bool = _field(False, "take the mean of the most likely component (no noise)")
   noise_smoothing: float = _field(
     0.0,
-    "MDN noise correlated over frames: each frame's standard-normal draw passes two cascaded AR(1) filters "
-    "with this coefficient (unit variance kept), so a full-temperature sample moves smoothly instead of "
-    "trembling; 0 = independent noise per frame",
+    "MDN noise correlated over frames: the coefficient of the noise_order AR(1) filters it passes (0 = white noise)",
+    more=(
+      "each frame's standard-normal draw passes sample.noise_order cascaded AR(1) filters with this "
+      "coefficient (unit variance kept), so a full-temperature sample moves smoothly instead of trembling; "
+      "0 = independent noise per frame"
+    ),
     minimum=0.0,
     below=1.0,
     resumable=True,
   )
   noise_order: int = _field(
     2,
-    "how many AR(1) filters (each with coefficient noise_smoothing) the MDN noise passes, 1-8: two leave "
-    "a tremble in every frame's change (their second difference keeps every frequency) that smoothing harder "
-    "only trades for poses that wander off; four at 0.8 move as fast per frame as two at 0.9 with a third of "
-    "the second difference",
+    "how many AR(1) filters, each with coefficient noise_smoothing, the MDN noise passes",
+    more=(
+      "how many AR(1) filters (each with coefficient noise_smoothing) the MDN noise passes, 1-8: two leave "
+      "a tremble in every frame's change (their second difference keeps every frequency) that smoothing "
+      "harder only trades for poses that wander off; four at 0.8 move as fast per frame as two at 0.9 with "
+      "a third of the second difference"
+    ),
     minimum=1,
     below=MAX_NOISE_ORDER + 1,
     resumable=True,
   )
   persistence: float = _field(
     0.0,
-    "MDN component persistence: added to the log-weight of the component drawn for the previous frame, so "
-    "the dancer does not hop between components every frame (0 = off)",
+    "bonus to the log-weight of the previous frame's mixture component (0 = off)",
+    more=(
+      "MDN component persistence: added to the log-weight of the component drawn for the previous frame, so "
+      "the dancer does not hop between components every frame (0 = off)"
+    ),
     minimum=0.0,
     resumable=True,
   )
   crossfade: float = _field(
     0.0,
-    "MDN component switches glide: the jump between the old and the new component's means is carried "
-    "into the frame and decays by this factor per frame (0 = off; 0.8: mostly gone after 10 frames)",
+    "MDN component switches glide: the jump between the means decays by this factor per frame (0 = off)",
+    more=(
+      "MDN component switches glide: the jump between the old and the new component's means is carried into "
+      "the frame and decays by this factor per frame (0 = off; 0.8: mostly gone after 10 frames)"
+    ),
     minimum=0.0,
     below=1.0,
     resumable=True,
   )
   rigid_bones: bool = _field(
     False,
-    "decode every generated frame with the training takes' mean bone lengths (each bone keeps its "
-    "direction): bones cannot stretch",
+    "decode with the training takes' mean bone lengths: bones cannot stretch",
+    more=(
+      "decode every generated frame with the training takes' mean bone lengths (each bone keeps its "
+      "direction): bones cannot stretch"
+    ),
     resumable=True,
   )
   foot_lock: bool = _field(
     False,
-    "canonical features: a foot the model says is in contact with the floor does not slide; the body "
-    "travels by what its legs do",
+    "canonical runs: a foot in contact with the floor does not slide",
+    more=(
+      "canonical features: a foot the model says is in contact with the floor does not slide; the body "
+      "travels by what its legs do"
+    ),
     resumable=True,
   )
   ground: bool = _field(
     False,
-    "canonical features: a foot the model says is in contact with the floor stands on it (the body is moved "
-    "up or down to the training takes' floor, smoothly, and never faster than the takes' fastest vertical "
-    "root step): no floating, no feet sunk into the floor",
+    "canonical runs: feet in contact with the floor stand on the training floor, no floating",
+    more=(
+      "canonical features: a foot the model says is in contact with the floor stands on it (the body is "
+      "moved up or down to the training takes' floor, smoothly, and never faster than the takes' fastest "
+      "vertical root step): no floating, no feet sunk into the floor"
+    ),
     resumable=True,
   )
   clamp: bool = _field(
     False,
-    "every generated frame is clipped, feature by feature, to the range the training frames span before "
-    "it is fed back: no root speed, pose or joint velocity beyond what the data shows (the model is never "
-    "fed a frame unlike its training inputs)",
+    "clip every generated frame to the training features' range before it is fed back",
+    more=(
+      "every generated frame is clipped, feature by feature, to the range the training frames span before "
+      "it is fed back: no root speed, pose or joint velocity beyond what the data shows (the model is never "
+      "fed a frame unlike its training inputs)"
+    ),
     resumable=True,
   )
   clamp_steps: bool = _field(
     False,
-    "every generated frame's change from the previous one is clipped, feature by feature, to the range of "
-    "the training frames' changes: no pose, height or speed that jumps in one frame further than the data "
-    "ever does (a mixture component that flickers for a frame)",
+    "clip every frame's change from the previous one to the range of the training frames' changes",
+    more=(
+      "every generated frame's change from the previous one is clipped, feature by feature, to the range of "
+      "the training frames' changes: no pose, height or speed that jumps in one frame further than the data "
+      "ever does (a mixture component that flickers for a frame)"
+    ),
     resumable=True,
   )
   pace: float = _field(
     0.0,
-    "MDN pace governor: the scale temperature is multiplied by m = (training pace / the dancer's own pace) to "
-    "this power (within 0.5-2x) and the persistence by min(m, 1/m)^2, the pace being how far the joints move "
-    "relative to the root in half a second, turning included, as the benchmark measures it (runs without "
-    "canonical features: the pose features), averaged over about 5 s: a dancer who slows down gets more "
-    "energy, one who trembles or races gets less, and either lets go of its mixture component sooner (0 = off)",
+    "pace governor gain g: scale temperature x m = (training / own pace)^g in 0.5-2, persistence x min(m, 1/m)^2",
+    more=(
+      "MDN pace governor: the scale temperature is multiplied by m = (training pace / the dancer's own "
+      "pace) to this power (within 0.5-2x) and the persistence by min(m, 1/m)^2, the pace being how far the "
+      "joints move relative to the root in half a second, turning included, as the benchmark measures it "
+      "(runs without canonical features: the pose features), averaged over about 5 s: a dancer who slows "
+      "down gets more energy, one who trembles or races gets less, and either lets go of its mixture "
+      "component sooner (0 = off)"
+    ),
     minimum=0.0,
     resumable=True,
   )
   scale_cap: float = _field(
     0.0,
-    "MDN scale ceiling: every drawn component's scale is held, feature by feature, at most at this quantile "
-    "of the scales the model predicts for its own training frames (teacher forced), e.g. 0.95; a model that "
-    "wanders into a state it is unsure of (scales 4x wider than on its data) then draws a calm frame, not a "
-    "jerky one, and finds its way back (0 = off; needs the run's training data at sampling time)",
+    "hold MDN scales at most at this quantile of the model's own scales on its training frames (0 = off)",
+    more=(
+      "MDN scale ceiling: every drawn component's scale is held, feature by feature, at most at this "
+      "quantile of the scales the model predicts for its own training frames (teacher forced), e.g. 0.95; a "
+      "model that wanders into a state it is unsure of (scales 4x wider than on its data) then draws a calm "
+      "frame, not a jerky one, and finds its way back (0 = off; needs the run's training data at sampling "
+      "time)"
+    ),
     minimum=0.0,
     below=1.0,
     resumable=True,
   )
   seed: int = _field(0, "sampling seed", resumable=True, minimum=0, below=2**32)
-
-  def controls(self, **given) -> dict:
-    """How to draw and decode a dance (``sample.dance``): each of ``CONTROLS`` as given, where given and
-    not None, else this config's."""
-    out = {k: getattr(self, k) if given.get(k) is None else given[k] for k in self.CONTROLS}
-    return {**out, **{k: bool(out[k]) for k in self.FLAGS}}
-
-  FLAGS = ("greedy", "rigid_bones", "foot_lock", "ground", "clamp", "clamp_steps")  # the on/off ones of CONTROLS
-
-  CONTROLS = (
-    "pi_temperature",
-    "sigma_temperature",
-    "greedy",
-    "noise_smoothing",
-    "noise_order",
-    "persistence",
-    "crossfade",
-    "pace",
-    "scale_cap",
-    "rigid_bones",
-    "foot_lock",
-    "ground",
-    "clamp",
-    "clamp_steps",
-  )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -510,6 +575,45 @@ _SECTION_CLASSES = {
   "log": LogConfig,
   "parallel": ParallelConfig,
 }
+
+
+def key_docs(prefix: str = "") -> list[dict]:
+  """Every config key under ``prefix`` (a section, ``sample``, or a key, ``sample.pace``), in schema order:
+  ``{key, default, help, more, choices, minimum, below}``. A prefix that names nothing is a UserError."""
+  rows = []
+  for section, cls in _SECTION_CLASSES.items():
+    defaults = cls()
+    for f in dataclasses.fields(cls):
+      key = f"{section}.{f.name}"
+      if key == prefix or key.startswith(prefix.rstrip(".") + ".") or not prefix:
+        meta = f.metadata
+        rows.append(
+          {
+            "key": key,
+            "default": getattr(defaults, f.name),
+            "help": meta["help"],
+            "more": meta.get("more"),
+            "choices": field_choices(meta),
+            "minimum": meta.get("minimum"),
+            "below": meta.get("below"),
+          }
+        )
+  if not rows:
+    raise UserError(f"{prefix!r}: no such config key or section" + suggest(prefix, [*_SECTION_CLASSES, *valid_keys()]))
+  return rows
+
+
+def key_help(key: str) -> str:
+  """The help of one config key, with its range or choices (what a flag that sets it says)."""
+  row = key_docs(key)[0]
+  bounds = []
+  if row["choices"]:
+    bounds.append("one of " + ", ".join(map(str, row["choices"])))
+  if row["minimum"] is not None:
+    bounds.append(f">= {row['minimum']:g}")
+  if row["below"] is not None:
+    bounds.append(f"< {row['below']:g}")
+  return row["help"] + (f" [{', '.join(bounds)}]" if bounds else "")
 
 
 def valid_keys() -> list[str]:
@@ -731,18 +835,20 @@ def config_diff(a: Config, b: Config, ignore: Sequence[str] = ()) -> list[str]:
   return out
 
 
+def toml_value(v) -> str:
+  """A config value as TOML writes it."""
+  if isinstance(v, bool):
+    return "true" if v else "false"
+  if isinstance(v, str):
+    return json.dumps(v)
+  if isinstance(v, (list, tuple)):
+    return "[" + ", ".join(toml_value(x) for x in v) + "]"
+  return repr(v)
+
+
 def to_toml(cfg: Config) -> str:
   """The resolved config as TOML text (what ``chorjax config show`` prints)."""
-
-  def fmt(v):
-    if isinstance(v, bool):
-      return "true" if v else "false"
-    if isinstance(v, str):
-      return json.dumps(v)
-    if isinstance(v, (list, tuple)):
-      return "[" + ", ".join(fmt(x) for x in v) + "]"
-    return repr(v)
-
+  fmt = toml_value
   lines = [f"name = {fmt(cfg.name)}"]
   for s, body in cfg.to_dict().items():
     if s == "name":

@@ -1,59 +1,205 @@
-"""Sampling controls as the draw and the decoder take them: what ``[sample]``, a run's calibration and the
-flags resolve to (``SampleConfig.controls``), split into the generator's arguments (the training range,
-step limits, pace target and scale ceiling filled in from the run's features) and the decoder's."""
+"""Sampling controls, one typed value from the flags to the draw.
+
+:class:`Controls` holds the fourteen controls of ``[sample]``, resolved in one
+place (:meth:`Controls.resolve`: a flag or keyword given, else the run's calibration, else its ``[sample]``).
+It splits into what the draw uses (:class:`Draw`, with the training range as :class:`Bounds`, the pace
+target as :class:`Pacing` and the scale ceiling filled in from the run's features) and what decoding uses
+(:meth:`Controls.decoding`). ``Draw`` is a pytree: jitted generators take it whole, compiled once per
+value of its static fields (``greedy``, the noise filters, the governor's gain and lag).
+"""
 
 from __future__ import annotations
 
 import dataclasses
+import difflib
+from typing import Any
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from flax import nnx
 
 from chorjax.errors import UserError
 
-
-def decoding(controls: dict) -> dict:
-  """``Features.decode``'s keyword arguments for ``controls`` (``SampleConfig.controls``)."""
-  return {"rigid": controls["rigid_bones"], "lock_feet": controls["foot_lock"], "ground": controls.get("ground", False)}
+FLAGS = ("greedy", "rigid_bones", "foot_lock", "ground", "clamp", "clamp_steps")  # the on/off controls
 
 
-def draw_controls(features, controls: dict) -> dict:
-  """:func:`generate`'s keyword arguments for ``controls`` (``SampleConfig.controls``): the decode-time
-  ones left out, the training range (``clamp``) and pace target (``pace``) filled in from ``features``.
-  Raises UserError if the run cannot do what is asked (checked before generating, not after)."""
-  try:
-    features.check_decode(
-      controls["rigid_bones"],
-      controls["foot_lock"],
-      controls["clamp"],
-      controls["pace"],
-      controls.get("ground", False),
-      controls.get("clamp_steps", False),
+@dataclasses.dataclass(frozen=True)
+class Controls:
+  """How to draw and decode a dance: each field is the ``[sample]`` key of its name (``chorjax config keys
+  sample`` says what each does). A pytree: the numbers are its leaves, the switches and the noise order
+  static."""
+
+  pi_temperature: float
+  sigma_temperature: float
+  greedy: bool
+  noise_smoothing: float
+  noise_order: int
+  persistence: float
+  crossfade: float
+  pace: float
+  scale_cap: float
+  rigid_bones: bool
+  foot_lock: bool
+  ground: bool
+  clamp: bool
+  clamp_steps: bool
+
+  @classmethod
+  def names(cls) -> tuple[str, ...]:
+    return tuple(f.name for f in dataclasses.fields(cls))
+
+  @classmethod
+  def resolve(cls, sample_config, calibrated: dict | None = None, **given) -> Controls:
+    """The controls a draw uses: each one ``given`` (not None), else ``calibrated`` (a run's calibration.json
+    settings), else ``sample_config``'s (a ``SampleConfig``). A name that is no control is a UserError that
+    suggests the closest."""
+    names = cls.names()
+    for name in [*given, *(calibrated or {})]:
+      if name not in names:
+        close = difflib.get_close_matches(name, names, n=1)
+        raise UserError(f"{name!r} is not a sampling control" + (f"; did you mean {close[0]!r}?" if close else ""))
+    given = {**(calibrated or {}), **{k: v for k, v in given.items() if v is not None}}
+    values = {k: given.get(k, getattr(sample_config, k)) for k in names}
+    return cls(**{**values, **{k: bool(values[k]) for k in FLAGS}})
+
+  def replace(self, **changes) -> Controls:
+    return dataclasses.replace(self, **changes)
+
+  def to_dict(self) -> dict:
+    """``{name: value}`` in ``[sample]``'s order (what a sample's settings and an evaluation record)."""
+    return dataclasses.asdict(self)
+
+  def decoding(self) -> dict:
+    """``Features.decode``'s keyword arguments."""
+    return {"rigid": self.rigid_bones, "lock_feet": self.foot_lock, "ground": self.ground}
+
+  def draw(self, features) -> Draw:
+    """What the generator takes: the draw's controls, the training range (``clamp``, ``clamp_steps``), pace
+    target (``pace``) and scale ceiling (``scale_cap``) filled in from ``features``. A UserError if the run
+    cannot do what is asked (checked before generating, not after)."""
+    try:
+      features.check_decode(self.rigid_bones, self.foot_lock, self.clamp, self.pace, self.ground, self.clamp_steps)
+      if self.scale_cap and features.scale_ceiling is None:
+        raise ValueError("scale_cap: the run's scale ceiling was not measured (Run.ranged, controls.with_ceiling)")
+    except ValueError as e:
+      raise UserError(str(e)) from None
+    return Draw(
+      pi_temperature=self.pi_temperature,
+      sigma_temperature=self.sigma_temperature,
+      greedy=self.greedy,
+      noise_smoothing=self.noise_smoothing,
+      noise_order=self.noise_order,
+      persistence=self.persistence,
+      crossfade=self.crossfade,
+      bounds=Bounds.of(features, self.clamp, self.clamp_steps),
+      pace=self.pace,
+      pace_lag=features.pace_lag if self.pace else Draw.pace_lag,
+      pacing=Pacing.of(features) if self.pace else None,
+      scale_cap=features.scale_ceiling if self.scale_cap else None,
     )
-    if controls.get("scale_cap") and features.scale_ceiling is None:
-      raise ValueError("scale_cap: the run's scale ceiling was not measured (Run.ranged, run.with_ceiling)")
-  except ValueError as e:
-    raise UserError(str(e)) from None
-  decoded = ("rigid_bones", "foot_lock", "ground", "clamp", "clamp_steps", "scale_cap")
-  drawn = {k: v for k, v in controls.items() if k not in decoded}
-  if controls.get("scale_cap"):
-    drawn["scale_cap"] = features.scale_ceiling
-  if controls["clamp"]:
-    drawn["bounds"] = tuple(getattr(features, k) for k in features.RANGES)
-  if controls.get("clamp_steps"):
-    span = drawn.get("bounds") or (
-      np.full(features.dim, -np.inf, np.float32),
-      np.full(features.dim, np.inf, np.float32),
-    )
-    drawn["bounds"] = (*span, *(getattr(features, k) for k in features.STEPS))
-  if controls["pace"] and features.pace_joints is not None:  # canonical runs: the judge's measure
-    drawn.update(pace_lag=features.pace_lag, pace_target=(features.pace_joints, features.joint_motion))
-  elif controls["pace"]:  # runs whose training data cannot tell how their joints move
+
+
+jax.tree_util.register_dataclass(
+  Controls,
+  data_fields=["pi_temperature", "sigma_temperature", "persistence", "crossfade"],
+  meta_fields=["noise_smoothing", "noise_order", "pace", "scale_cap", *FLAGS],
+)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Bounds:
+  """Every drawn frame is clipped to ``low``/``high`` ``[D]`` before it is fed back and returned; with
+  ``step_low``/``step_high`` ``[D]``, its change from the previous frame is clipped to those first."""
+
+  low: Any
+  high: Any
+  step_low: Any = None
+  step_high: Any = None
+
+  @classmethod
+  def of(cls, features, clamp: bool, clamp_steps: bool) -> Bounds | None:
+    """The training range (``clamp``) and the training frames' changes (``clamp_steps``) of ``features``."""
+    if not (clamp or clamp_steps):
+      return None
+    if clamp:
+      low, high = (getattr(features, k) for k in features.RANGES)
+    else:
+      low, high = np.full(features.dim, -np.inf, np.float32), np.full(features.dim, np.inf, np.float32)
+    if not clamp_steps:
+      return cls(low, high)
+    return cls(low, high, *(getattr(features, k) for k in features.STEPS))
+
+  def clip(self, x_BxD, previous_BxD=None):
+    """``x`` held to the bounds (the step bounds from ``previous`` first, where there is one)."""
+    if self.step_low is not None and previous_BxD is not None:
+      x_BxD = previous_BxD + jnp.clip(x_BxD - previous_BxD, self.step_low, self.step_high)
+    return jnp.clip(x_BxD, self.low, self.high)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Pacing:
+  """The pace the governor holds a dancer to: ``ref``, the training pace over the lag, in the measure of
+  ``joints`` (the judge's: joints relative to the root, turning included; ``Features.pace_joints``) or,
+  for runs whose training data cannot tell how their joints move, ``weights`` ``[D]`` that average the pose
+  features' change (``Features.pace``)."""
+
+  ref: Any
+  joints: Any = None
+  weights: Any = None
+
+  @classmethod
+  def of(cls, features) -> Pacing:
+    if features.pace_joints is not None:  # canonical runs: the judge's measure
+      return cls(features.pace_joints, joints=features.joint_motion)
     weights = np.zeros(features.dim, np.float32)
     weights[features.pose_channels] = 1.0 / len(features.pose_channels)
-    drawn.update(pace_lag=features.pace_lag, pace_target=(features.pace, weights))
-  return drawn
+    return cls(features.pace, weights=weights)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Draw:
+  """What the frame-by-frame draw takes (``Controls.draw``); defaults: full temperature, white noise, nothing
+  held. ``greedy``, ``noise_smoothing``, ``noise_order``, ``pace`` (the governor's gain) and ``pace_lag``
+  are static: a program is compiled for each value; the rest are traced."""
+
+  pi_temperature: Any = 1.0
+  sigma_temperature: Any = 1.0
+  greedy: bool = dataclasses.field(default=False, metadata={"static": True})
+  noise_smoothing: float = dataclasses.field(default=0.0, metadata={"static": True})
+  noise_order: int = dataclasses.field(default=2, metadata={"static": True})
+  persistence: Any = 0.0
+  crossfade: Any = 0.0
+  bounds: Bounds | None = None
+  pace: float = dataclasses.field(default=0.0, metadata={"static": True})
+  pace_lag: int = dataclasses.field(default=15, metadata={"static": True})
+  pacing: Pacing | None = None
+  scale_cap: Any = None
+
+  def replace(self, **changes) -> Draw:
+    return dataclasses.replace(self, **changes)
+
+  @property
+  def plain(self) -> bool:
+    """No smoothing, persistence, crossfade, governor or scale ceiling: the loop without the draw's state.
+    (Decided before tracing, where persistence and crossfade are still numbers.)"""
+    return bool(
+      self.greedy
+      or (self.noise_smoothing == self.persistence == self.crossfade == self.pace == 0 and self.scale_cap is None)
+    )
+
+  def head_args(self) -> dict:
+    """The MDN draw's keyword arguments (``heads.MDNHead.draw``)."""
+    return {
+      "pi_temperature": self.pi_temperature,
+      "sigma_temperature": self.sigma_temperature,
+      "persistence": self.persistence,
+      "crossfade": self.crossfade,
+      "scale_cap": self.scale_cap,
+    }
 
 
 def scale_ceiling(graphdef, params, train, seq_length: int, quantile: float):
@@ -76,9 +222,9 @@ def scale_ceiling(graphdef, params, train, seq_length: int, quantile: float):
   return np.quantile(np.asarray(scale_NxS), quantile, axis=0).astype(np.float32)
 
 
-def with_ceiling(features, graphdef, params, train, seq_length: int, controls: dict):
-  """``features`` with the scale ceiling that ``controls["scale_cap"]`` asks for (unchanged when off)."""
-  q = controls.get("scale_cap")
+def with_ceiling(features, graphdef, params, train, seq_length: int, controls: Controls):
+  """``features`` with the scale ceiling that ``controls.scale_cap`` asks for (unchanged when off)."""
+  q = controls.scale_cap
   if not q:
     return features
   return dataclasses.replace(features, scale_ceiling=scale_ceiling(graphdef, params, train, seq_length, q))

@@ -10,6 +10,7 @@ import jax
 import numpy as np
 
 from chorjax import scoring
+from chorjax.controls import Controls
 from chorjax.data.dataset import eval_windows
 from chorjax.data.motion import Motion
 from chorjax.data.transforms import to_y_up
@@ -40,7 +41,7 @@ def evaluate(
     seed, seeds: sampling seed(s); with several, ``num`` dancers are drawn with each and all are
       scored together (every key then carries a mean and sd over them).
     window, splits: windows and reference splits of the distribution metrics (``chorjax.scoring``).
-    controls: sampling controls (``SampleConfig.CONTROLS``: temperatures, greedy, noise smoothing,
+    controls: sampling controls (``controls.Controls``: temperatures, greedy, noise smoothing,
       persistence, rigid bones); unset or None: the run's ``[sample]``.
 
   Returns:
@@ -79,9 +80,9 @@ def evaluate(
     "frames": frames,
     "num": num,
     "data": list(data),
-    "sampling": {**sampling, "seed": seed, "seeds": seeds},
+    "sampling": {**sampling.to_dict(), "seed": seed, "seeds": seeds},
     # the first dancer, in data space: write_metrics stores it beside the JSON (compare draws its strip)
-    "first_sample": Motion(decoded[0][0], fps, sk, feats.up_axis, name=f"{Path(workdir).name} seed {seeds[0]}"),
+    "first_sample": Motion(decoded[0][0], fps, sk, feats.up_axis, "data", f"{Path(workdir).name} seed {seeds[0]}"),
     "loss_kind": "none" if not run.family.likelihood else "nll" if run.config.model.head == "mdn" else "mse",
     "heldout_loss": loss,
     "loss_takes": loss_takes,
@@ -89,7 +90,7 @@ def evaluate(
   }
 
 
-def generate_positions(run: Run, train, num: int, frames: int, seed: int, sampling: dict) -> np.ndarray:
+def generate_positions(run: Run, train, num: int, frames: int, seed: int, sampling: Controls) -> np.ndarray:
   """``[num, frames, J, 3]`` data-space positions; dancer k is conditioned on the k-th training take."""
   ids = [run.id_map[m.name] for m in train] or [0]
   motion = np.array([ids[k % len(ids)] for k in range(num)])
@@ -119,23 +120,27 @@ def metrics_path(workdir) -> Path:
 
 def write_metrics(result: dict, path) -> Path:
   """Writes the metrics JSON; an evaluation's first generated dancer goes to ``sample.npz`` beside it."""
-  from chorjax.data.npz import write_npz
+  from chorjax.output import write_motions
 
   result = dict(result)
   first = result.pop("first_sample", None)
   if first is not None:
-    write_npz(
-      sample_path(path),
-      first.positions[None],
-      fps=first.fps,
-      skeleton=first.skeleton,
-      up_axis=first.up_axis,
-      units="data",
-      settings=result["sampling"],
-    )
+    write_motions(sample_path(path), [first], settings=result["sampling"])
   return atomic_write(path, lambda p: p.write_text(json.dumps(result, indent=2)))
 
 
 def sample_path(metrics_json) -> Path:
   """The evaluation's first generated dancer, beside its metrics JSON."""
   return Path(metrics_json).with_name("sample.npz")
+
+
+def evaluate_to(workdir, data, output=None, *, force: bool = False, **kw) -> tuple[dict, Path]:
+  """``chorjax eval``: :func:`evaluate` (``kw``: its arguments and the sampling controls), written to ``output``
+  (default: the run's ``eval/metrics.json``) with its first dancer beside it; neither replaced unless
+  ``force`` (checked before the draw). Returns ``(the result, the JSON written)``."""
+  from chorjax.output import refuse_existing
+
+  out = Path(output) if output else metrics_path(workdir)
+  refuse_existing([out, sample_path(out)], force)
+  result = evaluate(workdir, data, **kw)
+  return result, write_metrics(result, out)

@@ -48,13 +48,14 @@ from pathlib import Path
 
 import numpy as np
 
-from chorjax.config import SampleConfig, load_config, plain_name, suggest, valid_keys
+from chorjax.config import load_config, plain_name, suggest, valid_keys
+from chorjax.controls import Controls
 from chorjax.errors import UserError, atomic_write
 from chorjax.families import family_of
 from chorjax.scoring import mean_of, upgrade
 
 SWEEP_KEYS = {"name", "base", "root", "grid", "set", "eval", "candidates", "vectorize"}
-EVAL_KEYS = {"data", "frames", "num", "seed", "seeds", "splits", "window", *SampleConfig.CONTROLS}
+EVAL_KEYS = {"data", "frames", "num", "seed", "seeds", "splits", "window", *Controls.names()}
 
 
 def _fmt(v) -> str:
@@ -600,3 +601,15 @@ def compare(workdirs, output) -> Path:
   lines += ["## What the models dance", "", *_strips(groups, stem)]
   atomic_write(out, lambda p: p.write_text("\n".join(lines)))
   return out
+
+
+def compare_to(workdirs, output, *, force: bool = False) -> Path:
+  """``chorjax compare``: :func:`compare`, the report and the images written beside it refused where they
+  exist (unless ``force``)."""
+  from chorjax.output import refuse_existing
+
+  stem = Path(output).with_suffix("")
+  images = sorted(stem.parent.glob(f"{stem.name}_loss.png")) + sorted(stem.parent.glob(f"{stem.name}_movement.png"))
+  images += sorted(stem.parent.glob(f"{stem.name}_strip*.png"))
+  refuse_existing([output, *images], force)  # the report's images are written beside it
+  return compare(workdirs, output)

@@ -33,6 +33,7 @@ from __future__ import annotations
 import asyncio
 import collections
 import contextlib
+import dataclasses
 import json
 import math
 import signal
@@ -42,6 +43,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
+from chorjax.controls import Controls
 from chorjax.errors import UserError
 
 AHEAD = 2  # chunks generated ahead of the clock
@@ -61,12 +63,10 @@ class Stream:
     chunk: frames per generated chunk.
   """
 
-  def __init__(self, run, sampling: dict, weights_M, seed: int, chunk: int):
-    from chorjax.controls import decoding, draw_controls
-
+  def __init__(self, run, sampling: Controls, weights_M, seed: int, chunk: int):
     self.run, self.features, self.chunk = run, run.features, chunk
-    self.draw = draw_controls(run.features, sampling)
-    self.decoding = decoding(sampling)
+    self.draw = sampling.draw(run.features)
+    self.decoding = sampling.decoding()
     self.weights = np.asarray(weights_M, np.float32)
     self.key, self.count = jax.random.key(seed), 0
     self.keep = run.config.data.seq_length  # frames a re-prime teacher-forces
@@ -79,8 +79,7 @@ class Stream:
 
   def _started(self, prime_1xPxD):
     start_stream, _ = self.run.family.stream()
-    pace = {"pace_lag": self.draw["pace_lag"], "pace_ref": self.draw["pace_target"][0]} if self.draw["pace"] else {}
-    return start_stream(self.run.graphdef, self.run.params, self.weights[None], prime_1xPxD, **pace)
+    return start_stream(self.run.graphdef, self.run.params, self.weights[None], self.draw, prime_1xPxD)
 
   def next_chunk(self) -> np.ndarray:
     """The next ``chunk`` frames ``[C, J, 3]`` in data space."""
@@ -88,7 +87,7 @@ class Stream:
     key = jax.random.fold_in(self.key, self.count)
     self.count += 1
     self.state, z = continue_stream(
-      self.run.graphdef, self.run.params, self.state, key, num_frames=self.chunk, **self.draw
+      self.run.graphdef, self.run.params, self.state, key, self.draw, num_frames=self.chunk
     )
     z = np.asarray(z[0])
     if self.last is None:
@@ -147,7 +146,7 @@ class Stream:
     given = {"pi_temperature": pi_temperature, "sigma_temperature": sigma_temperature}
     checked = {k: check_sample_control(k, v, f"set {k}") for k, v in given.items() if v is not None}
     weights = None if mix is None else parse_mix(str(mix), self.run.num_motions)
-    self.draw.update(checked)
+    self.draw = self.draw.replace(**checked)
     if weights is not None:
       self.weights = weights
       self._start(np.asarray(self.history) if len(self.history) >= 2 else None)
@@ -176,7 +175,9 @@ class Live:
 
     f, run = self.stream.features, self.stream.run
     sk = f.skeleton
-    settings = {k: v for k, v in self.stream.draw.items() if isinstance(v, int | float | bool)}
+    draw = self.stream.draw
+    scalars = {f.name: getattr(draw, f.name) for f in dataclasses.fields(draw) if f.name != "pace_lag" or draw.pace}
+    settings = {k: v for k, v in scalars.items() if isinstance(v, int | float | bool)}
     return json.dumps(
       {
         "hello": {
@@ -475,28 +476,21 @@ def run_live(
   checkpoint="kept",
   on_ready=print,
   allow_origins=(),
+  force: bool = False,
 ) -> int:
-  """``chorjax live``: loads the run, serves until Ctrl-C, writes the recording; returns 0."""
-  from chorjax.data.npz import write_npz
+  """``chorjax live``: loads the run, serves until Ctrl-C, writes the recording (``record``, an ``.npz`` not
+  replaced unless ``force``); returns 0."""
+  from chorjax.data.motion import Motion
   from chorjax.models import motion_weight_vector
+  from chorjax.output import write_motions
   from chorjax.run import load_run
   from chorjax.sample import read_phrase
 
-  try:
-    import pythonosc  # noqa: F401
-    import websockets  # noqa: F401
-  except ImportError:
-    raise UserError("chorjax live needs the live extra: pip install -e '.[live]'") from None
+  _check_flags(port, record, force, fps, alternate)
   osc_out = host_port(osc, "--osc") if osc else None
   listen = host_port(osc_in, "--osc-in") if osc_in else None
-  if fps is not None and not (math.isfinite(fps) and fps > 0):
-    raise UserError(f"--fps {fps}: must be a finite number above 0")
   if alternate and not (input_spec or listen):
     raise UserError("--alternate: needs an input to alternate with (--input FILE or --osc-in HOST:PORT)")
-  if alternate < 0 or not math.isfinite(alternate):
-    raise UserError(f"--alternate {alternate}: must be a number of seconds >= 0")
-  if record is not None and Path(record).suffix.lower() != ".npz":
-    raise UserError(f"{record}: --record writes an .npz")
   run = load_run(workdir, checkpoint).serving("live")
   sampling = run.sampling(**(controls or {}))
   run = run.ranged(sampling)
@@ -517,7 +511,28 @@ def run_live(
     raise UserError(f"cannot serve on {host}:{port}: {e.strerror or e}") from None
   finally:
     if record is not None and live.sent:
-      f, settings = run.features, {"workdir": str(workdir), "seed": seed, "fps": rate, **sampling}
-      sent = np.stack(live.sent)[None]
-      write_npz(record, sent, fps=rate, skeleton=f.skeleton, up_axis=f.up_axis, units="data", settings=settings)
+      f, settings = run.features, {"workdir": str(workdir), "seed": seed, "fps": rate, **sampling.to_dict()}
+      sent = Motion(np.stack(live.sent), rate, f.skeleton, f.up_axis, units="data")
+      write_motions(Path(record), [sent], settings=settings)
   return 0
+
+
+def _check_flags(port: int, record, force: bool, fps, alternate: float) -> None:
+  """``chorjax live``'s flags checked before anything is loaded: the port, the recording (an ``.npz`` that
+  is not there yet, unless ``force``), the frame rate and the alternation's seconds; and the live extra."""
+  from chorjax.output import check_output, refuse_existing
+
+  if not 0 <= port <= 65535:
+    raise UserError(f"--port {port}: must be at least 0" if port < 0 else f"--port {port}: must be at most 65535")
+  if record is not None:
+    check_output(record, (".npz",))
+    refuse_existing([record], force)
+  try:
+    import pythonosc  # noqa: F401
+    import websockets  # noqa: F401
+  except ImportError:
+    raise UserError("chorjax live needs the live extra: pip install -e '.[live]'") from None
+  if fps is not None and not (math.isfinite(fps) and fps > 0):
+    raise UserError(f"--fps {fps}: must be a finite number above 0")
+  if alternate < 0 or not math.isfinite(alternate):
+    raise UserError(f"--alternate {alternate}: must be a number of seconds >= 0")

@@ -24,7 +24,7 @@ from flax import nnx
 from chorjax import checkpoint as ckpt
 from chorjax.calibration_file import read_calibration
 from chorjax.config import Config, config_from_dict
-from chorjax.controls import with_ceiling
+from chorjax.controls import Controls, with_ceiling
 from chorjax.data.features import Features
 from chorjax.errors import UserError, check_memory
 from chorjax.families import family_of
@@ -108,14 +108,13 @@ class Run:
       raise UserError(f"{self.workdir}: {why}")
     return self
 
-  def sampling(self, **given) -> dict:
+  def sampling(self, **given) -> Controls:
     """Sampling controls: the ones given (not None), else the run's calibration (``chorjax calibrate``),
     else its ``[sample]`` config, as the run's family applies them (a GAN records the frame-by-frame draw's
     controls as off, and reads no calibration)."""
     family = self.family
     calibrated = read_calibration(self.workdir) if self.workdir and family.calibrated else {}
-    controls = self.config.sample.controls(**{**calibrated, **{k: v for k, v in given.items() if v is not None}})
-    return family.controls(controls)
+    return family.controls(Controls.resolve(self.config.sample, calibrated, **given))
 
   def check_drawn(self, frames: int, what: str) -> None:
     """Refuses a draw of ``frames`` frames in all (frames x dancers) that this machine cannot hold: each
@@ -123,7 +122,7 @@ class Run:
     f = self.features
     check_memory(frames * (f.dim + f.skeleton.num_joints * 3) * 8 * 6, what)
 
-  def ranged(self, sampling: dict) -> Run:
+  def ranged(self, sampling: Controls) -> Run:
     """This run with the training range, per-frame changes and pace that ``sampling`` (``clamp``,
     ``clamp_steps``, ``pace``) holds to, the floor ``ground`` stands on, and the scale ceiling of ``scale_cap``
     (measured on the model's training frames). Runs trained before those were recorded get them from their
@@ -131,12 +130,12 @@ class Run:
     trained with."""
     f = self.features
     needs = (
-      (sampling.get("clamp") and f.low is None)
-      or (sampling.get("pace") and (f.pace is None or (f.pace_joints is None and f.joint_motion is not None)))
-      or (sampling.get("ground") and f.floor is None and f.representation == "canonical")
-      or (sampling.get("clamp_steps") and f.step_low is None)
+      (sampling.clamp and f.low is None)
+      or (sampling.pace and (f.pace is None or (f.pace_joints is None and f.joint_motion is not None)))
+      or (sampling.ground and f.floor is None and f.representation == "canonical")
+      or (sampling.clamp_steps and f.step_low is None)
     )
-    if not needs and not sampling.get("scale_cap"):
+    if not needs and not sampling.scale_cap:
       return self
     from chorjax.data.dataset import load_dataset
 

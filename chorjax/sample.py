@@ -78,6 +78,78 @@ def sample_dancers(run, frames: int, num: int, seed: int, prime=None, motion=Non
     "mix": mix,
     "prime": prime,
     "seed": seed,
-    **sampling,
+    **sampling.to_dict(),
   }
   return pos, settings
+
+
+def write_sample(
+  workdir,
+  output,
+  *,
+  frames: int = 1000,
+  num: int = 1,
+  seed: int = 0,
+  prime=None,
+  motion=None,
+  mix=None,
+  controls: dict | None = None,
+  checkpoint="kept",
+  skeleton=None,
+  force: bool = False,
+) -> list:
+  """``chorjax sample``: draws ``num`` dancers of ``frames`` frames from the run in ``workdir`` (see
+  :func:`sample_dancers`) and writes them to ``output`` (``output.write_motions``: CSV, NPZ with the
+  settings, BVH, onto the character ``skeleton`` where given, or HTML). Everything that can be refused is
+  refused before the draw; an existing file is not replaced unless ``force``. Returns the paths written."""
+  from chorjax.output import as_motions, check_output, load_character, output_paths, refuse_existing, write_motions
+  from chorjax.run import load_run
+
+  out, _ = check_output(output)
+  character = load_character(skeleton, out)
+  run = load_run(workdir, checkpoint).serving("sample")
+  if character is not None and run.features.skeleton.name != "mpii16":
+    raise UserError(f"--skeleton: {workdir} dances on its own skeleton, not the 16 joints it retargets from")
+  run.check_drawn(frames * num, f"--frames {frames} x --num {num}")  # before naming 10^7 files
+  refuse_existing(output_paths(out, num), force)  # the files really written (OUT_k.csv for several dancers)
+  pos, settings = sample_dancers(run, frames, num, seed, prime, motion, mix, controls)
+  settings["workdir"] = str(workdir)
+  motions = as_motions(pos, run.fps, run.features.skeleton, run.features.up_axis)
+  return write_motions(out, motions, settings=settings, character=character, title=f"chorjax sample ({workdir})")
+
+
+def write_inbetween(
+  workdir, output, *, start: str, to, frames, seed: int = 0, num: int = 1, checkpoint="kept", force: bool = False
+) -> list:
+  """``chorjax inbetween``: ``num`` pieces of the context phrase ``start`` (``FILE[:START:LEN]``), then for each
+  target pose of ``to`` (``FILE[:FRAME]``) the frames a run of a family that writes transitions puts before
+  it (``frames``: one count for every target, or one for all) and the target; written to ``output`` as
+  :func:`write_sample` writes. Returns the paths written."""
+  from chorjax.output import as_motions, check_output, output_paths, refuse_existing, write_motions
+  from chorjax.run import load_run
+
+  to, frames = list(to), list(frames)
+  if len(frames) == 1:
+    frames *= len(to)
+  if len(frames) != len(to):
+    raise UserError(f"--frames: give one count for every --to, or one for all ({len(to)} --to, {len(frames)} --frames)")
+  for n in frames:
+    if n < 1:
+      raise UserError(f"--frames {n}: must be at least 1")
+  out, _ = check_output(output)
+  refuse_existing(output_paths(out, num), force)
+  run = load_run(workdir, checkpoint).serving("inbetween")
+  run.check_drawn(sum(frames) * num, f"--frames {' '.join(map(str, frames))} x --num {num}")
+  context = read_phrase(start, run.features, run.config.data, flag="--from")
+  targets = [read_pose(t, run.features, run.config.data) for t in to]
+  pieces = run.family.transitions(run, context, targets, frames, jax.random.key(seed), num)
+  settings = {
+    "workdir": str(workdir),
+    "checkpoint_step": run.step,
+    "from": start,
+    "to": to,
+    "frames": frames,
+    "seed": seed,
+  }
+  motions = as_motions(pieces, run.fps, run.features.skeleton, run.features.up_axis)
+  return write_motions(out, motions, settings=settings, title=f"chorjax sample ({workdir})")

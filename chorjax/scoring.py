@@ -48,6 +48,8 @@ Keys (a value, or ``{"mean", "sd"}`` over several motions or reference splits):
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from chorjax import metrics
@@ -72,6 +74,7 @@ def upgrade(result: dict) -> dict:
   """A metrics dict in today's key names (older files named the first and last segment after 1,000 frames)
   and with every sampling control stated (older files lack the ones added since: they were off)."""
   from chorjax.config import SampleConfig
+  from chorjax.controls import Controls
 
   out = dict(result)
   for old, new in (("movement_first_1000", "movement_first"), ("movement_last_1000", "movement_last")):
@@ -79,7 +82,7 @@ def upgrade(result: dict) -> dict:
       out[new] = out.pop(old)
   out.setdefault("segment_frames", 1000)
   if "sampling" in out:
-    out["sampling"] = {**SampleConfig().controls(), **out["sampling"]}
+    out["sampling"] = {**Controls.resolve(SampleConfig()).to_dict(), **out["sampling"]}
   return out
 
 
@@ -385,3 +388,26 @@ def score_motions(motions, reference, **kw) -> dict:
     raise UserError(f"{short[0]}: too short to score (need at least {2 * kw.get('window', 60)} frames)")
   result = score(out, ref, skeleton, fps, **kw)
   return {"motions": [m.name for m in motions], "fps": fps, **result}
+
+
+MOST = {"window": 10_000, "splits": 1_000}  # beyond: minutes of work that say nothing more
+
+
+def score_to(motion_specs, data_specs, output=None, *, force: bool = False, **kw) -> tuple[dict, Path | None]:
+  """``chorjax metrics``: :func:`score_files` (``kw``: ``window``, ``splits``, ``seed``), written as JSON to
+  ``output`` where given (not replaced unless ``force``). Returns ``(the result, the JSON written or None)``."""
+  import json
+
+  from chorjax.errors import atomic_write
+  from chorjax.output import refuse_existing
+
+  for name, most in MOST.items():
+    if kw.get(name, 0) > most:
+      raise UserError(f"--{name} {kw[name]}: at most {most}")
+  out = Path(output) if output else None
+  if out is not None:
+    refuse_existing([out], force)
+  result = score_files(motion_specs, data_specs, **kw)
+  if out is not None:
+    atomic_write(out, lambda p: p.write_text(json.dumps(result, indent=2)))
+  return result, out

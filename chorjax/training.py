@@ -32,7 +32,7 @@ import numpy as np
 from chorjax import checkpoint as ckpt
 from chorjax.calibrate import default_grid
 from chorjax.config import Config, config_diff, config_from_dict, resumable_keys
-from chorjax.controls import with_ceiling
+from chorjax.controls import Controls, with_ceiling
 from chorjax.data.dataset import Dataset, dataset_notes, load_dataset
 from chorjax.errors import Interrupted, UserError, atomic_write
 from chorjax.families import family_of
@@ -384,7 +384,7 @@ def figure_hook(writer, graphdef, host_params, ds: Dataset, cfg: Config):
     n, s, sk = 120, cfg.sample, ds.features.skeleton
     real_id, real_z = (ds.val or ds.train)[0]
     key = jax.random.key(loop.step)
-    params, controls = host_params(loop.state["params"]), s.controls()
+    params, controls = host_params(loop.state["params"]), Controls.resolve(s)
     features = with_ceiling(ds.features, graphdef, params, ds.train, cfg.data.seq_length, controls)
     gen = family_of(cfg).dance(graphdef, params, features, np.array([real_id]), key, n, controls)
     fig, axes = plt.subplots(1, 2, figsize=(10, 3), sharey=True)
@@ -417,15 +417,18 @@ def calibrate_and_sample(workdir: Path, ds: Dataset, cfg: Config) -> dict:
   return write_end_sample(workdir, kept.graphdef, kept.params, ds, cfg, kept.sampling())
 
 
-def write_end_sample(workdir: Path, graphdef, params, ds: Dataset, cfg: Config, controls: dict | None = None) -> dict:
+def write_end_sample(
+  workdir: Path, graphdef, params, ds: Dataset, cfg: Config, controls: Controls | None = None
+) -> dict:
   """``samples/sample.csv`` and ``samples/player.html``: the dance the run ends with, as its family draws it
   (``Family.end_sample``: the generated dancers beside a real take, or an in-betweening piece beside its take)."""
-  from chorjax.data.csv import write_csv
-  from chorjax.render.html import write_player
+  from chorjax.output import as_motions, write_motions
 
-  positions, motions, title = family_of(cfg).end_sample(graphdef, params, ds, cfg, controls or cfg.sample.controls())
-  csv = write_csv(positions, workdir / "samples" / "sample.csv")
-  return {"csv": str(csv), "html": str(write_player(motions, workdir / "samples" / "player.html", title=title))}
+  controls = controls or Controls.resolve(cfg.sample)
+  positions, motions, title = family_of(cfg).end_sample(graphdef, params, ds, cfg, controls)
+  first = as_motions(positions[None], ds.fps, ds.features.skeleton, ds.features.up_axis)
+  csv = write_motions(workdir / "samples" / "sample.csv", first)[0]
+  return {"csv": str(csv), "html": str(write_motions(workdir / "samples" / "player.html", motions, title=title)[0])}
 
 
 # ---------------------------------------------------------------- the driver
@@ -597,3 +600,44 @@ def _train(
   if samples:
     summary["samples"] = samples
   return summary
+
+
+def train_command(config, overrides=(), *, workdir=None, force: bool = False, log=print) -> list[dict]:
+  """``chorjax train``: ``config`` (a TOML path) with ``overrides``; a list for a vectorizable key
+  (``train.seed=[0,1,2]``) trains one run directory a point (``WORKDIR/seed=0`` ...) as one program, else
+  one run (data-parallel over processes where ``[parallel]`` says). ``log`` hears a line a run trained.
+  Returns the runs' summaries (:func:`train_and_evaluate`)."""
+  from chorjax.config import load_config
+  from chorjax.parallel import setup_parallel
+  from chorjax.points import expand_overrides, train_vectorized
+
+  overrides, points = expand_overrides(list(overrides))
+  cfg = load_config(config, overrides)
+  workdir = Path(workdir) if workdir else default_workdir(cfg)
+  if len(points) > 1:
+    tag = lambda p: "-".join(f"{k.split('.')[-1]}={v}" for k, v in p)
+    cfgs = [load_config(config, [*overrides, *(f"{k}={v!r}" for k, v in p)]) for p in points]
+    dirs = [workdir / tag(p) for p in points]
+    summaries = train_vectorized(cfgs, dirs, force=force)
+    for d, s in zip(dirs, summaries):
+      log(f"trained {d.name}: steps {s['start_step']}->{s['final_step']}{_losses(s)}; workdir {d}")
+    return summaries
+  parallel = setup_parallel(cfg)
+  s = train_and_evaluate(cfg, workdir, force=force, parallel=parallel)
+  if parallel is not None and not parallel.is_main:
+    log(
+      f"process {parallel.process_index}/{parallel.process_count}: steps {s['start_step']}->"
+      f"{s['final_step']}, final train loss {s.get('final_train_loss', float('nan')):.6g}"
+    )
+    return [s]
+  steps = f"steps {s['start_step']}->{s['final_step']}"
+  log(f"trained {cfg.name}: {steps}{_losses(s)}, {s['seconds']:.0f} s; workdir {workdir}")
+  if "samples" in s:
+    log(f"sample: {s['samples']['csv']}\nwatch it: {s['samples']['html']}")
+  return [s]
+
+
+def _losses(summary: dict) -> str:
+  """``, train loss X, val loss Y`` of a run's summary (what it has of them)."""
+  train = f", train loss {summary['final_train_loss']:.4g}" if "final_train_loss" in summary else ""
+  return train + (f", val loss {summary['final_val_loss']:.4g}" if "final_val_loss" in summary else "")

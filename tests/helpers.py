@@ -20,6 +20,20 @@ TINY = [
 ]
 
 
+# a tiny LSTM-GAN (model.family = "gan")
+GAN_NETWORKS = [
+  "model.family=gan",
+  "data.representation=directions",
+  "gan.latent_size=8",
+  "gan.generator_dense=[16]",
+  "gan.generator_size=16",
+  "gan.critic_size=16",
+  "gan.critic_dense=[16]",
+  "gan.generator_layers=1",
+  "gan.critic_layers=1",
+]
+
+
 # the quickstart's way of drawing: smoothed noise, persistence, crossfade, clamp, pace, rigid bones, foot lock
 QUICKSTART_SAMPLING = [
   "data.representation=canonical",

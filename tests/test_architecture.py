@@ -155,3 +155,28 @@ def test_no_two_modules_share_a_file_name():
     if p.name != "__init__.py":
       seen.setdefault(p.name, []).append(str(p.relative_to(PACKAGE.parent)))
   assert not {k: v for k, v in seen.items() if len(v) > 1}
+
+
+CLI = PACKAGE / "cli.py"
+MAX_HANDLER_LINES = 15
+
+
+def test_the_command_line_imports_the_api_and_nothing_else_of_chorjax():
+  found = _imports(CLI, set(import_graph()))
+  assert found == {"chorjax.api"} or found == {"chorjax.api", "chorjax"}, found
+
+
+def test_every_command_handler_is_short():
+  """A handler parses, calls one API function and prints: set_defaults(func=...) names each handler."""
+  tree = ast.parse(CLI.read_text())
+  handlers = {
+    kw.value.id
+    for node in ast.walk(tree)
+    if isinstance(node, ast.Call) and getattr(node.func, "attr", None) == "set_defaults"
+    for kw in node.keywords
+    if kw.arg == "func" and isinstance(kw.value, ast.Name)
+  }
+  assert len(handlers) >= 15  # the parser is read
+  functions = {n.name: n for n in tree.body if isinstance(n, ast.FunctionDef)}
+  long = {h: functions[h].end_lineno - functions[h].lineno + 1 for h in handlers}
+  assert not {h: n for h, n in long.items() if n > MAX_HANDLER_LINES}, long

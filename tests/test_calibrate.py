@@ -12,6 +12,7 @@ from helpers import QUICKSTART_SAMPLING, tiny_config
 from chorjax import calibrate, cli
 from chorjax.calibrate import calibration_path, search
 from chorjax.calibration_file import CALIBRATED, chosen_calibration_row
+from chorjax.controls import Draw, Pacing
 from chorjax.data.npz import read_npz
 from chorjax.data.transforms import to_y_up
 from chorjax.errors import UserError
@@ -140,7 +141,7 @@ def test_calibrate_records_the_settings_and_the_run_uses_them_unless_told(run_di
   with np.load(out) as z:  # what the sample was drawn with
     drawn = json.loads(str(z["meta"]))["settings"]
   assert {k: drawn[k] for k in chosen} == chosen  # the run's default now
-  assert load_run(run_dir).sampling(sigma_temperature=0.5)["sigma_temperature"] == 0.5  # a flag still wins
+  assert load_run(run_dir).sampling(sigma_temperature=0.5).sigma_temperature == 0.5  # a flag still wins
   calibration_path(run_dir).write_text("{not json")
   assert cli.main(["sample", str(run_dir), "-o", str(tmp_path / "t.npz"), "--frames", "30"]) == 2
   assert "damaged calibration" in capsys.readouterr().err
@@ -249,11 +250,18 @@ def test_the_governor_holds_what_the_judge_measures_turning_included(run_dir):
   assert f.pace_joints == pytest.approx(np.concatenate([pace_of(x) for x in train]).mean(), rel=1e-5)
   assert any(np.abs(x[:, 0]).max() > 0.01 for x in train)  # the takes turn, so turning counts
   gen = lambda **kw: np.asarray(
-    generate(run.graphdef, run.params, np.arange(4) % 2, jax.random.key(0), num_frames=400, noise_smoothing=0.5, **kw)
+    generate(
+      run.graphdef,
+      run.params,
+      np.arange(4) % 2,
+      jax.random.key(0),
+      num_frames=400,
+      draw=Draw(noise_smoothing=0.5, **kw),
+    )
   )
   settled = lambda z: np.mean([pace_of(d[200:]).mean() for d in z])  # once the running mean settled
   free = settled(gen())
-  held = lambda ref: settled(gen(pace=2.0, pace_lag=lag, pace_target=(ref, m)))
+  held = lambda ref: settled(gen(pace=2.0, pace_lag=lag, pacing=Pacing(ref, joints=m)))
   assert held(0.5 * free) < 0.9 * free < 0.9 * held(2 * free)  # held back, left alone, pushed on
 
 

@@ -15,7 +15,7 @@ import shutil
 from pathlib import Path
 
 import pytest
-from helpers import QUICKSTART_SAMPLING, tiny_config
+from helpers import GAN_NETWORKS, QUICKSTART_SAMPLING, tiny_config
 
 from chorjax import cli
 from chorjax.data.dataset import bundled_path
@@ -30,17 +30,7 @@ QUIET = ["train.num_steps=3", "log.tensorboard=false", "sample.frames=16"]
 FAMILIES = {
   "quickstart": [*QUICKSTART_SAMPLING, "model.mdn_basis=pca", "data.augment=['mirror']", "sample.scale_cap=0.97"],
   "mse": ["model.head=mse", "data.representation=canonical"],
-  "gan": [
-    "model.family=gan",
-    "data.representation=directions",
-    "gan.latent_size=8",
-    "gan.generator_dense=[16]",
-    "gan.generator_size=16",
-    "gan.critic_size=16",
-    "gan.critic_dense=[16]",
-    "gan.generator_layers=1",
-    "gan.critic_layers=1",
-  ],
+  "gan": GAN_NETWORKS,
   "inbetween": [
     "model.family=inbetween",
     "model.num_layers=1",

@@ -66,14 +66,14 @@ def _roll(graphdef, params, x_BxD, key, *, num_frames: int, sigma):
   return x, jnp.swapaxes(xs, 0, 1)
 
 
-def start_stream(graphdef, params, motion, prime_BxPxD=None, *, pace_lag=None, pace_ref=1.0):
+def start_stream(graphdef, params, motion, draw, prime_BxPxD=None):
   if prime_BxPxD is None:
     return jnp.zeros((np.shape(motion)[0], params["drift"]["bias"].shape[0]))
   return jnp.asarray(prime_BxPxD[:, -1])
 
 
-def continue_stream(graphdef, params, state, key, *, num_frames: int, sigma_temperature=1.0, **draw):
-  return _roll(graphdef, params, state, key, num_frames=num_frames, sigma=sigma_temperature)
+def continue_stream(graphdef, params, state, key, draw, *, num_frames: int):
+  return _roll(graphdef, params, state, key, num_frames=num_frames, sigma=draw.sigma_temperature)
 
 
 class Toy(Family):
@@ -101,13 +101,11 @@ class Toy(Family):
     return float(_loss(params, windows, graphdef))
 
   def dance(self, graphdef, params, features, motion, key, num_frames, controls, prime=None):
-    from chorjax.controls import decoding
-
     x0 = jnp.zeros((np.shape(motion)[0], features.dim)) if prime is None else jnp.asarray(prime[:, -1])
-    _, z = _roll(graphdef, params, x0, key, num_frames=num_frames, sigma=controls["sigma_temperature"])
+    _, z = _roll(graphdef, params, x0, key, num_frames=num_frames, sigma=controls.sigma_temperature)
     if prime is not None:
       z = np.concatenate([prime, np.asarray(z)], axis=1)
-    return np.asarray(features.decode(z, **decoding(controls)))
+    return np.asarray(features.decode(z, **controls.decoding()))
 
   def stream(self):
     return start_stream, continue_stream

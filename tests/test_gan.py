@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from flax import nnx
-from helpers import read_events, tiny_config
+from helpers import GAN_NETWORKS, read_events, tiny_config
 
 from chorjax import cli
 from chorjax.config import load_config
@@ -24,15 +24,7 @@ from chorjax.scoring import mean_of
 from chorjax.training import train_and_evaluate
 
 GAN = [
-  "model.family=gan",
-  "data.representation=directions",
-  "gan.latent_size=8",
-  "gan.generator_dense=[16]",
-  "gan.generator_size=16",
-  "gan.critic_size=16",
-  "gan.critic_dense=[16]",
-  "gan.generator_layers=1",
-  "gan.critic_layers=1",
+  *GAN_NETWORKS,
   "gan.generator_lr=3e-3",
   "gan.critic_lr=3e-3",
 ]

@@ -76,7 +76,7 @@ def test_stream_continues_without_jumps_and_takes_steering(live_run):
   take_step = np.linalg.norm(np.diff(phrase[:, 6], axis=0), axis=-1).max()
   assert np.linalg.norm(after[0, 6] - phrase[-1, 6]) < 10 * take_step  # continues where the phrase ends
   stream.set(pi_temperature=0.5, sigma_temperature=0.8, mix="1:0.5,2:0.5")
-  assert stream.draw["pi_temperature"] == 0.5 and stream.weights[1] == 0.5
+  assert stream.draw.pi_temperature == 0.5 and stream.weights[1] == 0.5
   before = stream.last[1]
   assert np.linalg.norm(stream.next_chunk()[0, 6] - before[6]) < 10 * take_step  # a new mix does not jump
   for bad in ({"pi_temperature": -1}, {"sigma_temperature": "hot"}, {"mix": "99:1"}):
@@ -138,15 +138,15 @@ def test_a_stream_draws_its_noise_through_the_quickstarts_four_filters(live_run)
   """The quickstart's noise order (4) in an endless dance: the same seed draws the same frames, another order
   draws others, and a stream may change the order between chunks (its state holds every filter)."""
   run = load_run(live_run)
-  sampling = {**run.sampling(), "noise_order": 4}
+  sampling = run.sampling(noise_order=4)
   run = run.ranged(sampling)
   stream = Stream(run, sampling, motion_weight_vector(run.num_motions), seed=0, chunk=5)
   four = np.concatenate([stream.next_chunk() for _ in range(4)])
   again = Stream(run, sampling, motion_weight_vector(run.num_motions), seed=0, chunk=5)
   np.testing.assert_array_equal(four, np.concatenate([again.next_chunk() for _ in range(4)]))
-  two = Stream(run, {**sampling, "noise_order": 2}, motion_weight_vector(run.num_motions), seed=0, chunk=5)
+  two = Stream(run, sampling.replace(noise_order=2), motion_weight_vector(run.num_motions), seed=0, chunk=5)
   assert not np.allclose(four, np.concatenate([two.next_chunk() for _ in range(4)]))  # the order is used
-  stream.draw["noise_order"] = 2
+  stream.draw = stream.draw.replace(noise_order=2)
   assert np.isfinite(stream.next_chunk()).all()  # the state holds every filter an order may use
 
 

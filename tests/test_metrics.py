@@ -9,7 +9,6 @@ from helpers import TINY
 
 from chorjax import cli
 from chorjax import metrics as M
-from chorjax.cli import METRIC_KEYS
 from chorjax.config import load_config
 from chorjax.data import transforms as tf
 from chorjax.data.csv import read_csv
@@ -17,6 +16,7 @@ from chorjax.data.dataset import bundled_path, load_dataset, read_takes
 from chorjax.data.motion import bone_length_cv
 from chorjax.data.skeletons import MPII16
 from chorjax.evaluate import held_out
+from chorjax.reports import METRIC_KEYS
 from chorjax.scoring import mean_of, score
 
 TAKE = read_csv(bundled_path("cmu94") / "94_05_skeleton_3d.csv")

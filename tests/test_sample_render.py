@@ -15,6 +15,7 @@ from flax import nnx
 from helpers import headless, tiny_config
 
 from chorjax import cli
+from chorjax.controls import Bounds, Draw, Pacing
 from chorjax.data.csv import read_csv
 from chorjax.data.dataset import bundled_path, load_dataset
 from chorjax.data.npz import read_npz
@@ -43,7 +44,9 @@ def loaded(run_dir):
 def test_shapes_seeds_and_greedy(loaded):
   graphdef, params = loaded.graphdef, loaded.params
   w = jnp.tile(as_weights(jnp.array([3]), 10), (4, 1))
-  gen = lambda seed, **kw: np.asarray(generate(graphdef, params, w, jax.random.key(seed), num_frames=50, **kw))
+  gen = lambda seed, **kw: np.asarray(
+    generate(graphdef, params, w, jax.random.key(seed), num_frames=50, draw=Draw(**kw))
+  )
   a, b, c = gen(0), gen(0), gen(1)
   assert a.shape == (4, 50, 48) and np.isfinite(a).all()
   np.testing.assert_array_equal(a, b)
@@ -57,7 +60,7 @@ def test_the_unrolled_loop_draws_what_one_frame_per_iteration_draws(loaded, monk
   w = jnp.tile(as_weights(jnp.array([3]), 10), (4, 1))
   draw = lambda: np.asarray(
     jax.jit(generation._generate.__wrapped__, static_argnames=("graphdef", "num_frames"))(
-      loaded.graphdef, loaded.params, w, jax.random.key(0), num_frames=102
+      loaded.graphdef, loaded.params, w, jax.random.key(0), Draw(), num_frames=102
     )
   )
   unrolled = draw()
@@ -83,7 +86,7 @@ def test_priming_reproduces_the_teacher_forced_states(loaded):
   for a, b in zip(jax.tree.leaves(carry), jax.tree.leaves(forced)):
     np.testing.assert_allclose(a, b, atol=1e-5)
   # and generation continues from that state: greedy continuation equals stepping on from it
-  cont = generate(graphdef, params, w, jax.random.key(0), num_frames=3, prime_BxPxD=prime, greedy=True)
+  cont = generate(graphdef, params, w, jax.random.key(0), num_frames=3, prime_BxPxD=prime, draw=Draw(greedy=True))
   carry = model.initial_carry(w)
   for t in range(30):
     carry, out = model.step(carry, prime[:, t])
@@ -346,7 +349,7 @@ def test_smooth_noise_has_unit_variance_and_is_smooth_and_white_at_zero():
 def test_persistence_and_smoothing_keep_the_default_path_and_make_a_smoother_dance(loaded):
   graphdef, params = loaded.graphdef, loaded.params
   w = jnp.tile(as_weights(jnp.array([3]), 10), (4, 1))
-  gen = lambda **kw: np.asarray(generate(graphdef, params, w, jax.random.key(0), num_frames=300, **kw))
+  gen = lambda **kw: np.asarray(generate(graphdef, params, w, jax.random.key(0), num_frames=300, draw=Draw(**kw)))
   plain = gen(pi_temperature=1.0, sigma_temperature=1.0)
   np.testing.assert_array_equal(plain, gen(pi_temperature=1.0, sigma_temperature=1.0, noise_smoothing=0.0))
   smooth = gen(pi_temperature=1.0, sigma_temperature=1.0, noise_smoothing=0.9, persistence=4.0)
@@ -393,18 +396,20 @@ def test_clamp_keeps_every_frame_in_the_training_range(loaded, run_dir, tmp_path
   np.testing.assert_array_equal(f.high, every.max(0))
   w = jnp.tile(as_weights(jnp.array([3]), 10), (4, 1))
   wide = {"pi_temperature": 1.0, "sigma_temperature": 3.0, "noise_smoothing": 0.5}
-  gen = lambda **kw: np.asarray(generate(loaded.graphdef, loaded.params, w, jax.random.key(0), num_frames=200, **kw))
-  free, held = gen(**wide), gen(**wide, bounds=(f.low, f.high))
+  gen = lambda **kw: np.asarray(
+    generate(loaded.graphdef, loaded.params, w, jax.random.key(0), num_frames=200, draw=Draw(**kw))
+  )
+  free, held = gen(**wide), gen(**wide, bounds=Bounds(f.low, f.high))
   assert ((free < f.low) | (free > f.high)).any()  # a wide draw leaves the range ...
   assert ((held >= f.low) & (held <= f.high)).all()  # ... the clamped one never does
   assert np.isfinite(held).all() and not np.allclose(held[0], held[1])
   # a run trained before the range was recorded gets it from its own training data ...
   old = dataclasses.replace(loaded, features=dataclasses.replace(f, **dict.fromkeys(f.RANGES)))
-  assert old.ranged({"clamp": False}) is old
-  np.testing.assert_array_equal(old.ranged({"clamp": True}).features.low, f.low)
+  assert old.ranged(old.sampling(clamp=False)) is old
+  np.testing.assert_array_equal(old.ranged(old.sampling(clamp=True)).features.low, f.low)
   with pytest.raises(UserError, match=r"needs a training range or pace .*changed"):  # ... unless that data changed
     dataclasses.replace(old, features=dataclasses.replace(old.features, mean=old.features.mean + 1)).ranged(
-      {"clamp": True}
+      old.sampling(clamp=True)
     )
   controls = loaded.sampling(clamp=True)
   with pytest.raises(UserError, match="no training range"):
@@ -417,8 +422,6 @@ def test_clamp_keeps_every_frame_in_the_training_range(loaded, run_dir, tmp_path
 def test_clamp_steps_holds_every_change_to_the_training_changes(loaded, run_dir, tmp_path):
   import dataclasses
 
-  from chorjax.controls import draw_controls
-
   f = loaded.features
   train = [x for _, x in load_dataset(loaded.config.data).train]
   steps = np.concatenate([np.diff(x, axis=0) for x in train])
@@ -426,11 +429,13 @@ def test_clamp_steps_holds_every_change_to_the_training_changes(loaded, run_dir,
   np.testing.assert_array_equal(f.step_high, steps.max(0))
   w = jnp.tile(as_weights(jnp.array([3]), 10), (4, 1))
   wide = {"pi_temperature": 1.0, "sigma_temperature": 3.0, "noise_smoothing": 0.5}
-  gen = lambda **kw: np.asarray(generate(loaded.graphdef, loaded.params, w, jax.random.key(0), num_frames=200, **kw))
+  gen = lambda **kw: np.asarray(
+    generate(loaded.graphdef, loaded.params, w, jax.random.key(0), num_frames=200, draw=Draw(**kw))
+  )
   controls = loaded.sampling(clamp=True, clamp_steps=True)
-  bounds = draw_controls(f, controls)["bounds"]
-  assert len(bounds) == 4
-  free, held = gen(**wide, bounds=bounds[:2]), gen(**wide, bounds=bounds)
+  bounds = controls.draw(f).bounds
+  assert bounds is not None and bounds.step_low is not None
+  free, held = gen(**wide, bounds=Bounds(bounds.low, bounds.high)), gen(**wide, bounds=bounds)
   change = lambda z: np.diff(z, axis=1)
   tol = 1e-5
   assert ((change(free) < f.step_low - tol) | (change(free) > f.step_high + tol)).any()  # a wide draw jumps ...
@@ -438,7 +443,7 @@ def test_clamp_steps_holds_every_change_to_the_training_changes(loaded, run_dir,
   assert ((held >= f.low) & (held <= f.high)).all() and np.abs(change(held)).mean() > 0  # in range, still moving
   # a run that records no steps measures them on its training takes
   old = dataclasses.replace(loaded, features=dataclasses.replace(f, **dict.fromkeys(f.STEPS)))
-  np.testing.assert_array_equal(old.ranged({"clamp_steps": True}).features.step_high, f.step_high)
+  np.testing.assert_array_equal(old.ranged(old.sampling(clamp_steps=True)).features.step_high, f.step_high)
   out = tmp_path / "s.npz"
   assert cli.main(["sample", str(run_dir), "-o", str(out), "--frames", "100", "--clamp-steps"]) == 0
   assert json.loads(str(np.load(out)["meta"]))["settings"]["clamp_steps"] is True
@@ -457,10 +462,12 @@ def test_pace_governor_drives_the_dancer_towards_the_training_pace(loaded, run_d
   base = {"pi_temperature": 1.0, "sigma_temperature": 1.0, "noise_smoothing": 0.5, "pace_lag": lag}
   weights = np.zeros(f.dim, np.float32)
   weights[pose] = 1 / len(pose)
-  gen = lambda **kw: np.asarray(generate(loaded.graphdef, loaded.params, w, jax.random.key(0), num_frames=400, **kw))
+  gen = lambda **kw: np.asarray(
+    generate(loaded.graphdef, loaded.params, w, jax.random.key(0), num_frames=400, draw=Draw(**kw))
+  )
   pace_of = lambda z: np.abs(z[:, 200 + lag :, pose] - z[:, 200:-lag, pose]).mean()  # once the running mean settled
   free = gen(**base)
-  held = lambda ref: gen(**base, pace=2.0, pace_target=(ref, weights))
+  held = lambda ref: gen(**base, pace=2.0, pacing=Pacing(ref, weights=weights))
   slow, fast = held(0.5 * pace_of(free)), held(2 * pace_of(free))
   assert pace_of(slow) < 0.9 * pace_of(free) < 0.9 * pace_of(fast)  # held back, left alone, pushed on
   assert np.isfinite(fast).all()
@@ -494,7 +501,9 @@ def test_scale_cap_holds_draws_to_the_scales_the_model_predicts_on_its_data(load
   assert isinstance(model.head, MDNHead) and (high >= model.head.min_scale).all()
   w = jnp.tile(as_weights(jnp.array([3]), 10), (4, 1))
   base = {"pi_temperature": 1.0, "sigma_temperature": 1.0, "noise_smoothing": 0.5}
-  gen = lambda **kw: np.asarray(generate(loaded.graphdef, loaded.params, w, jax.random.key(0), num_frames=300, **kw))
+  gen = lambda **kw: np.asarray(
+    generate(loaded.graphdef, loaded.params, w, jax.random.key(0), num_frames=300, draw=Draw(**kw))
+  )
   free = gen(**base)
   np.testing.assert_array_equal(gen(**base, scale_cap=np.full(low.shape, np.inf, np.float32)), free)  # no cap: same
   tight = gen(**base, scale_cap=np.full(low.shape, 1e-3, np.float32))  # draws at the component means

@@ -93,7 +93,7 @@ def test_points_trained_together_are_calibrated_as_each_would_be_alone(tmp_path,
     assert len(saved["table"]) == 2 and set(saved["settings"]) == {*calibrate.GRID, *calibrate.RECORDED}
     assert saved["settings"]["noise_order"] == cfgs[k].sample.noise_order  # the order it was chosen with
     assert saved["settings"]["pace"] == cfgs[k].sample.pace  # and the governor's gain
-    assert load_run(tmp_path / f"v{k}").sampling()["foot_lock"] == saved["settings"]["foot_lock"]
+    assert load_run(tmp_path / f"v{k}").sampling().foot_lock == saved["settings"]["foot_lock"]
     assert (tmp_path / f"v{k}" / "samples" / "sample.csv").exists()
 
 

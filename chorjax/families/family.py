@@ -8,7 +8,10 @@ registers itself with ``families.registry.register``.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # (the annotations only)
+  from chorjax.controls import Controls
 
 
 class Family:
@@ -66,15 +69,15 @@ class Family:
     """The jitted step of a data-parallel run (families with ``data_parallel``)."""
     raise NotImplementedError
 
-  def controls(self, controls: dict) -> dict:
+  def controls(self, controls: Controls) -> Controls:
     """The sampling controls as this family's draw applies them (what does not apply recorded as off)."""
     return controls
 
-  def dance(self, graphdef, params, features, motion, key, num_frames: int, controls: dict, prime=None):
+  def dance(self, graphdef, params, features, motion, key, num_frames: int, controls: Controls, prime=None):
     """Dancers in data space ``[B, T, J, 3]`` (``motion``: ids ``[B]`` or weights ``[B, M]``)."""
     raise NotImplementedError
 
-  def end_sample(self, graphdef, params, ds, cfg, controls: dict) -> tuple:
+  def end_sample(self, graphdef, params, ds, cfg, controls: Controls) -> tuple:
     """What a run ends with: ``(positions of samples/sample.csv, the motions of the player, its title)``;
     here ``sample.num`` dancers of ``sample.frames`` conditioned on take ``sample.motion`` (seed
     ``sample.seed``), the first in the CSV, all beside that take in the player."""
@@ -104,7 +107,10 @@ class Family:
     raise NotImplementedError
 
   def stream(self):
-    """``(start_stream, continue_stream)``: live mode's endless draw (``chorjax.live``)."""
+    """``(start_stream, continue_stream)``: live mode's endless draw (``chorjax.live``):
+    ``start_stream(graphdef, params, motion [B, M], draw, prime [B, P, D] or None) -> state`` and
+    ``continue_stream(graphdef, params, state, key, draw, *, num_frames) -> (state, frames [B, N, D])``,
+    ``draw`` the run's ``Controls.draw`` (its temperatures may change between chunks)."""
     raise NotImplementedError
 
   def train_together(self):

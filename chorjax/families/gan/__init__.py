@@ -53,14 +53,13 @@ class Gan(Family):
     sampler = WindowSampler(ds.train, cfg.data.seq_length, per_step, cfg.train.seed)
     return gan_train_step, sampler, {}, None
 
-  def controls(self, controls: dict) -> dict:
+  def controls(self, controls):
     from chorjax.families.gan.networks import gan_controls
 
     return gan_controls(controls)
 
   def dance(self, graphdef, params, features, motion, key, num_frames, controls, prime=None):
     """Each dancer one sequence from noise (``motion`` only counts them; no prime)."""
-    from chorjax.controls import decoding, draw_controls
     from chorjax.errors import UserError
     from chorjax.families.gan.networks import GanModel, gan_controls, generate_sequences, pose_layer
 
@@ -70,10 +69,11 @@ class Gan(Family):
     model = nnx.merge(graphdef, params)
     assert isinstance(model, GanModel)
     projection = pose_layer(features, model.pose)
-    bounds = draw_controls(features, controls).get("bounds")
+    b = controls.draw(features).bounds
+    bounds = None if b is None else (b.low, b.high)
     num = int(np.shape(motion)[0])
     z = generate_sequences(graphdef, params, key, num=num, num_frames=num_frames, projection=projection, bounds=bounds)
-    return np.asarray(features.decode(z, **decoding(controls)))
+    return np.asarray(features.decode(z, **controls.decoding()))
 
 
 register(Gan())

@@ -220,10 +220,10 @@ def generate_sequences(graphdef, params, key, *, num: int, num_frames: int, proj
   return x if bounds is None else jnp.clip(x, *bounds)
 
 
-def gan_controls(controls: dict) -> dict:
+def gan_controls(controls):
   """Sampling ``controls`` (``SampleConfig.controls``) as a GAN applies them: the frame-by-frame MDN draw
   controls at their neutral values (temperatures 1, the rest off); ``clamp``, ``rigid_bones`` and
   ``foot_lock`` (decoding) as given."""
   off = {"pi_temperature": 1.0, "sigma_temperature": 1.0, "greedy": False, "noise_smoothing": 0.0, "noise_order": 2}
   frames = {"persistence": 0.0, "crossfade": 0.0, "pace": 0.0, "scale_cap": 0.0, "clamp_steps": False}
-  return {**controls, **off, **frames}
+  return controls.replace(**off, **frames)

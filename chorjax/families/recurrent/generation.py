@@ -17,8 +17,8 @@ import numpy as np
 from flax import nnx
 
 from chorjax.config import MAX_NOISE_ORDER
-from chorjax.controls import decoding, draw_controls
-from chorjax.data.features import JointMotion, joint_pace
+from chorjax.controls import Controls, Draw, Pacing
+from chorjax.data.features import joint_pace
 
 # Frames per iteration of the plain generation loop: an iteration's fixed cost (the loop's bookkeeping, one
 # dispatch per operation) then serves four frames; 6% faster at batch 64 (benchmarks.sampling_ceiling), the
@@ -26,33 +26,8 @@ from chorjax.data.features import JointMotion, joint_pace
 # rounding differs, which a free-running dance grows into another dance.
 UNROLL = 4
 
-# What a compiled sampling program is specialized on. The draw's other controls (temperatures, persistence,
-# crossfade, bounds, scale ceiling) are its arguments: calibration's 180 settings compiled 30 programs when
-# persistence and crossfade were in this list, 5 since.
-_STATIC = ("graphdef", "num_frames", "greedy", "noise_smoothing", "noise_order", "pace", "pace_lag")
 
-
-def generate(
-  graphdef,
-  params,
-  motion,
-  key,
-  *,
-  num_frames: int,
-  prime_BxPxD=None,
-  pi_temperature=1.0,
-  sigma_temperature=1.0,
-  greedy: bool = False,
-  noise_smoothing: float = 0.0,
-  noise_order: int = 2,
-  persistence: float = 0.0,
-  crossfade: float = 0.0,
-  bounds=None,
-  pace: float = 0.0,
-  pace_lag: int = 15,
-  pace_target=None,
-  scale_cap=None,
-):
+def generate(graphdef, params, motion, key, *, num_frames: int, draw: Draw | None = None, prime_BxPxD=None):
   """Generates ``num_frames`` normalized frames per dancer.
 
   Args:
@@ -61,94 +36,49 @@ def generate(
     motion: per dancer, what conditions it: motion ids ``[B]`` or weights ``[B, M]`` (a blend).
     key: PRNG key; the same key gives the same dance.
     num_frames: frames to generate after the prime.
+    draw: the draw's controls (``Controls.draw``; default: full temperature, white noise, nothing held):
+      the MDN temperatures and ``greedy`` (``heads.mdn_sample``); the noise through ``noise_order`` cascaded
+      AR(1) filters with coefficient ``noise_smoothing`` (:func:`smooth_noise`); ``persistence`` added to the
+      log-weight of the previous frame's component; ``crossfade``, the factor by which the jump between the
+      means of a new and an old component decays per frame; ``bounds`` every drawn frame (and its change)
+      is clipped to; the pace governor (``pace``, ``pace_lag``, ``pacing``: :func:`_smooth_scan`); the
+      ceiling ``scale_cap`` ``[S]`` on the MDN scales.
     prime_BxPxD: optional real phrase (normalized); generation continues after its last frame.
       Without it, generation starts from the zero frame (the mean pose) and the id's state.
-    pi_temperature, sigma_temperature, greedy: MDN sampling controls (see ``heads.mdn_sample``).
-    noise_smoothing, noise_order: the MDN noise passes ``noise_order`` cascaded AR(1) filters with coefficient
-      ``noise_smoothing`` (:func:`smooth_noise`; 0 = independent per frame).
-    persistence: added to the log-weight of the previous frame's mixture component.
-    crossfade: a change of component glides: the jump between the means decays by this factor per frame.
-    bounds: optional ``(low [D], high [D])``: every drawn frame is clipped to them before it is fed back
-      and returned (``Features.low``/``high``: the training range; ``sample.clamp``); with
-      ``(step_low [D], step_high [D])`` after them, its change from the previous frame is clipped to those
-      first (``sample.clamp_steps``; the first frame's change counts from the mean pose or the prime's last frame).
-    pace, pace_lag, pace_target: the pace governor (0 = off; :func:`_generate_smoothly`); ``pace_target``
-      is ``(the training pace over pace_lag frames, its measure)``: a ``JointMotion`` (the judge's measure,
-      ``Features.pace_joints``) or ``[D]`` weights that average the pose features (``Features.pace``).
-    scale_cap: optional ``[S]`` ceiling on the MDN scales (``run.scale_ceiling``; ``sample.scale_cap``).
 
   Returns:
     ``[B, num_frames, D]`` normalized frames.
   """
-  plain = bool(greedy or (noise_smoothing == persistence == crossfade == pace == 0 and scale_cap is None))
+  draw = draw or Draw()
   return _generate(
-    graphdef,
-    params,
-    motion,
-    key,
-    num_frames=num_frames,
-    prime_BxPxD=prime_BxPxD,
-    pi_temperature=pi_temperature,
-    sigma_temperature=sigma_temperature,
-    greedy=greedy,
-    noise_smoothing=noise_smoothing,
-    noise_order=noise_order,
-    persistence=persistence,
-    crossfade=crossfade,
-    bounds=bounds,
-    pace=pace,
-    pace_lag=pace_lag,
-    pace_target=pace_target,
-    scale_cap=scale_cap,
-    plain=plain,
+    graphdef, params, motion, key, draw, num_frames=num_frames, prime_BxPxD=prime_BxPxD, plain=draw.plain
   )
 
 
-@functools.partial(jax.jit, static_argnames=(*_STATIC, "plain"))
-def _generate(
-  graphdef,
-  params,
-  motion,
-  key,
-  *,
-  num_frames: int,
-  prime_BxPxD=None,
-  pi_temperature=1.0,
-  sigma_temperature=1.0,
-  greedy: bool = False,
-  noise_smoothing: float = 0.0,
-  noise_order: int = 2,
-  persistence=0.0,
-  crossfade=0.0,
-  bounds=None,
-  pace: float = 0.0,
-  pace_lag: int = 15,
-  pace_target=None,
-  scale_cap=None,
-  plain: bool = True,
-):
-  """:func:`generate`'s program (the same defaults); ``plain``: no smoothing, persistence, crossfade, governor
-  or scale ceiling (decided before tracing, where persistence and crossfade are still numbers)."""
+@functools.partial(jax.jit, static_argnames=("graphdef", "num_frames", "plain"))
+def _generate(graphdef, params, motion, key, draw: Draw, *, num_frames: int, prime_BxPxD=None, plain: bool = True):
+  """:func:`generate`'s program; ``plain``: ``draw.plain`` (decided before tracing, where persistence and
+  crossfade are still numbers). ``draw``'s static fields are part of what the program is compiled for."""
   model = nnx.merge(graphdef, params)
   carry, x0 = _primed(model, motion, prime_BxPxD)
 
   if plain:
+    bounds = draw.bounds
 
     def body(c, k):
-      carry, x = c
-      carry, out = model.step(carry, x)
-      x = _clip(model.sample(out, k, pi_temperature, sigma_temperature, greedy), bounds, x)
+      carry, previous = c
+      carry, out = model.step(carry, previous)
+      x = model.sample(out, k, draw.pi_temperature, draw.sigma_temperature, draw.greedy)
+      x = x if bounds is None else bounds.clip(x, previous)
       return (carry, x), x
 
     _, xs_NxBxD = jax.lax.scan(body, (carry, x0), jax.random.split(key, num_frames), unroll=UNROLL)
     return jnp.swapaxes(xs_NxBxD, 0, 1)
 
-  controls = _draw_args(pi_temperature, sigma_temperature, persistence, crossfade, scale_cap)
-  if pace and pace_target is None:
-    raise ValueError("pace needs pace_target = (the training pace, the pose weights): Features.pace")
-  pacing = (pace, pace_lag, *pace_target) if pace and pace_target is not None else None
-  noise = (noise_smoothing, noise_order)
-  return _generate_smoothly(model, carry, x0, key, num_frames, noise, controls, bounds, pacing)
+  if draw.pace and draw.pacing is None:
+    raise ValueError("pace needs draw.pacing (the training pace and its measure): Controls.draw")
+  state = _smooth_start(carry, x0, draw)
+  return _smooth_scan(model, state, key, num_frames, draw)[1]
 
 
 def _primed(model, motion, prime_BxPxD):
@@ -161,42 +91,12 @@ def _primed(model, motion, prime_BxPxD):
   return carry, prime_BxPxD[:, -1]
 
 
-def _draw_args(pi_temperature, sigma_temperature, persistence, crossfade, scale_cap) -> dict:
-  """The MDN draw's keyword arguments (``heads.MDNHead.draw``)."""
-  return {
-    "pi_temperature": pi_temperature,
-    "sigma_temperature": sigma_temperature,
-    "persistence": persistence,
-    "crossfade": crossfade,
-    "scale_cap": scale_cap,
-  }
-
-
-def _clip(x_BxD, bounds, previous_BxD=None):
-  """``x`` held to ``bounds``: ``(low, high)``, or ``(low, high, step_low, step_high)`` where its change from
-  ``previous`` is held to the steps first (``sample.clamp_steps``)."""
-  if bounds is None:
-    return x_BxD
-  if len(bounds) == 4 and previous_BxD is not None:
-    x_BxD = previous_BxD + jnp.clip(x_BxD - previous_BxD, bounds[2], bounds[3])
-  return jnp.clip(x_BxD, bounds[0], bounds[1])
-
-
-def _generate_smoothly(model, carry, x0_BxD, key, num_frames: int, noise: tuple, controls: dict, bounds, pacing):
-  """The scan of :func:`generate` with smoothed noise and the draw's state (component, offset) carried.
-
-  With ``pacing = (gain, lag, ref, measure)`` a governor holds the dancer to the training pace ``ref``
-  (how far it moves over ``lag`` frames, :func:`_moved`; the own pace a running mean over about ten lags):
-  off pace, the scale temperature rises or falls and the component is let go sooner (:func:`_governed`)."""
-  state = _smooth_start(carry, x0_BxD, pacing)
-  return _smooth_scan(model, state, key, num_frames, noise, controls, bounds, pacing)[1]
-
-
-def _smooth_start(carry, x0_BxD, pacing):
+def _smooth_start(carry, x0_BxD, draw: Draw):
   """The state of :func:`_smooth_scan` before the first frame: ``(carry, previous frame, noise filters
   [MAX_NOISE_ORDER, B, D], (component, offset), (the governor's recent frames, where the next goes, own pace))``."""
   b = x0_BxD.shape[0]
-  lag, ref = (pacing[1], pacing[2]) if pacing else (1, 1.0)
+  pacing = draw.pacing if draw.pace else None
+  lag, ref = (draw.pace_lag, pacing.ref) if pacing is not None else (1, 1.0)
   none = (jnp.full((b,), -1, jnp.int32), jnp.zeros_like(x0_BxD))  # no component yet, no offset
   at = jnp.zeros((), jnp.int32)  # an array from the start: a resumed state keeps its type (no retrace)
   governor = (jnp.broadcast_to(x0_BxD, (lag, *x0_BxD.shape)), at, jnp.full((b,), ref, jnp.float32))
@@ -204,22 +104,28 @@ def _smooth_start(carry, x0_BxD, pacing):
   return (carry, x0_BxD, filters, none, governor)
 
 
-def _smooth_scan(model, state, key, num_frames: int, noise: tuple, controls: dict, bounds, pacing):
-  """``num_frames`` smoothed draws from ``state`` with ``noise = (noise_smoothing, noise_order)``: ``(the state
-  after them, frames [B, N, D])``."""
-  gain, lag, ref, weights = pacing or (0.0, 1, 1.0, jnp.zeros(state[1].shape[-1]))
+def _smooth_scan(model, state, key, num_frames: int, draw: Draw):
+  """``num_frames`` draws from ``state`` with smoothed noise and the draw's state (component, offset) carried:
+  ``(the state after them, frames [B, N, D])``.
+
+  With a governor (``draw.pace``, ``draw.pacing``) the dancer is held to the training pace ``pacing.ref``:
+  how far it moves over ``pace_lag`` frames (:func:`_moved`; its own pace a running mean over about ten
+  lags); off pace, the scale temperature rises or falls and the component is let go sooner (:func:`_governed`)."""
+  pacing = draw.pacing if draw.pace else None
+  lag = draw.pace_lag if pacing is not None else 1
   keep = 1.0 - 1.0 / (10 * lag)  # the running pace forgets over about ten lags (5 s)
+  controls = draw.head_args()
 
   def body(c, k):
     carry, previous, filters, drawn, (recent, at, own) = c
     carry, out = model.step(carry, previous)
     k_comp, k_noise = jax.random.split(k)
-    filters, eps_BxD = smooth_noise(filters, k_noise, *noise)
-    governed = _governed(controls, own, ref, gain) if pacing else controls
+    filters, eps_BxD = smooth_noise(filters, k_noise, draw.noise_smoothing, draw.noise_order)
+    governed = _governed(controls, own, pacing.ref, draw.pace) if pacing is not None else controls
     x, drawn = model.draw(out, k_comp, eps_BxD, drawn, **governed)
-    x = _clip(x, bounds, previous)
-    if pacing:
-      own = keep * own + (1 - keep) * _moved(x, recent, at, weights)
+    x = x if draw.bounds is None else draw.bounds.clip(x, previous)
+    if pacing is not None:
+      own = keep * own + (1 - keep) * _moved(x, recent, at, pacing)
       recent, at = recent.at[at].set(x), (at + 1) % lag
     return (carry, x, filters, drawn, (recent, at, own)), x
 
@@ -239,14 +145,15 @@ def _governed(controls: dict, own_B, ref, gain) -> dict:
   return {**controls, "sigma_temperature": sigma, "persistence": hold}
 
 
-def _moved(x_BxD, recent_LxBxD, at, measure):
+def _moved(x_BxD, recent_LxBxD, at, pacing: Pacing):
   """How far each dancer moved over the governor's lag (``recent[at]`` is the frame ``lag`` frames before
-  ``x``): with ``measure`` a ``JointMotion``, the judge's measure (``features.joint_pace``: joints relative
-  to the root, the turn over the lag summed from the heading changes); else the weighted mean absolute
-  change of the features (``measure``: ``[D]`` weights)."""
+  ``x``): with ``pacing.joints``, the judge's measure (``features.joint_pace``: joints relative to the root,
+  the turn over the lag summed from the heading changes); else the mean absolute change of the features
+  weighted by ``pacing.weights``."""
   then = recent_LxBxD[at]
-  if not isinstance(measure, JointMotion):
-    return jnp.abs(x_BxD - then) @ measure
+  measure = pacing.joints
+  if measure is None:
+    return jnp.abs(x_BxD - then) @ pacing.weights
   lag = recent_LxBxD.shape[0]
   heading = recent_LxBxD[..., 0].sum(0) - then[:, 0] + x_BxD[:, 0]  # the changes of the lag frames up to x
   return joint_pace(x_BxD, then, heading * measure.std[0] + lag * measure.mean[0], measure)
@@ -283,56 +190,33 @@ def noise_gain(rho: float, order: int) -> float:
   return float(np.sum(h**2) ** -0.5)
 
 
-def dance(graphdef, params, features, motion, key, num_frames: int, controls: dict, prime_BxPxD=None) -> np.ndarray:
-  """Dancers in data space ``[B, T, J, 3]``: :func:`generate` with ``controls`` (``SampleConfig.controls``;
-  clipped to the training range if asked), decoded (with rigid bones and locked feet if asked). A prime
-  phrase comes first, decoded as one with its continuation (root-motion features integrate across the
-  seam)."""
-  drawn = draw_controls(features, controls)
-  z = generate(graphdef, params, motion, key, num_frames=num_frames, prime_BxPxD=prime_BxPxD, **drawn)
+def dance(graphdef, params, features, motion, key, num_frames: int, controls: Controls, prime_BxPxD=None) -> np.ndarray:
+  """Dancers in data space ``[B, T, J, 3]``: :func:`generate` with ``controls`` (clipped to the training range
+  if asked), decoded (with rigid bones and locked feet if asked). A prime phrase comes first, decoded as one
+  with its continuation (root-motion features integrate across the seam)."""
+  draw = controls.draw(features)
+  z = generate(graphdef, params, motion, key, num_frames=num_frames, draw=draw, prime_BxPxD=prime_BxPxD)
   if prime_BxPxD is not None:
     z = np.concatenate([prime_BxPxD, np.asarray(z)], axis=1)
-  return np.asarray(features.decode(z, **decoding(controls)))
+  return np.asarray(features.decode(z, **controls.decoding()))
 
 
-@functools.partial(jax.jit, static_argnames=("graphdef", "pace_lag"))
-def start_stream(graphdef, params, motion, prime_BxPxD=None, *, pace_lag: int | None = None, pace_ref=1.0):
+@functools.partial(jax.jit, static_argnames=("graphdef",))
+def start_stream(graphdef, params, motion, draw: Draw, prime_BxPxD=None):
   """The state of an endless dance (:func:`continue_stream`) before its first frame: conditioned on
-  ``motion`` and, with a prime, after its last frame (teacher forced over the phrase as
-  :func:`generate` primes). ``pace_lag``/``pace_ref``: the governor's lag and the training pace, where
-  the stream will be paced (None: it will not)."""
+  ``motion`` and, with a prime, after its last frame (teacher forced over the phrase as :func:`generate`
+  primes); ``draw``: the draw the stream will continue with (its governor's lag and training pace)."""
   model = nnx.merge(graphdef, params)
   carry, x0 = _primed(model, motion, prime_BxPxD)
-  return _smooth_start(carry, x0, None if pace_lag is None else (None, pace_lag, pace_ref, None))
+  return _smooth_start(carry, x0, draw)
 
 
-@functools.partial(jax.jit, static_argnames=_STATIC)
-def continue_stream(
-  graphdef,
-  params,
-  state,
-  key,
-  *,
-  num_frames: int,
-  pi_temperature=1.0,
-  sigma_temperature=1.0,
-  greedy: bool = False,
-  noise_smoothing: float = 0.0,
-  noise_order: int = 2,
-  persistence: float = 0.0,
-  crossfade: float = 0.0,
-  bounds=None,
-  pace: float = 0.0,
-  pace_lag: int = 15,
-  pace_target=None,
-  scale_cap=None,
-):
+@functools.partial(jax.jit, static_argnames=("graphdef", "num_frames"))
+def continue_stream(graphdef, params, state, key, draw: Draw, *, num_frames: int):
   """The next ``num_frames`` of an endless dance: ``(state, normalized frames [B, N, D])``. The same draw
   as :func:`generate`'s smoothed path (``greedy``: the most likely component's mean), resumable chunk
   by chunk from :func:`start_stream`'s state; the temperatures may change between chunks."""
   model = nnx.merge(graphdef, params)
-  if greedy:
-    pi_temperature = sigma_temperature = 0.0
-  controls = _draw_args(pi_temperature, sigma_temperature, persistence, crossfade, scale_cap)
-  pacing = (pace, pace_lag, *pace_target) if pace and pace_target is not None else None
-  return _smooth_scan(model, state, key, num_frames, (noise_smoothing, noise_order), controls, bounds, pacing)
+  if draw.greedy:
+    draw = draw.replace(pi_temperature=0.0, sigma_temperature=0.0)
+  return _smooth_scan(model, state, key, num_frames, draw)

@@ -1,0 +1,92 @@
+"""Writing motions: one function writes a dance, a set of transitions or takes in every format chorjax
+writes (CSV, NPZ, BVH, BVH onto a character, the HTML player), for the command line, the Python API, the
+end of training and evaluation alike; and the checks that come before any long work (the output's kind,
+files that already exist, the character to retarget onto)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from chorjax.errors import UserError
+
+WRITES = (".csv", ".npz", ".bvh", ".html")  # what a dance may be written as
+
+
+def check_output(path, allowed=WRITES) -> tuple[Path, str]:
+  """The output path and its suffix, checked to be an allowed kind."""
+  out = Path(path)
+  suffix = out.suffix.lower()
+  if suffix not in allowed:
+    kinds = allowed[0] if len(allowed) == 1 else f"{', '.join(allowed[:-1])} or {allowed[-1]}"
+    raise UserError(f"{out}: output must end in {kinds}")
+  return out, suffix
+
+
+def output_paths(out: Path, num: int) -> list[Path]:
+  """The files ``num`` motions written to ``out`` make: OUT itself, or OUT_k per motion for CSV/BVH."""
+  if num == 1 or out.suffix.lower() in (".npz", ".html"):
+    return [out]
+  return [out.with_name(f"{out.stem}_{k}{out.suffix}") for k in range(num)]
+
+
+def refuse_existing(paths, force: bool, how: str = "--force") -> None:
+  """A UserError for the first of ``paths`` that exists, unless ``force`` (``how`` says how to allow it)."""
+  for p in paths:
+    if Path(p).exists() and not force:
+      raise UserError(f"{p}: already exists (use {how} to overwrite)")
+
+
+def load_character(path, out: Path):
+  """The ``--skeleton`` character a BVH is retargeted onto (read and mapped now, before any long work), or
+  None without one."""
+  if path is None:
+    return None
+  if out.suffix.lower() != ".bvh":
+    raise UserError(f"--skeleton {path}: retargeting writes BVH; give -o OUT.bvh (not {out.name})")
+  from chorjax.data.retarget import Character
+
+  return Character(path)
+
+
+def write_motions(out: Path, motions, *, settings=None, character=None, title=None) -> list:
+  """Writes ``motions`` (of one skeleton and rate) as ``out``'s suffix says: one ``.npz`` with all of them and
+  ``settings``, one ``.html`` player (``title``), or a ``.csv`` / ``.bvh`` per motion (``output_paths``;
+  ``character``: a BVH onto that character's hierarchy). Returns the paths written."""
+  import numpy as np
+
+  from chorjax.data.csv import write_csv
+  from chorjax.data.npz import write_npz
+  from chorjax.render.html import write_player
+
+  suffix, paths, first = out.suffix.lower(), output_paths(out, len(motions)), motions[0]
+  if suffix == ".npz":
+    positions = np.stack([m.positions for m in motions])
+    return [
+      write_npz(
+        out,
+        positions,
+        fps=first.fps,
+        skeleton=first.skeleton,
+        up_axis=first.up_axis,
+        units=first.units,
+        settings=settings or {},
+      )
+    ]
+  if suffix == ".html":
+    return [write_player(motions, out, title=title or out.stem)]
+  if suffix == ".bvh":
+    from chorjax.data.bvh import write_bvh
+    from chorjax.data.mapping import to_mpii16
+    from chorjax.data.retarget import write_retargeted
+
+    if character is not None:
+      return [write_retargeted(to_mpii16(m), character, path) for m, path in zip(motions, paths)]
+    return [write_bvh(m, path) for m, path in zip(motions, paths)]
+  return [write_csv(m, path) for m, path in zip(motions, paths)]
+
+
+def as_motions(positions, fps, skeleton, up_axis, name: str = "dancer") -> list:
+  """Drawn positions ``[K, T, J, 3]`` in a run's data space as motions ``{name} 0``, ``{name} 1`` ..."""
+  from chorjax.data.motion import Motion
+
+  return [Motion(p, fps, skeleton, up_axis, units="data", name=f"{name} {k}") for k, p in enumerate(positions)]

@@ -1,0 +1,59 @@
+"""Help text lives once, in the config fields' metadata: every key has a short help, `chorjax config keys`
+prints them, and the sampling flags' help and defaults come from the keys they set."""
+
+import argparse
+import dataclasses
+
+import pytest
+
+from chorjax import cli
+from chorjax.config import SampleConfig, key_docs, valid_keys
+from chorjax.controls import Controls
+
+MAX_HELP = 160  # characters: one or two lines of a terminal; the reasoning goes to `more` (the docs)
+
+
+def test_every_config_key_has_a_short_help():
+  rows = key_docs()
+  assert [r["key"] for r in rows] == valid_keys()
+  missing = [r["key"] for r in rows if not r["help"].strip()]
+  long = [f"{r['key']} ({len(r['help'])})" for r in rows if len(r["help"]) > MAX_HELP]
+  assert not missing, f"keys without help: {missing}"
+  assert not long, f"help over {MAX_HELP} characters (move the rest to more=): {long}"
+
+
+def test_config_keys_prints_every_key_of_a_prefix_with_default_and_help(capsys):
+  assert cli.main(["config", "keys", "sample"]) == 0
+  out = capsys.readouterr().out
+  fields = dataclasses.fields(SampleConfig)
+  for f in fields:
+    assert f"sample.{f.name} = " in out
+  assert "sample.noise_order = 2\n    how many AR(1) filters" in out
+  assert "model." not in out
+  assert cli.main(["config", "keys", "model.cell"]) == 0
+  assert capsys.readouterr().out.splitlines()[0] == 'model.cell = "lnlstm"'
+  assert cli.main(["config", "keys", "samples"]) == 2
+  assert "did you mean 'sample'" in capsys.readouterr().err
+
+
+def _sampling_actions() -> dict[str, argparse.Action]:
+  """`chorjax sample`'s sampling flags, by the control they set."""
+  parser = cli.build_parser()
+  sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+  actions = {a.dest: a for a in sub.choices["sample"]._actions}
+  return {name: actions[name] for name in Controls.names()}
+
+
+@pytest.mark.parametrize("name", Controls.names())
+def test_a_sampling_flag_says_its_keys_help_and_defers_to_the_run(name):
+  action = _sampling_actions()[name]
+  help_text = key_docs(f"sample.{name}")[0]["help"]
+  assert action.help is not None and action.help.startswith(help_text), (action.help, help_text)
+  assert f"sample.{name})" in action.help
+  # unset, the flag takes the run's value: its default must not override the key's
+  assert action.default in (None, False) and (action.default is None or name == "greedy")
+
+
+def test_the_help_of_the_noise_keys_says_what_the_code_does():
+  smoothing = key_docs("sample.noise_smoothing")[0]
+  assert "noise_order" in smoothing["help"] and "two cascaded" not in (smoothing["more"] or "")
