@@ -176,11 +176,12 @@ def train(config, workdir=None, overrides: Sequence[str] | None = None, *, force
   """Trains ``config`` (a TOML path or a loaded ``chorjax.config.Config``; ``overrides``: ``"key=value"``
   strings) in ``workdir`` (default ``runs/<name>``), resuming from its latest checkpoint as ``chorjax
   train`` does, and returns the run at the checkpoint it keeps."""
+  from chorjax.end_of_run import standard
   from chorjax.training import default_workdir, train_and_evaluate
 
   cfg = load_config(config, list(overrides or []))
   workdir = Path(workdir) if workdir is not None else default_workdir(cfg)
-  train_and_evaluate(cfg, workdir, force=force)
+  train_and_evaluate(cfg, workdir, force=force, finish=standard(cfg))
   return load_run(workdir)
 
 

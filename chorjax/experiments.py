@@ -190,6 +190,7 @@ def _release_compiled() -> None:
 
 def _train_points(points, log) -> None:
   """Trains ``(name, overrides, cfg, workdir)`` points: together when there are several, else alone."""
+  from chorjax.end_of_run import standard
   from chorjax.points import NotAligned, train_vectorized
   from chorjax.training import train_and_evaluate
 
@@ -202,7 +203,7 @@ def _train_points(points, log) -> None:
       log(f"{e}: one by one")
   for name, overrides, cfg, workdir in points:
     log(f"{name}: training ({' '.join(overrides)})")
-    train_and_evaluate(cfg, workdir)
+    train_and_evaluate(cfg, workdir, finish=standard(cfg))
 
 
 # ---------------------------------------------------------------- comparison report

@@ -30,7 +30,7 @@ import jax
 import numpy as np
 
 from chorjax import checkpoint as ckpt
-from chorjax.calibrate import default_grid
+from chorjax import end_of_run
 from chorjax.config import Config, config_diff, config_from_dict, resumable_keys
 from chorjax.controls import Controls, with_ceiling
 from chorjax.data.dataset import Dataset, dataset_notes, load_dataset
@@ -400,42 +400,16 @@ def figure_hook(writer, graphdef, host_params, ds: Dataset, cfg: Config):
   return draw
 
 
-def calibrates(cfg: Config) -> bool:
-  """Whether training ends by calibrating (``train.calibrate``; a family whose draw a control can change)."""
-  return cfg.train.calibrate and family_of(cfg).calibrated and bool(default_grid(cfg))
-
-
-def calibrate_and_sample(workdir: Path, ds: Dataset, cfg: Config) -> dict:
-  """``train.calibrate``: ``chorjax calibrate`` on the kept checkpoint, then the end sample drawn with it."""
-  from chorjax.calibrate import calibrate
-  from chorjax.run import load_run
-
-  calibrate(workdir, log=lambda line: print(line, flush=True))
-  if cfg.sample.frames <= 0:
-    return {}
-  kept = load_run(workdir)
-  return write_end_sample(workdir, kept.graphdef, kept.params, ds, cfg, kept.sampling())
-
-
-def write_end_sample(
-  workdir: Path, graphdef, params, ds: Dataset, cfg: Config, controls: Controls | None = None
-) -> dict:
-  """``samples/sample.csv`` and ``samples/player.html``: the dance the run ends with, as its family draws it
-  (``Family.end_sample``: the generated dancers beside a real take, or an in-betweening piece beside its take)."""
-  from chorjax.output import as_motions, write_motions
-
-  controls = controls or Controls.resolve(cfg.sample)
-  positions, motions, title = family_of(cfg).end_sample(graphdef, params, ds, cfg, controls)
-  first = as_motions(positions[None], ds.fps, ds.features.skeleton, ds.features.up_axis)
-  csv = write_motions(workdir / "samples" / "sample.csv", first)[0]
-  return {"csv": str(csv), "html": str(write_motions(workdir / "samples" / "player.html", motions, title=title)[0])}
-
-
 # ---------------------------------------------------------------- the driver
 
 
-def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=None) -> dict:
+def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=None, finish=None) -> dict:
   """Trains ``cfg`` in ``workdir``, resuming from its latest checkpoint; returns a summary.
+
+  ``finish``: hooks the main process runs once the run has trained all its steps (not when stopped), each
+  ``hook(end_of_run.Finished) -> dict`` of what it wrote (the summary's ``samples``); default
+  ``end_of_run.standard(cfg)``: calibration and the sample drawn with it (``train.calibrate``), else the
+  end sample.
 
   Writes ``config.json``, ``metrics.jsonl``, TensorBoard events, ``checkpoints/`` and, at the end,
   ``samples/`` (a short sample and its HTML player). With ``parallel`` (see ``chorjax.parallel``)
@@ -457,7 +431,7 @@ def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=No
   is_main = parallel is None or parallel.is_main
   before = {p.name for p in workdir.iterdir()} if workdir.is_dir() else None
   try:
-    return _locked_train(cfg, workdir, force, parallel, is_main)
+    return _locked_train(cfg, workdir, force, parallel, is_main, finish)
   except UserError:
     if is_main:
       _clean_refused_start(workdir, before)
@@ -479,7 +453,7 @@ def _clean_refused_start(workdir: Path, before: set | None) -> None:
     workdir.rmdir()
 
 
-def _locked_train(cfg: Config, workdir: Path, force: bool, parallel, is_main: bool) -> dict:
+def _locked_train(cfg: Config, workdir: Path, force: bool, parallel, is_main: bool, finish) -> dict:
   with workdir_lock(workdir) if is_main else contextlib.nullcontext():
     keep_old_config = _check_saved_config(workdir, cfg, force) and is_main
     ds = load_dataset(cfg.data)
@@ -491,7 +465,7 @@ def _locked_train(cfg: Config, workdir: Path, force: bool, parallel, is_main: bo
     manager = ckpt.create_manager(workdir, keep=cfg.train.keep_checkpoints)
     with contextlib.ExitStack() as cleanup:
       cleanup.callback(ckpt.close_quietly, manager)
-      return _train(cfg, workdir, ds, manager, parallel, cleanup, keep_old_config)
+      return _train(cfg, workdir, ds, manager, parallel, cleanup, keep_old_config, finish)
 
 
 def _is_run(workdir: Path) -> bool:
@@ -533,7 +507,7 @@ def _restore_or_init(cfg: Config, workdir: Path, ds: Dataset, manager, parallel)
 
 
 def _train(
-  cfg: Config, workdir: Path, ds: Dataset, manager, parallel, cleanup: contextlib.ExitStack, keep_old_config=False
+  cfg: Config, workdir: Path, ds: Dataset, manager, parallel, cleanup: contextlib.ExitStack, keep_old_config, finish
 ) -> dict:
   t_start = time.time()
   is_main = parallel is None or parallel.is_main
@@ -575,17 +549,14 @@ def _train(
     ckpt.wait(manager)
 
   loop.on_stop = save_now
-  samples: dict = {}
-  calibrating = is_main and total > 0 and calibrates(cfg)
-  if is_main and cfg.sample.frames > 0 and total > 0 and not calibrating:
-    loop.end_hooks.append(
-      lambda loop: samples.update(write_end_sample(workdir, spec.graphdef, host_params(loop.state["params"]), ds, cfg))
-    )
   with stop_on_signals() as stop:
     loop.stop = stop if parallel is None else agreed_stop(stop)
     loop.run()
-  if calibrating and loop.step >= total:  # finished, not stopped: settings for the checkpoint the run keeps
-    samples.update(calibrate_and_sample(workdir, ds, cfg))
+  samples: dict = {}
+  if is_main and total > 0 and loop.step >= total:  # finished, not stopped
+    finished = end_of_run.Finished(workdir, ds, cfg, spec.graphdef, host_params(loop.state["params"]))
+    for hook in end_of_run.standard(cfg) if finish is None else finish:
+      samples.update(hook(finished))
   summary = {
     "start_step": start,
     "final_step": loop.step,
@@ -623,7 +594,7 @@ def train_command(config, overrides=(), *, workdir=None, force: bool = False, lo
       log(f"trained {d.name}: steps {s['start_step']}->{s['final_step']}{_losses(s)}; workdir {d}")
     return summaries
   parallel = setup_parallel(cfg)
-  s = train_and_evaluate(cfg, workdir, force=force, parallel=parallel)
+  s = train_and_evaluate(cfg, workdir, force=force, parallel=parallel, finish=end_of_run.standard(cfg))
   if parallel is not None and not parallel.is_main:
     log(
       f"process {parallel.process_index}/{parallel.process_count}: steps {s['start_step']}->"

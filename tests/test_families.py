@@ -204,3 +204,17 @@ def test_an_unknown_family_is_one_line_naming_the_known_ones():
 
   with pytest.raises(UserError, match=r"'gann' is not one of 'rnn', 'gan', 'inbetween'.*did you mean 'gan'"):
     tiny_config("model.family=gann")
+
+
+def test_the_end_of_a_run_is_the_hooks_handed_to_training(tmp_path):
+  from chorjax import end_of_run
+  from chorjax.training import train_and_evaluate
+
+  seen = []
+  hook = lambda run: seen.append(run) or {"mine": str(run.workdir)}
+  summary = train_and_evaluate(tiny_config(*TOY), tmp_path / "w", finish=[hook])
+  assert summary["samples"] == {"mine": str(tmp_path / "w")} and not (tmp_path / "w" / "samples").exists()
+  assert isinstance(seen[0], end_of_run.Finished) and seen[0].cfg.model.family == "toy"
+  assert end_of_run.standard(tiny_config(*TOY)) == [end_of_run.end_sample]  # no calibration: nothing to choose
+  summary = train_and_evaluate(tiny_config(*TOY), tmp_path / "w", finish=[hook])  # resumed at its end
+  assert len(seen) == 2

@@ -31,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from chorjax import checkpoint as ckpt
+from chorjax import end_of_run
 from chorjax.config import Config
 from chorjax.data.dataset import WindowSampler, dataset_notes, eval_windows, load_dataset
 from chorjax.errors import UserError
@@ -47,11 +48,8 @@ from chorjax.training import (
   _truncate_metrics,
   _write_config,
   best_checkpoint_hook,
-  calibrate_and_sample,
-  calibrates,
   stop_on_signals,
   workdir_lock,
-  write_end_sample,
 )
 
 
@@ -163,13 +161,12 @@ def _run(cfgs, workdirs, ds, managers, restored, stack) -> list[dict]:
   _checkpoint_hooks(loop, cfgs, managers, ds, bool(val))
   samples: list[dict] = [{} for _ in cfgs]
 
-  def end_samples(_: Loop) -> None:  # each point as it would end alone: calibrated (train.calibrate), then drawn
+  def end_samples(_: Loop) -> None:  # each point as it would end alone (end_of_run.standard)
     for k, (c, w) in enumerate(zip(cfgs, workdirs)):
-      if calibrates(c):
-        if c.train.num_steps > 0 and loop.step >= c.train.num_steps:  # finished, not stopped
-          samples[k] = calibrate_and_sample(w, ds, c)
-      elif c.sample.frames > 0 and c.train.num_steps > 0:
-        samples[k] = write_end_sample(w, spec.graphdef, _take(loop.state["params"], k), ds, c)
+      if c.train.num_steps > 0 and loop.step >= c.train.num_steps:  # finished, not stopped
+        finished = end_of_run.Finished(w, ds, c, spec.graphdef, _take(loop.state["params"], k))
+        for hook in end_of_run.standard(c):
+          samples[k].update(hook(finished))
 
   loop.end_hooks.append(end_samples)
   print(f"training {k_points} points as one program: {', '.join(str(w.name) for w in workdirs)}", flush=True)

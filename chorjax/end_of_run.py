@@ -1,0 +1,67 @@
+"""What a run does once it has trained all its steps: hooks the training driver runs in the main process,
+handed to it by whoever trains (``chorjax.train``, ``chorjax train``, sweeps); :func:`standard` is what
+they hand it: calibration and the sample drawn with it (``train.calibrate``), else the end sample."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+from chorjax.controls import Controls
+from chorjax.families import family_of
+
+
+@dataclasses.dataclass(frozen=True)
+class Finished:
+  """A run that has trained all its steps: its directory, dataset, config and final parameters."""
+
+  workdir: Path
+  ds: Any
+  cfg: Any
+  graphdef: Any
+  params: Any
+
+
+def standard(cfg) -> list:
+  """The hooks ``chorjax train`` ends a run of ``cfg`` with."""
+  if calibrates(cfg):
+    return [calibration]
+  return [end_sample] if cfg.sample.frames > 0 else []
+
+
+def calibrates(cfg) -> bool:
+  """Whether training ends by calibrating (``train.calibrate``; a family whose draw a control can change)."""
+  from chorjax.calibrate import default_grid
+
+  return cfg.train.calibrate and family_of(cfg).calibrated and bool(default_grid(cfg))
+
+
+def calibration(run: Finished) -> dict:
+  """``train.calibrate``: ``chorjax calibrate`` on the kept checkpoint, then the end sample drawn with it."""
+  from chorjax.calibrate import calibrate
+  from chorjax.run import load_run
+
+  calibrate(run.workdir, log=lambda line: print(line, flush=True))
+  if run.cfg.sample.frames <= 0:
+    return {}
+  kept = load_run(run.workdir)
+  return write_end_sample(run.workdir, kept.graphdef, kept.params, run.ds, run.cfg, kept.sampling())
+
+
+def end_sample(run: Finished) -> dict:
+  """The end sample drawn from the final parameters with the run's ``[sample]``."""
+  return write_end_sample(run.workdir, run.graphdef, run.params, run.ds, run.cfg)
+
+
+def write_end_sample(workdir: Path, graphdef, params, ds, cfg, controls: Controls | None = None) -> dict:
+  """``samples/sample.csv`` and ``samples/player.html``: the dance the run ends with, as its family draws it
+  (``Family.end_sample``: the generated dancers beside a real take, or an in-betweening piece beside its take)."""
+  from chorjax.output import as_motions, write_motions
+
+  controls = controls or Controls.resolve(cfg.sample)
+  positions, motions, title = family_of(cfg).end_sample(graphdef, params, ds, cfg, controls)
+  first = as_motions(positions[None], ds.fps, ds.features.skeleton, ds.features.up_axis)
+  csv = write_motions(Path(workdir) / "samples" / "sample.csv", first)[0]
+  html = write_motions(Path(workdir) / "samples" / "player.html", motions, title=title)[0]
+  return {"csv": str(csv), "html": str(html)}
