@@ -30,6 +30,7 @@ from chorjax.config import (  # noqa: F401
   key_docs,
   key_help,
   load_config,
+  reference_markdown,
   to_toml,
   toml_value,
 )

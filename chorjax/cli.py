@@ -70,6 +70,9 @@ def _config_show(args) -> int:
 
 
 def _config_keys(args) -> int:
+  if args.markdown:
+    print(api.reference_markdown(), end="")
+    return 0
   for row in api.key_docs(args.prefix):
     print(f"{row['key']} = {api.toml_value(row['default'])}\n    {api.key_help(row['key'])}")
     if args.more and row["more"]:
@@ -329,6 +332,7 @@ def _add_data_commands(sub) -> None:
   keys = csub.add_parser("keys", help="every config key with its default and help (PREFIX: a section or key)")
   keys.add_argument("prefix", nargs="?", default="", metavar="PREFIX", help="e.g. sample or model.cell (default: all)")
   keys.add_argument("--more", action="store_true", help="also the longer notes some keys carry")
+  keys.add_argument("--markdown", action="store_true", help="every key as the docs' reference page (docs/config.md)")
   keys.set_defaults(func=_config_keys)
 
 

@@ -48,11 +48,12 @@ def _field(
   return dataclasses.field(default=default, metadata=meta)
 
 
-def field_choices(meta) -> tuple | None:
-  """A field's allowed values (``meta``: its metadata); a callable's are read now (the registered families)."""
+def field_choices(meta, registered: bool = True) -> tuple | None:
+  """A field's allowed values (``meta``: its metadata); a callable's are read now (the families, with those
+  registered in this process where ``registered``)."""
   choices: Any = meta.get("choices")
   if callable(choices):
-    return tuple(typing.cast(Sequence, choices()))
+    return tuple(typing.cast(Sequence, choices(registered)))
   return tuple(choices) if choices else None
 
 
@@ -577,7 +578,7 @@ _SECTION_CLASSES = {
 }
 
 
-def key_docs(prefix: str = "") -> list[dict]:
+def key_docs(prefix: str = "", registered: bool = True) -> list[dict]:
   """Every config key under ``prefix`` (a section, ``sample``, or a key, ``sample.pace``), in schema order:
   ``{key, default, help, more, choices, minimum, below}``. A prefix that names nothing is a UserError."""
   rows = []
@@ -593,7 +594,7 @@ def key_docs(prefix: str = "") -> list[dict]:
             "default": getattr(defaults, f.name),
             "help": meta["help"],
             "more": meta.get("more"),
-            "choices": field_choices(meta),
+            "choices": field_choices(meta, registered),
             "minimum": meta.get("minimum"),
             "below": meta.get("below"),
           }
@@ -603,9 +604,27 @@ def key_docs(prefix: str = "") -> list[dict]:
   return rows
 
 
-def key_help(key: str) -> str:
-  """The help of one config key, with its range or choices (what a flag that sets it says)."""
-  row = key_docs(key)[0]
+def reference_markdown() -> str:
+  """Every config key as the docs' reference page (``docs/config.md``): a table a section, each key's
+  default, help with its range, and the notes of ``more``."""
+  lines = ["# Config reference", "", "Generated from the config fields (`chorjax config keys --markdown`).", ""]
+  section = None
+  for row in key_docs(registered=False):  # the families chorjax ships, whatever this process registered
+    name = row["key"].split(".")[0]
+    if name != section:
+      lines += [""] if section else []
+      section = name
+      lines += [f"## [{name}]", "", "| key | default | what it does |", "| --- | --- | --- |"]
+    text = key_help(row) + (f"<br>*More:* {row['more']}" if row["more"] else "")
+    cells = (f"`{row['key']}`", f"`{toml_value(row['default'])}`", text)
+    lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
+  return "\n".join(lines) + "\n"
+
+
+def key_help(key: str | dict) -> str:
+  """The help of one config key (or of a row of :func:`key_docs`), with its range or choices (what a flag
+  that sets it says)."""
+  row = key_docs(key)[0] if isinstance(key, str) else key
   bounds = []
   if row["choices"]:
     bounds.append("one of " + ", ".join(map(str, row["choices"])))

@@ -57,3 +57,15 @@ def test_a_sampling_flag_says_its_keys_help_and_defers_to_the_run(name):
 def test_the_help_of_the_noise_keys_says_what_the_code_does():
   smoothing = key_docs("sample.noise_smoothing")[0]
   assert "noise_order" in smoothing["help"] and "two cascaded" not in (smoothing["more"] or "")
+
+
+def test_the_docs_config_reference_is_generated_from_the_fields():
+  """docs/config.md is `chorjax config keys --markdown`: regenerate it when a field changes."""
+  from pathlib import Path
+
+  from chorjax.config import reference_markdown
+
+  page = Path(__file__).resolve().parents[1] / "docs" / "config.md"
+  assert page.read_text() == reference_markdown(), "docs/config.md is stale: chorjax config keys --markdown > it"
+  for row in key_docs():
+    assert f"| `{row['key']}` |" in page.read_text()

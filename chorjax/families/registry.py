@@ -32,9 +32,9 @@ def register(family: Family) -> Family:
   return family
 
 
-def names() -> tuple[str, ...]:
-  """Every family name a config may give: the built-in ones and those registered since."""
-  return tuple(dict.fromkeys((*BUILTIN, *_REGISTERED)))
+def names(registered: bool = True) -> tuple[str, ...]:
+  """Every family name a config may give: the built-in ones and (``registered``) those registered since."""
+  return tuple(dict.fromkeys((*BUILTIN, *(_REGISTERED if registered else ()))))
 
 
 def get(name: str) -> Family:
