@@ -221,8 +221,12 @@ SAMPLING_FLAGS = (
 
 def _control_help(name: str) -> str:
   """A sampling flag's help: its ``[sample]`` key's, and where an unset flag's value comes from."""
-  where = "the run's calibration, else " if name in api.CALIBRATED else "the run's "
-  return f"{api.key_help(f'sample.{name}')} (default: {where}sample.{name})"
+  return _key_flag(f"sample.{name}", "the run's calibration, else the run's" if name in api.CALIBRATED else "the run's")
+
+
+def _key_flag(key: str, whose: str) -> str:
+  """The help of a flag that sets ``key``: the key's help, and that unset it is ``whose`` value of the key."""
+  return f"{api.key_help(key)} (default: {whose} {key})"
 
 
 def _add_sampling_args(p) -> None:
@@ -347,14 +351,12 @@ def _add_run_commands(sub) -> None:
     action="store_true",
     help="continue a workdir whose saved config differs (the old config is kept beside it)",
   )
+  train.add_argument("--distributed", action="store_true", help=_key_flag("parallel.distributed", "its config's"))
   train.add_argument(
-    "--distributed",
-    action="store_true",
-    help="multi-process run: jax.distributed.initialize (same as parallel.distributed=true)",
+    "--coordinator", metavar="HOST:PORT", help=_key_flag("parallel.coordinator_address", "its config's")
   )
-  train.add_argument("--coordinator", metavar="HOST:PORT", help="coordinator address (parallel.coordinator_address)")
-  train.add_argument("--num-processes", type=int, help="processes in the job (parallel.num_processes)")
-  train.add_argument("--process-id", type=int, help="this process's index (parallel.process_id)")
+  train.add_argument("--num-processes", type=int, help=_key_flag("parallel.num_processes", "its config's"))
+  train.add_argument("--process-id", type=int, help=_key_flag("parallel.process_id", "its config's"))
   train.set_defaults(func=_train)
 
   sample = sub.add_parser(
@@ -577,14 +579,10 @@ def _add_calibrate_command(sub) -> None:
     "--noise-order",
     type=int,
     metavar="N",
-    help="AR(1) filters the drawn noise passes, 1-8, recorded with the chosen settings (default: the run's "
-    "sample.noise_order)",
+    help=_key_flag("sample.noise_order", "the run's") + "; recorded with the choice",
   )
   cal.add_argument(
-    "--pace",
-    type=float,
-    metavar="GAIN",
-    help="the pace governor's gain (0 = off), recorded with the chosen settings (default: the run's sample.pace)",
+    "--pace", type=float, metavar="GAIN", help=_key_flag("sample.pace", "the run's") + "; recorded with the choice"
   )
   cal.add_argument("--force", action="store_true", help="replace an existing calibration.json")
   cal.set_defaults(func=_calibrate)

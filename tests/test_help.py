@@ -69,3 +69,32 @@ def test_the_docs_config_reference_is_generated_from_the_fields():
   assert page.read_text() == reference_markdown(), "docs/config.md is stale: chorjax config keys --markdown > it"
   for row in key_docs():
     assert f"| `{row['key']}` |" in page.read_text()
+
+
+def _flags_that_set_keys():
+  """(command, flag, action, key) for every flag whose help says which config key it stands for."""
+  import re
+
+  keys, found = set(valid_keys()), []
+
+  def walk(parser, prefix):
+    for action in parser._actions:
+      if isinstance(action, argparse._SubParsersAction):
+        for name, sub in action.choices.items():
+          walk(sub, f"{prefix} {name}".strip())
+      m = re.search(r"\(default: [^()]*?([a-z]+\.[a-z_]+)\)(; .*)?$", action.help or "")
+      if m and m.group(1) in keys:
+        found.append((prefix, action.option_strings[0], action, m.group(1)))
+
+  walk(cli.build_parser(), "")
+  return found
+
+
+def test_every_flag_that_sets_a_key_says_the_keys_help_and_does_not_override_it():
+  flags = _flags_that_set_keys()
+  commands = {c for c, *_ in flags}
+  assert {"sample", "eval", "live", "calibrate", "train"} <= commands, commands
+  assert len(flags) >= 14 * 3 + 2 + 4
+  for command, flag, action, key in flags:
+    assert action.help.startswith(key_docs(key)[0]["help"]), (command, flag)
+    assert action.default in (None, False), (command, flag, action.default)  # unset: the run's or config's value
