@@ -63,10 +63,7 @@ class DataConfig:
   skeleton: str = _field(
     "mpii16",
     "joint layout of CSV takes: mpii16, or a FILE.skeleton.json (a sidecar beside a CSV is found by itself)",
-    more=(
-      "joint layout of CSV takes: mpii16, or a skeleton file (FILE.skeleton.json, as `data convert --joints "
-      "native` writes beside each CSV; such a sidecar is found by itself)"
-    ),
+    more=("`chorjax data convert --joints native` writes such a sidecar beside each CSV."),
   )
   joints: str = _field(
     "mpii16",
@@ -77,8 +74,8 @@ class DataConfig:
     "",
     "a TOML file mapping each training joint to a source joint, for skeletons that cannot be placed automatically",
     more=(
-      'a TOML file, one `target = "source joint"` line per training joint, for skeletons whose joints '
-      "cannot be placed automatically (default: by family, names, then topology)"
+      'One `target = "source joint"` line per training joint. Without it, skeletons are placed by a known '
+      "rig family, by joint names, then by topology."
     ),
   )
   fps: float = _field(30.0, "frame rate of CSV takes (CSV files do not record it), 1-1000", minimum=1.0, below=1000.5)
@@ -97,9 +94,8 @@ class DataConfig:
     "bone_relative",
     "features the model sees: absolute, bone_relative, root_relative, canonical (root motion + pose) or directions",
     more=(
-      "features the model sees: per-frame positions (absolute, bone_relative, root_relative), or the root's "
-      "motion plus the pose: canonical (HumanML3D-style: facing frame, joint steps, foot contacts) or "
-      "directions (unit bone directions at the training takes' mean lengths: bones cannot stretch)"
+      "canonical: HumanML3D-style (facing frame, joint steps, foot contacts); directions: unit bone "
+      "directions at the training takes' mean lengths, so bones cannot stretch."
     ),
     choices=("absolute", "bone_relative", "root_relative", "canonical", "directions"),
   )
@@ -109,8 +105,8 @@ class DataConfig:
     False,
     "keep a take's leading rest pose (by default training drops it and says so)",
     more=(
-      "keep a take's leading rest pose (a converter's arms-out frame 0 and the blend out of it, found by "
-      "the jump it makes: see `chorjax data check`); by default training drops it and says so"
+      "A converter's arms-out frame 0 and the blend out of it are found by the jump they make (`chorjax "
+      "data check` shows them)."
     ),
   )
   augment: tuple = _field(
@@ -124,11 +120,9 @@ class ModelConfig:
     "rnn",
     "model family: 'rnn' (recurrent core + head), 'gan' (LSTM-GAN, [gan]) or 'inbetween' (transitions, [inbetween])",
     more=(
-      "model family: 'rnn' (a recurrent core predicting every next frame through model.head) or 'gan' (an "
-      "LSTM-GAN: a generator turns a noise vector into a whole sequence, a critic tells real from "
-      "generated; configured under [gan]) or 'inbetween' (a transition model that writes the frames between "
-      "a context phrase and a target pose, for `chorjax inbetween`; configured under [inbetween], its "
-      "recurrent core is model.cell, num_layers, hidden_size and forget_bias)"
+      "rnn predicts every next frame through model.head; gan's generator turns a noise vector into a whole "
+      "sequence that a critic judges; inbetween writes the frames between a context phrase and a target "
+      "pose for `chorjax inbetween`, its core being model.cell, num_layers, hidden_size and forget_bias."
     ),
     choices=family_names,
   )
@@ -144,11 +138,9 @@ class ModelConfig:
     "features",
     "the coordinates of the MDN's diagonal Gaussians: 'features' or 'pca' (the training frames' principal axes)",
     more=(
-      "the coordinates the MDN's diagonal Gaussians live in: 'features' (each normalized feature: a draw's "
-      "noise is independent per feature) or 'pca' (the principal axes of the training frames' features, "
-      "fixed at the start of training and saved with the run: a draw varies the pose along directions the "
-      "data varies together; the likelihood is the same quantity, the basis is a rotation); an MSE head "
-      "ignores it"
+      "With 'pca' the basis is fixed at the start of training and saved with the run: a draw varies the "
+      "pose along directions the data varies together. The likelihood is the same quantity (the basis is a "
+      "rotation); an MSE head ignores the key."
     ),
     choices=("features", "pca"),
   )
@@ -162,10 +154,8 @@ class ModelConfig:
     "fused",
     "how model.cell = 'lstm' runs: 'fused' (every backend) or 'cudnn' (cuDNN on a CUDA GPU, fused elsewhere)",
     more=(
-      "how model.cell = 'lstm' runs over a training window: 'fused' (chorjax's own scan, every backend) or "
-      "'cudnn' (NVIDIA cuDNN through jax.experimental.rnn where JAX runs on a CUDA GPU, the fused scan "
-      "elsewhere: the same parameters, so a run trained on a GPU samples anywhere; not yet timed on a GPU, "
-      "see BENCHMARKS.md)"
+      "'cudnn' uses NVIDIA cuDNN through jax.experimental.rnn with the same parameters as the fused scan, "
+      "so a run trained on a GPU samples anywhere."
     ),
     choices=("fused", "cudnn"),
   )
@@ -192,11 +182,7 @@ class GanConfig:
   frame_noise: int = _field(
     0,
     "channels of fresh noise fed to the generator's LSTM at every frame (0 = one repeated noise vector)",
-    more=(
-      "channels of fresh noise fed to the generator's LSTM at every frame beside the repeated vector (0 = "
-      "the tutorial's generator: one noise vector, repeated; an LSTM driven by a constant input tends to "
-      "settle into one still pose, as in a trial run in experiments/families)"
-    ),
+    more=("0 is the tutorial's generator; an LSTM driven by a constant input tends to settle into one still pose."),
     minimum=0,
   )
   generator_layers: int = _field(2, "the generator's stacked recurrent layers", minimum=1)
@@ -208,10 +194,7 @@ class GanConfig:
   loss: str = _field(
     "bce",
     "adversarial loss: 'bce' (binary cross-entropy) or 'wgan-gp' (Wasserstein critic with gradient penalty)",
-    more=(
-      "adversarial loss: 'bce' (the tutorial's: binary cross-entropy, a non-saturating generator loss) or "
-      "'wgan-gp' (Wasserstein critic with gradient penalty, the stable alternative)"
-    ),
+    more=("bce is the tutorial's loss with a non-saturating generator; wgan-gp is the stable alternative."),
     choices=("bce", "wgan-gp"),
   )
   gp_weight: float = _field(10.0, "weight of the gradient penalty (wgan-gp)", minimum=0.0)
@@ -222,12 +205,9 @@ class GanConfig:
     "directions",
     "what the generator writes: bone 'directions', joint 'rotations' (quaternions, forward kinematics) or 'features'",
     more=(
-      "what the generator writes: 'directions' (every bone's direction, made a unit vector after the "
-      "generator: the positions-only stand-in for quaternions), 'rotations' (every joint's local rotation "
-      "as a quaternion, made unit length, through forward kinematics from the takes' mean rest directions, "
-      "as the tutorial does; chorjax reads BVH/AMC/C3D as positions, so the rotations are the generator's "
-      "own, not the files'), both with data.representation = directions (bones keep the takes' mean "
-      "lengths), or 'features' (the run's data.representation as it is)"
+      "directions and rotations need data.representation = directions (bones keep the takes' mean lengths). "
+      "Rotations go through forward kinematics from the takes' mean rest directions; they are the "
+      "generator's own, not a file's channels."
     ),
     choices=("directions", "rotations", "features"),
   )
@@ -242,10 +222,9 @@ class InbetweenConfig:
     "lstm",
     "the transition model: 'lstm' (Harvey et al. 2020) or 'cvae' (Tang et al. 2022: a motion manifold and a sampler)",
     more=(
-      "the transition model: 'lstm' (the recurrent core conditioned on the target pose and the time to "
-      "arrival, as in Harvey et al. 2020, writing each frame's deviation from linear interpolation) or "
-      "'cvae' (Tang et al. 2022: a conditional VAE motion manifold with a mixture-of-experts decoder, "
-      "trained first, then a recurrent transition sampler that writes its latents with the decoder frozen)"
+      "lstm writes each frame's deviation from linear interpolation, conditioned on the target pose and the "
+      "time to arrival; cvae trains a conditional VAE manifold with a mixture-of-experts decoder first, "
+      "then a recurrent sampler of its latents with the decoder frozen."
     ),
     choices=("lstm", "cvae"),
   )
@@ -260,9 +239,8 @@ class InbetweenConfig:
     0.5,
     "std of the noise on the target (lstm) or of the sampler's latents (cvae): seeds write different transitions",
     more=(
-      "lstm: std of the noise added to the target and offset encodings (once per transition, fading over "
-      "the last 5-30 frames before arrival, as Harvey et al.'s z_target); cvae: the sampler's latents are "
-      "drawn as mu + target_noise x sigma x eps. Either way, different seeds write different transitions"
+      "lstm: added once per transition to the target and offset encodings, fading over the last 5-30 frames "
+      "before arrival (Harvey et al.'s z_target); cvae: latents drawn as mu + target_noise x sigma x eps."
     ),
     minimum=0.0,
   )
@@ -288,20 +266,15 @@ class InbetweenConfig:
     1e-5,
     "cvae: weight of stage 1's KL term",
     more=(
-      "cvae: weight of the KL term of stage 1, beside a reconstruction that is a mean L1 per coordinate in "
-      "leg lengths (about 0.003-0.01): on cmu94, 0.1 and 5e-4 collapsed the posterior (KL under 1 nat, the "
-      "decoder ignoring z); 1e-5 keeps it some 70 nats"
+      "Beside a reconstruction that is a mean L1 per coordinate in leg lengths (about 0.003-0.01); on "
+      "cmu94, 0.1 and 5e-4 collapsed the posterior, 1e-5 keeps it some 70 nats."
     ),
     minimum=0.0,
   )
   physics_start: int = _field(
     1000,
     "cvae: the stage-1 step from which the foot-skating and bone-length losses join",
-    more=(
-      "cvae: the stage-1 step from which the foot-skating and bone-length losses join (their weight ramping "
-      "from 0 to 1 over the rest of stage 1, while the learning rate, decayed to optim.final_lr_ratio, is "
-      "warmed again from 0)"
-    ),
+    more=("Their weight ramps from 0 to 1 over the rest of stage 1, while the learning rate is warmed again from 0."),
     minimum=0,
   )
 
@@ -337,9 +310,8 @@ class TrainConfig:
     "last",
     "the checkpoint sample, eval, calibrate and live use by default: the 'last', or the 'best' by validation loss",
     more=(
-      "the checkpoint that sample, eval, calibrate and live use unless told (--checkpoint kept, their "
-      "default): the last, or the best by validation loss (a small dataset over-fits: its held-out NLL "
-      "rises late); the last where nothing is held out"
+      "`--checkpoint kept` (the default of those commands) follows it. A small dataset over-fits late, so "
+      "'best' keeps the lowest held-out loss; with nothing held out it is the last."
     ),
     choices=("last", "best"),
     resumable=True,
@@ -348,8 +320,8 @@ class TrainConfig:
     False,
     "after training, choose the sampling settings on the training takes (`chorjax calibrate`)",
     more=(
-      "after training, choose the sampling's noise_smoothing, sigma_temperature, persistence, crossfade and "
-      "foot_lock on the training takes (`chorjax calibrate`; the end sample is drawn with them)"
+      "It chooses noise_smoothing, sigma_temperature, persistence, crossfade and foot_lock, and the end "
+      "sample is drawn with them."
     ),
     resumable=True,
   )
@@ -357,10 +329,9 @@ class TrainConfig:
     "none",
     "feed the model's own outputs back in training: 'auto' (auto-conditioning), 'scheduled' or 'none'",
     more=(
-      "against exposure bias, feed the model's own outputs back as inputs during training: 'auto' (auto- "
-      "conditioning, Zhou et al. 2018: ground_truth_frames real frames, then condition_frames own ones, "
-      "repeating) or 'scheduled' (scheduled sampling: each frame is the model's own with probability "
-      "feedback_max x the schedule); 'none' = teacher forcing only"
+      "Against exposure bias: 'auto' (Zhou et al. 2018) feeds ground_truth_frames real frames, then "
+      "condition_frames own ones, repeating; 'scheduled' makes each frame the model's own with probability "
+      "feedback_max x the schedule; 'none' is teacher forcing only."
     ),
     choices=("none", "auto", "scheduled"),
   )
@@ -397,11 +368,7 @@ class SampleConfig:
   noise_smoothing: float = _field(
     0.0,
     "MDN noise correlated over frames: the coefficient of the noise_order AR(1) filters it passes (0 = white noise)",
-    more=(
-      "each frame's standard-normal draw passes sample.noise_order cascaded AR(1) filters with this "
-      "coefficient (unit variance kept), so a full-temperature sample moves smoothly instead of trembling; "
-      "0 = independent noise per frame"
-    ),
+    more=("The filters keep unit variance, so a full-temperature sample moves smoothly instead of trembling."),
     minimum=0.0,
     below=1.0,
     resumable=True,
@@ -410,10 +377,8 @@ class SampleConfig:
     2,
     "how many AR(1) filters, each with coefficient noise_smoothing, the MDN noise passes",
     more=(
-      "how many AR(1) filters (each with coefficient noise_smoothing) the MDN noise passes, 1-8: two leave "
-      "a tremble in every frame's change (their second difference keeps every frequency) that smoothing "
-      "harder only trades for poses that wander off; four at 0.8 move as fast per frame as two at 0.9 with "
-      "a third of the second difference"
+      "Two filters leave a tremble in every frame's change; four at 0.8 move as fast per frame as two at "
+      "0.9 with a third of the second difference."
     ),
     minimum=1,
     below=MAX_NOISE_ORDER + 1,
@@ -422,20 +387,14 @@ class SampleConfig:
   persistence: float = _field(
     0.0,
     "bonus to the log-weight of the previous frame's mixture component (0 = off)",
-    more=(
-      "MDN component persistence: added to the log-weight of the component drawn for the previous frame, so "
-      "the dancer does not hop between components every frame (0 = off)"
-    ),
+    more=("The dancer does not hop between mixture components every frame."),
     minimum=0.0,
     resumable=True,
   )
   crossfade: float = _field(
     0.0,
     "MDN component switches glide: the jump between the means decays by this factor per frame (0 = off)",
-    more=(
-      "MDN component switches glide: the jump between the old and the new component's means is carried into "
-      "the frame and decays by this factor per frame (0 = off; 0.8: mostly gone after 10 frames)"
-    ),
+    more=("At 0.8 a switch's jump is mostly gone after 10 frames."),
     minimum=0.0,
     below=1.0,
     resumable=True,
@@ -443,61 +402,42 @@ class SampleConfig:
   rigid_bones: bool = _field(
     False,
     "decode with the training takes' mean bone lengths: bones cannot stretch",
-    more=(
-      "decode every generated frame with the training takes' mean bone lengths (each bone keeps its "
-      "direction): bones cannot stretch"
-    ),
+    more=("Each bone keeps its direction."),
     resumable=True,
   )
   foot_lock: bool = _field(
     False,
     "canonical runs: a foot in contact with the floor does not slide",
-    more=(
-      "canonical features: a foot the model says is in contact with the floor does not slide; the body "
-      "travels by what its legs do"
-    ),
+    more=("The body travels by what its legs do."),
     resumable=True,
   )
   ground: bool = _field(
     False,
     "canonical runs: feet in contact with the floor stand on the training floor, no floating",
     more=(
-      "canonical features: a foot the model says is in contact with the floor stands on it (the body is "
-      "moved up or down to the training takes' floor, smoothly, and never faster than the takes' fastest "
-      "vertical root step): no floating, no feet sunk into the floor"
+      "The body is moved up or down to the floor smoothly, never faster than the takes' fastest vertical root step."
     ),
     resumable=True,
   )
   clamp: bool = _field(
     False,
     "clip every generated frame to the training features' range before it is fed back",
-    more=(
-      "every generated frame is clipped, feature by feature, to the range the training frames span before "
-      "it is fed back: no root speed, pose or joint velocity beyond what the data shows (the model is never "
-      "fed a frame unlike its training inputs)"
-    ),
+    more=("Feature by feature: the model is never fed a frame unlike its training inputs."),
     resumable=True,
   )
   clamp_steps: bool = _field(
     False,
     "clip every frame's change from the previous one to the range of the training frames' changes",
-    more=(
-      "every generated frame's change from the previous one is clipped, feature by feature, to the range of "
-      "the training frames' changes: no pose, height or speed that jumps in one frame further than the data "
-      "ever does (a mixture component that flickers for a frame)"
-    ),
+    more=("Feature by feature: a component that flickers for a frame cannot jump further than the data ever does."),
     resumable=True,
   )
   pace: float = _field(
     0.0,
     "pace governor gain g: scale temperature x m = (training / own pace)^g in 0.5-2, persistence x min(m, 1/m)^2",
     more=(
-      "MDN pace governor: the scale temperature is multiplied by m = (training pace / the dancer's own "
-      "pace) to this power (within 0.5-2x) and the persistence by min(m, 1/m)^2, the pace being how far the "
-      "joints move relative to the root in half a second, turning included, as the benchmark measures it "
-      "(runs without canonical features: the pose features), averaged over about 5 s: a dancer who slows "
-      "down gets more energy, one who trembles or races gets less, and either lets go of its mixture "
-      "component sooner (0 = off)"
+      "The pace is how far the joints move relative to the root in half a second, turning included (the "
+      "pose features where the run has no canonical features), averaged over about 5 s: a dancer who slows "
+      "gets more energy, one who races less, and either lets go of its component sooner."
     ),
     minimum=0.0,
     resumable=True,
@@ -506,11 +446,8 @@ class SampleConfig:
     0.0,
     "hold MDN scales at most at this quantile of the model's own scales on its training frames (0 = off)",
     more=(
-      "MDN scale ceiling: every drawn component's scale is held, feature by feature, at most at this "
-      "quantile of the scales the model predicts for its own training frames (teacher forced), e.g. 0.95; a "
-      "model that wanders into a state it is unsure of (scales 4x wider than on its data) then draws a calm "
-      "frame, not a jerky one, and finds its way back (0 = off; needs the run's training data at sampling "
-      "time)"
+      "Teacher forced on the training frames, e.g. 0.95: a model unsure of a state then draws a calm frame "
+      "and finds its way back. Needs the run's training data at sampling time."
     ),
     minimum=0.0,
     below=1.0,
