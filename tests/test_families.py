@@ -131,6 +131,8 @@ def test_a_toy_family_trains_and_samples_through_the_api(toy_run):
   assert dance.positions.shape == (20, 16, 3) and np.isfinite(dance.positions).all()
   np.testing.assert_array_equal(dance.positions, again.positions)  # loaded back, the same draw
   assert not np.allclose(dance.positions, toy_run.sample(frames=20, seed=2).positions)
+  with pytest.raises(chorjax.UserError, match="'temprature' is not a sampling control; did you mean"):
+    toy_run.sample(frames=5, temprature=0.5)  # a misspelt control is refused, not swallowed
 
 
 def test_a_toy_family_trains_samples_and_evaluates_through_the_cli(tmp_path, capsys):
