@@ -150,8 +150,8 @@ def sampling(reps: int) -> dict:
 
 def vectorized(k: int, reps: int) -> dict:
   """Seconds of one step of one run, and of one vectorized step of ``k`` runs (the shipped shape)."""
-  from chorjax.families.recurrent.steps import create_train_state, train_step
-  from chorjax.families.recurrent.vectorized import vec_train_step
+  from chorjax.families.recurrent.steps import _train_step, create_train_state, train_step
+  from chorjax.vectorized import vec_train_step
 
   layers, hidden, b, t = SHAPES["shipped"]
   made = [create_train_state(_config("lstm", layers, hidden, [f"train.seed={s}"]), D, 10, np.eye(D)) for s in range(k)]
@@ -168,7 +168,7 @@ def vectorized(k: int, reps: int) -> dict:
     return m["loss"]
 
   def together():
-    box["all"], m = vec_train_step(box["all"], batches, keys, hyper, spec)
+    box["all"], m = vec_train_step(box["all"], batches, keys, hyper, spec, _train_step)
     return m["loss"]
 
   times = alternate([("one", one, jax.block_until_ready), ("together", together, jax.block_until_ready)], reps)

@@ -46,8 +46,8 @@ def _cfgs(k: int, steps: int):
 def steady_steps(k: int, reps: int = 30) -> dict:
   """Median seconds of one lone step and of one vectorized step of ``k`` points."""
   from chorjax.data.dataset import WindowSampler, load_dataset
-  from chorjax.families.recurrent.steps import create_train_state, train_step
-  from chorjax.families.recurrent.vectorized import vec_train_step
+  from chorjax.families.recurrent.steps import _train_step, create_train_state, train_step
+  from chorjax.vectorized import vec_train_step
 
   cfgs = _cfgs(k, 100)
   ds = load_dataset(cfgs[0].data)
@@ -65,7 +65,7 @@ def steady_steps(k: int, reps: int = 30) -> dict:
 
   def together(step):
     batch = jax.tree.map(lambda *xs: np.stack(xs), *[s.batch(step) for s in samplers])
-    box["all"], m = vec_train_step(box["all"], batch, keys, hyper, spec)
+    box["all"], m = vec_train_step(box["all"], batch, keys, hyper, spec, _train_step)
     return m["loss"]
 
   out = {}
@@ -128,8 +128,8 @@ def torch_steps(k: int, form: str, reps: int = 30) -> dict:
 
 
 def whole_training(k: int, steps: int) -> dict:
-  from chorjax.points import train_vectorized
   from chorjax.training import train_and_evaluate
+  from chorjax.vectorized import train_vectorized
 
   cfgs = _cfgs(k, steps)
   with tempfile.TemporaryDirectory() as d:

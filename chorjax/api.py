@@ -45,7 +45,7 @@ from chorjax.errors import (
   UserError,
 )
 from chorjax.evaluate import evaluate_to  # noqa: F401
-from chorjax.experiments import compare_to, run_sweep  # noqa: F401
+from chorjax.experiments import compare_to, run_sweep, train_command  # noqa: F401
 from chorjax.live import run_live  # noqa: F401
 from chorjax.render.files import plot_file, render  # noqa: F401
 from chorjax.reports import METRIC_KEYS, check_report, metric_lines, takes_table  # noqa: F401
@@ -53,7 +53,6 @@ from chorjax.run import Run as _Run
 from chorjax.runtime import keep_freed_memory  # noqa: F401
 from chorjax.sample import write_inbetween, write_sample  # noqa: F401
 from chorjax.scoring import score_to  # noqa: F401
-from chorjax.training import train_command  # noqa: F401
 
 __all__ = ["Motion", "Player", "Run", "UserError", "load_dataset", "load_run", "read_motion", "score", "train"]
 
@@ -72,7 +71,8 @@ class Motion(_motion.Motion):
     """Writes the motion as ``path``'s suffix says: ``.csv``, ``.npz``, ``.bvh`` (with ``skeleton``, a
     character BVH: the dance on its hierarchy, as ``chorjax sample --skeleton``) or ``.html`` (the player).
     An existing file is not replaced unless ``force``."""
-    from chorjax.output import check_output, refuse_existing, write_motions
+    from chorjax.errors import check_output, refuse_existing
+    from chorjax.output import write_motions
 
     path, suffix = check_output(path)
     refuse_existing([path], force, how="force=True")

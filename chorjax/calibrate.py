@@ -252,7 +252,7 @@ def calibrate_run(workdir, data=None, *, force: bool = False, noise_order=None, 
   where the run already has a calibration.json (unless ``force``) or ``noise_order`` / ``pace`` are not what
   ``[sample]`` allows."""
   from chorjax.config import check_sample_control
-  from chorjax.output import refuse_existing
+  from chorjax.errors import refuse_existing
 
   refuse_existing([calibration_path(workdir)], force)
   if noise_order is not None:

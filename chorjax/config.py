@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from chorjax.errors import UserError, check_memory
-from chorjax.families.registry import names as family_names
+from chorjax.registry import names as family_names
 
 
 def _field(

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from chorjax.errors import UserError
-from chorjax.output import load_character, refuse_existing
+from chorjax.errors import UserError, refuse_existing
+from chorjax.output import load_character
 
 
 def convert(

@@ -168,3 +168,23 @@ def check_array(values, where: str) -> None:
     idx = tuple(int(k) for k in np.argwhere(bad)[0])
     kind = "non-finite" if not np.isfinite(a[idx]) else "out-of-range"
     raise UserError(f"{where}: {kind} value {a[idx]!r} at index {list(idx)} ({int(bad.sum())} such values)")
+
+
+WRITES = (".csv", ".npz", ".bvh", ".html")  # what a dance may be written as
+
+
+def check_output(path, allowed=WRITES) -> tuple[Path, str]:
+  """The output path and its suffix, checked to be an allowed kind."""
+  out = Path(path)
+  suffix = out.suffix.lower()
+  if suffix not in allowed:
+    kinds = allowed[0] if len(allowed) == 1 else f"{', '.join(allowed[:-1])} or {allowed[-1]}"
+    raise UserError(f"{out}: output must end in {kinds}")
+  return out, suffix
+
+
+def refuse_existing(paths, force: bool, how: str = "--force") -> None:
+  """A UserError for the first of ``paths`` that exists, unless ``force`` (``how`` says how to allow it)."""
+  for p in paths:
+    if Path(p).exists() and not force:
+      raise UserError(f"{p}: already exists (use {how} to overwrite)")

@@ -191,8 +191,9 @@ def _release_compiled() -> None:
 def _train_points(points, log) -> None:
   """Trains ``(name, overrides, cfg, workdir)`` points: together when there are several, else alone."""
   from chorjax.end_of_run import standard
-  from chorjax.points import NotAligned, train_vectorized
+  from chorjax.points import NotAligned
   from chorjax.training import train_and_evaluate
+  from chorjax.vectorized import train_vectorized
 
   if len(points) > 1:
     log(f"{', '.join(n for n, *_ in points)}: training together ({' '.join(points[0][1])} ...)")
@@ -607,10 +608,53 @@ def compare(workdirs, output) -> Path:
 def compare_to(workdirs, output, *, force: bool = False) -> Path:
   """``chorjax compare``: :func:`compare`, the report and the images written beside it refused where they
   exist (unless ``force``)."""
-  from chorjax.output import refuse_existing
+  from chorjax.errors import refuse_existing
 
   stem = Path(output).with_suffix("")
   images = sorted(stem.parent.glob(f"{stem.name}_loss.png")) + sorted(stem.parent.glob(f"{stem.name}_movement.png"))
   images += sorted(stem.parent.glob(f"{stem.name}_strip*.png"))
   refuse_existing([output, *images], force)  # the report's images are written beside it
   return compare(workdirs, output)
+
+
+def train_command(config, overrides=(), *, workdir=None, force: bool = False, log=print) -> list[dict]:
+  """``chorjax train``: ``config`` (a TOML path) with ``overrides``; a list for a vectorizable key
+  (``train.seed=[0,1,2]``) trains one run directory a point (``WORKDIR/seed=0`` ...) as one program, else
+  one run (data-parallel over processes where ``[parallel]`` says). ``log`` hears a line a run trained.
+  Returns the runs' summaries (:func:`train_and_evaluate`)."""
+  from chorjax import end_of_run
+  from chorjax.parallel import setup_parallel
+  from chorjax.points import expand_overrides
+  from chorjax.training import default_workdir, train_and_evaluate
+  from chorjax.vectorized import train_vectorized
+
+  overrides, points = expand_overrides(list(overrides))
+  cfg = load_config(config, overrides)
+  workdir = Path(workdir) if workdir else default_workdir(cfg)
+  if len(points) > 1:
+    tag = lambda p: "-".join(f"{k.split('.')[-1]}={v}" for k, v in p)
+    cfgs = [load_config(config, [*overrides, *(f"{k}={v!r}" for k, v in p)]) for p in points]
+    dirs = [workdir / tag(p) for p in points]
+    summaries = train_vectorized(cfgs, dirs, force=force)
+    for d, s in zip(dirs, summaries):
+      log(f"trained {d.name}: steps {s['start_step']}->{s['final_step']}{_losses(s)}; workdir {d}")
+    return summaries
+  parallel = setup_parallel(cfg)
+  s = train_and_evaluate(cfg, workdir, force=force, parallel=parallel, finish=end_of_run.standard(cfg))
+  if parallel is not None and not parallel.is_main:
+    log(
+      f"process {parallel.process_index}/{parallel.process_count}: steps {s['start_step']}->"
+      f"{s['final_step']}, final train loss {s.get('final_train_loss', float('nan')):.6g}"
+    )
+    return [s]
+  steps = f"steps {s['start_step']}->{s['final_step']}"
+  log(f"trained {cfg.name}: {steps}{_losses(s)}, {s['seconds']:.0f} s; workdir {workdir}")
+  if "samples" in s:
+    log(f"sample: {s['samples']['csv']}\nwatch it: {s['samples']['html']}")
+  return [s]
+
+
+def _losses(summary: dict) -> str:
+  """``, train loss X, val loss Y`` of a run's summary (what it has of them)."""
+  train = f", train loss {summary['final_train_loss']:.4g}" if "final_train_loss" in summary else ""
+  return train + (f", val loss {summary['final_val_loss']:.4g}" if "final_val_loss" in summary else "")

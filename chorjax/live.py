@@ -520,7 +520,7 @@ def run_live(
 def _check_flags(port: int, record, force: bool, fps, alternate: float) -> None:
   """``chorjax live``'s flags checked before anything is loaded: the port, the recording (an ``.npz`` that
   is not there yet, unless ``force``), the frame rate and the alternation's seconds; and the live extra."""
-  from chorjax.output import check_output, refuse_existing
+  from chorjax.errors import check_output, refuse_existing
 
   if not 0 <= port <= 65535:
     raise UserError(f"--port {port}: must be at least 0" if port < 0 else f"--port {port}: must be at most 65535")

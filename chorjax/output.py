@@ -9,31 +9,12 @@ from pathlib import Path
 
 from chorjax.errors import UserError
 
-WRITES = (".csv", ".npz", ".bvh", ".html")  # what a dance may be written as
-
-
-def check_output(path, allowed=WRITES) -> tuple[Path, str]:
-  """The output path and its suffix, checked to be an allowed kind."""
-  out = Path(path)
-  suffix = out.suffix.lower()
-  if suffix not in allowed:
-    kinds = allowed[0] if len(allowed) == 1 else f"{', '.join(allowed[:-1])} or {allowed[-1]}"
-    raise UserError(f"{out}: output must end in {kinds}")
-  return out, suffix
-
 
 def output_paths(out: Path, num: int) -> list[Path]:
   """The files ``num`` motions written to ``out`` make: OUT itself, or OUT_k per motion for CSV/BVH."""
   if num == 1 or out.suffix.lower() in (".npz", ".html"):
     return [out]
   return [out.with_name(f"{out.stem}_{k}{out.suffix}") for k in range(num)]
-
-
-def refuse_existing(paths, force: bool, how: str = "--force") -> None:
-  """A UserError for the first of ``paths`` that exists, unless ``force`` (``how`` says how to allow it)."""
-  for p in paths:
-    if Path(p).exists() and not force:
-      raise UserError(f"{p}: already exists (use {how} to overwrite)")
 
 
 def load_character(path, out: Path):

@@ -1,6 +1,6 @@
-"""Points of a grid (sweep points, ``train.seed=[0,1,2]``) that train together as one vectorized program:
-which keys may differ between them, how a command's list overrides expand into points, and the family's
-own vectorized trainer that trains them (``Family.train_together``)."""
+"""Points of a grid (sweep points, ``train.seed=[0,1,2]``) that train together as one vectorized program
+(``chorjax.vectorized``): which keys may differ between them, and how a command's list overrides expand
+into points."""
 
 from __future__ import annotations
 
@@ -49,7 +49,7 @@ def check_group(cfgs) -> list[str]:
     raise UserError("train.input_noise cannot differ between vectorized points with train.feedback")
   if cfgs[0].parallel.distributed:
     raise UserError("vectorized training runs in one process (parallel.distributed = false)")
-  if family_of(cfgs[0]).train_together() is None:
+  if family_of(cfgs[0]).vector_step() is None:
     name = cfgs[0].model.family
     raise NotAligned(f"model.family = {name!r}: vectorized training covers the rnn family; train these points apart")
   return [k for k in differ if k in VECTOR_KEYS]
@@ -72,18 +72,3 @@ def expand_overrides(overrides) -> tuple[list[str], list[list[tuple[str, object]
     else:
       plain.append(text)
   return plain, [list(p) for p in itertools.product(*lists)] if lists else [[]]
-
-
-def train_vectorized(cfgs, workdirs, *, force: bool = False) -> list[dict]:
-  """Trains the points ``cfgs`` (one run directory each in ``workdirs``) as one vectorized program of their
-  family; returns each point's summary, as ``training.train_and_evaluate`` does.
-
-  Raises:
-    UserError: points that differ in a key that cannot be vectorized (:func:`check_group`).
-    NotAligned: a family that trains its points apart, or points whose latest checkpoints are at different steps.
-  """
-  cfgs = list(cfgs)
-  check_group(cfgs)
-  train = family_of(cfgs[0]).train_together()
-  assert train is not None  # check_group refuses a family that trains its points apart
-  return train(cfgs, workdirs, force=force)

@@ -102,7 +102,8 @@ def write_sample(
   :func:`sample_dancers`) and writes them to ``output`` (``output.write_motions``: CSV, NPZ with the
   settings, BVH, onto the character ``skeleton`` where given, or HTML). Everything that can be refused is
   refused before the draw; an existing file is not replaced unless ``force``. Returns the paths written."""
-  from chorjax.output import as_motions, check_output, load_character, output_paths, refuse_existing, write_motions
+  from chorjax.errors import check_output, refuse_existing
+  from chorjax.output import as_motions, load_character, output_paths, write_motions
   from chorjax.run import load_run
 
   out, _ = check_output(output)
@@ -125,7 +126,8 @@ def write_inbetween(
   target pose of ``to`` (``FILE[:FRAME]``) the frames a run of a family that writes transitions puts before
   it (``frames``: one count for every target, or one for all) and the target; written to ``output`` as
   :func:`write_sample` writes. Returns the paths written."""
-  from chorjax.output import as_motions, check_output, output_paths, refuse_existing, write_motions
+  from chorjax.errors import check_output, refuse_existing
+  from chorjax.output import as_motions, output_paths, write_motions
   from chorjax.run import load_run
 
   to, frames = list(to), list(frames)

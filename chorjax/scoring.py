@@ -398,8 +398,7 @@ def score_to(motion_specs, data_specs, output=None, *, force: bool = False, **kw
   ``output`` where given (not replaced unless ``force``). Returns ``(the result, the JSON written or None)``."""
   import json
 
-  from chorjax.errors import atomic_write
-  from chorjax.output import refuse_existing
+  from chorjax.errors import atomic_write, refuse_existing
 
   for name, most in MOST.items():
     if kw.get(name, 0) > most:

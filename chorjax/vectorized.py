@@ -35,8 +35,8 @@ from chorjax import end_of_run
 from chorjax.config import Config
 from chorjax.data.dataset import WindowSampler, dataset_notes, eval_windows, load_dataset
 from chorjax.errors import UserError
-from chorjax.families.recurrent.steps import StepSpec, _train_step, eval_step
-from chorjax.points import NotAligned
+from chorjax.families import family_of
+from chorjax.points import NotAligned, check_group
 from chorjax.run import run_meta
 from chorjax.training import (
   Loop,
@@ -53,17 +53,18 @@ from chorjax.training import (
 )
 
 
-@functools.partial(jax.jit, static_argnums=4, donate_argnums=0)
-def vec_train_step(states, batches, keys, hyper, spec: StepSpec):
-  """``K`` train steps at once: every argument but ``spec`` is stacked on a leading axis."""
-  step = lambda state, batch, key, lr_scale, noise: _train_step(state, batch, key, spec, lr_scale, noise)
-  return jax.vmap(step)(states, batches, keys, hyper["lr_scale"], hyper["noise"])
+@functools.partial(jax.jit, static_argnums=(4, 5), donate_argnums=0)
+def vec_train_step(states, batches, keys, hyper, spec, step):
+  """``K`` train steps at once: every argument but ``spec`` and the family's ``step`` (``Family.vector_step``)
+  is stacked on a leading axis."""
+  one = lambda state, batch, key, lr_scale, noise: step(state, batch, key, spec, lr_scale, noise)
+  return jax.vmap(one)(states, batches, keys, hyper["lr_scale"], hyper["noise"])
 
 
-@functools.partial(jax.jit, static_argnums=2)
-def vec_eval_step(params, batch, graphdef):
-  """Each point's validation loss on the same windows, ``[K]``."""
-  return jax.vmap(lambda p: eval_step(p, batch, graphdef))(params)
+@functools.partial(jax.jit, static_argnums=(2, 3))
+def vec_eval_step(params, batch, graphdef, loss):
+  """Each point's validation loss on the same windows, ``[K]`` (``loss``: the family's, ``Family.vector_step``)."""
+  return jax.vmap(lambda p: loss(p, batch, graphdef))(params)
 
 
 def _take(tree, k: int):
@@ -100,14 +101,16 @@ def _quiet(cfg: Config) -> Config:
 
 
 def train_vectorized(cfgs, workdirs, *, force: bool = False) -> list[dict]:
-  """Trains the points ``cfgs`` (one run directory each in ``workdirs``) as one vectorized program;
-  returns each point's summary, as ``train.train_and_evaluate`` does.
+  """Trains the points ``cfgs`` (one run directory each in ``workdirs``) as one vectorized program of their
+  family's step (``Family.vector_step``); returns each point's summary, as ``training.train_and_evaluate`` does.
 
   Raises:
-    NotAligned: points whose latest checkpoints are at different steps (the points were checked by
-      ``points.check_group``: ``points.train_vectorized`` is the way in).
+    UserError: points that differ in a key that cannot be vectorized (``points.check_group``).
+    NotAligned: a family that trains its points apart, or points whose latest checkpoints are at different
+      steps.
   """
   cfgs, workdirs = list(cfgs), [Path(w).absolute() for w in workdirs]
+  check_group(cfgs)
   with contextlib.ExitStack() as stack:
     for w in workdirs:
       if w.exists() and not w.is_dir():
@@ -144,7 +147,10 @@ def _run(cfgs, workdirs, ds, managers, restored, stack) -> list[dict]:
   samplers = [WindowSampler(ds.train, c0.data.seq_length, c0.train.batch_size, c.train.seed) for c in cfgs]
   get_batch = lambda step: jax.tree.map(lambda *xs: np.stack(xs), *[s.batch(step) for s in samplers])
   val = eval_windows(ds.val, c0.data.seq_length, c0.train.val_windows)
-  step_fn = lambda st, b, k: vec_train_step(st, b, k, hyper, spec)
+  parts = family_of(c0).vector_step()
+  assert parts is not None  # check_group refused a family without one
+  step, loss = parts
+  step_fn = lambda st, b, k: vec_train_step(st, b, k, hyper, spec, step)
   loop = VecLoop(step_fn, get_batch, keys, states, start, c0.train.num_steps)
   for k, (c, w) in enumerate(zip(cfgs, workdirs)):
     log = MetricsLog(w, c if k == 0 else _quiet(c), start)
@@ -153,7 +159,7 @@ def _run(cfgs, workdirs, ds, managers, restored, stack) -> list[dict]:
 
   def evaluate(_: Loop) -> None:
     if val:
-      loop.vec_val = np.asarray(vec_eval_step(loop.state["params"], val, spec.graphdef))
+      loop.vec_val = np.asarray(vec_eval_step(loop.state["params"], val, spec.graphdef, loss))
       loop.val_loss = float(loop.vec_val.mean())
     loop.flush()
 

@@ -105,7 +105,7 @@ SCHEMA = {PACKAGE / "config.py"}
 
 
 def _family_words() -> set[str]:
-  from chorjax.families.registry import BUILTIN
+  from chorjax.registry import BUILTIN
 
   return set(BUILTIN)
 

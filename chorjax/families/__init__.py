@@ -7,6 +7,6 @@
 Nothing outside this package names a family: it asks :func:`family_of` a config's family.
 """
 
-from chorjax.families.registry import family_of, get, names, register
+from chorjax.registry import family_of, get, names, register
 
 __all__ = ["family_of", "get", "names", "register"]

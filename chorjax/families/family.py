@@ -2,7 +2,7 @@
 family that generates dance frame by frame from motion ids, as the recurrent one does.
 
 A family (``model.family``) brings its model, its train step, how it draws and the commands it serves; it
-registers itself with ``families.registry.register``.
+registers itself with ``registry.register``.
 """
 
 from __future__ import annotations
@@ -113,7 +113,9 @@ class Family:
     ``draw`` the run's ``Controls.draw`` (its temperatures may change between chunks)."""
     raise NotImplementedError
 
-  def train_together(self):
-    """``(keys, train_vectorized, NotAligned)``: sweep points that differ only in ``keys`` train as one program;
-    None where the family trains every point apart."""
+  def vector_step(self) -> tuple[Callable, Callable] | None:
+    """``(step, loss)`` for training grid points as one vectorized program (``chorjax.vectorized``): the
+    un-jitted ``step(state, batch, key, spec, lr_scale, noise) -> (state, metrics)`` with the learning-rate
+    scale and the input noise traced, and ``loss(params, windows, graphdef)`` on ``data.dataset`` windows; or
+    None where the family trains its points apart."""
     return None

@@ -43,7 +43,7 @@ def render(
   ``.png`` (the first take's trajectories, or its filmstrip with ``strip``: ``poses`` a row, ``every``
   frames apart). ``frames``: the first N frames only. Returns the path written."""
   from chorjax.data.dataset import read_motions, resolve_files
-  from chorjax.output import check_output, refuse_existing
+  from chorjax.errors import check_output, refuse_existing
 
   if poses > MAX_POSES:
     raise UserError(f"--poses {poses}: at most {MAX_POSES} poses in a row")

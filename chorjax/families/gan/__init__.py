@@ -11,7 +11,7 @@ import numpy as np
 from flax import nnx
 
 from chorjax.families.family import Family
-from chorjax.families.registry import register
+from chorjax.registry import register
 
 
 class Gan(Family):

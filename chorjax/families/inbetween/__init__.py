@@ -10,7 +10,7 @@ a context phrase and a target pose (``chorjax inbetween``), no dance of their ow
 from __future__ import annotations
 
 from chorjax.families.family import Family
-from chorjax.families.registry import register
+from chorjax.registry import register
 
 _NO_DANCE = (
   "an in-betweening run writes the frames between poses, not dance of its own; "

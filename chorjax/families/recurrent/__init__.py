@@ -4,7 +4,6 @@ predicting every next frame through a mixture-density (or MSE) head, sampled fra
 * ``recurrent_model.py``: the model (core + head, conditioned on motion ids).
 * ``steps.py``: its state, loss and jitted train / evaluation steps.
 * ``generation.py``: the frame-by-frame draw, its controls, and live mode's endless stream.
-* ``vectorized.py``: K runs of one shape trained as one program (seeds, learning rates, input noise).
 """
 
 from __future__ import annotations
@@ -12,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from chorjax.families.family import Family
-from chorjax.families.registry import register
+from chorjax.registry import register
 
 
 class Recurrent(Family):
@@ -60,10 +59,10 @@ class Recurrent(Family):
 
     return start_stream, continue_stream
 
-  def train_together(self):
-    from chorjax.families.recurrent.vectorized import train_vectorized
+  def vector_step(self):
+    from chorjax.families.recurrent.steps import _train_step, eval_step
 
-    return train_vectorized
+    return _train_step, eval_step
 
 
 register(Recurrent())

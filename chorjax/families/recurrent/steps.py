@@ -167,7 +167,7 @@ def _feedback_loss_fn(params, batch, key, step, spec: StepSpec):
 
 def _train_step(state, batch, key, spec: StepSpec, lr_scale=None, noise=None):
   """One optimizer step. ``lr_scale`` and ``noise`` (traced; vectorized training, see
-  ``families.recurrent.vectorized``): the update scaled by ``lr_scale``, the input noise ``noise`` instead of
+  ``chorjax.vectorized``): the update scaled by ``lr_scale``, the input noise ``noise`` instead of
   ``spec.input_noise``."""
   key = step_key(key, state["step"])
   if spec.feedback is None:  # teacher forcing: the fused layers over whole windows
