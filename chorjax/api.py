@@ -72,10 +72,10 @@ class Motion(_motion.Motion):
     character BVH: the dance on its hierarchy, as ``chorjax sample --skeleton``) or ``.html`` (the player).
     An existing file is not replaced unless ``force``."""
     from chorjax.errors import check_output, refuse_existing
-    from chorjax.output import write_motions
+    from chorjax.output import write_motions, written_paths
 
     path, suffix = check_output(path)
-    refuse_existing([path], force, how="force=True")
+    refuse_existing(written_paths(path, 1, self.skeleton), force, how="force=True")  # a sidecar is the user's too
     if skeleton is not None and suffix != ".bvh":
       raise UserError(f"{path}: a character skeleton is for .bvh output")
     title = self.name or "chorjax"
@@ -148,8 +148,6 @@ class Run(_Run):
     as a :class:`Motion`, several as a list."""
     from chorjax.sample import sample_dancers
 
-    if frames < 1 or num < 1:
-      raise UserError(f"frames {frames} / num {num}: must be at least 1")
     pos, _ = sample_dancers(self, frames, num, seed, prime, motion, mix, controls)
     f = self.features
     name = f"{Path(self.workdir).name} seed {seed}"

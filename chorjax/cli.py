@@ -121,7 +121,7 @@ def _live(args) -> int:
 
 
 def _render(args) -> int:
-  _counts(args, frames=1, every=1, poses=1)
+  _counts(args, frames=1, every=1, poses=1, columns=1)
   options = {k: getattr(args, k) for k in ("frames", "fps", "size", "columns", "title", "strip", "every", "poses")}
   warn = lambda line: print(line, file=sys.stderr)
   print(f"wrote {api.render(args.inputs, args.output, **options, force=args.force, warn=warn)}")
@@ -274,10 +274,10 @@ def _add_convert_command(dsub) -> None:
     "so the takes can join it",
   )
   conv.add_argument("--up-axis", choices=("y", "-y", "z", "-z", "x", "-x"), help="rotate to this up axis")
-  conv.add_argument("--scale", type=_positive, default=1.0, help="multiply lengths (after --like; default 1)")
+  conv.add_argument("--scale", type=_scale, default=1.0, help="multiply lengths (after --like; default 1)")
   conv.add_argument("--asf", metavar="PATH", help="the skeleton of AMC inputs (default: found in the AMC's folder)")
-  conv.add_argument("--amc-fps", type=_positive, default=120.0, help="frame rate of AMC inputs (default 120)")
-  conv.add_argument("--fps", type=_positive, default=30.0, help="frame rate of CSV inputs (default 30)")
+  conv.add_argument("--amc-fps", type=_rate, default=120.0, help="frame rate of AMC inputs (default 120)")
+  conv.add_argument("--fps", type=_rate, default=30.0, help="frame rate of CSV inputs (default 30)")
   conv.add_argument(
     "--drop-first-frame", action="store_true", help="drop frame 0 whatever it holds (instead of the rest-pose check)"
   )
@@ -323,7 +323,7 @@ def _add_data_commands(sub) -> None:
   )
   check.add_argument("inputs", nargs="+", metavar="PATH", help="motion files, folders or a bundled dataset name")
   check.add_argument("--joint-map", metavar="MAP.toml", help="map skeletons by this file (default: automatic)")
-  check.add_argument("--fps", type=_positive, default=30.0, help="frame rate of CSV inputs (default 30)")
+  check.add_argument("--fps", type=_rate, default=30.0, help="frame rate of CSV inputs (default 30)")
   check.set_defaults(func=_data_check)
   _add_convert_command(dsub)
 
@@ -457,7 +457,7 @@ def _add_live_command(sub) -> None:
     metavar="HOST:PORT",
     help="listen for OSC /chorjax/input, /chorjax/prime, /chorjax/set, /chorjax/pause (default: off)",
   )
-  live.add_argument("--fps", type=_positive, help="frames sent per second (default: the run's frame rate)")
+  live.add_argument("--fps", type=_rate, help="frames sent per second (default: the run's frame rate)")
   _add_motion_args(live)
   live.add_argument(
     "--alternate",
@@ -533,7 +533,7 @@ def _add_render_command(sub) -> None:
     help="the file to write; its suffix picks the format",
   )
   render.add_argument("--frames", type=int, help="render only the first N frames")
-  render.add_argument("--fps", type=_positive, default=30.0, help="frame rate of CSV inputs (default 30)")
+  render.add_argument("--fps", type=_rate, default=30.0, help="frame rate of CSV inputs (default 30)")
   render.add_argument(
     "--size", default="1280x720", metavar="WxH", help="GIF/MP4: frame size in pixels (default 1280x720)"
   )
@@ -694,15 +694,23 @@ def _in_range(low: int, high: int):
   return whole
 
 
-def _positive(text: str) -> float:
-  """An argparse type: a finite number above 0 (a frame rate, a scale)."""
-  try:
-    value = float(text)
-  except ValueError:
-    raise argparse.ArgumentTypeError(f"invalid number: {text!r}") from None
-  if not (math.isfinite(value) and value > 0):
-    raise argparse.ArgumentTypeError(f"{text}: must be a finite number above 0")
-  return value
+def _above_zero(most: float):
+  """An argparse type: a number above 0 and at most ``most`` (a frame rate, a scale)."""
+
+  def number(text: str) -> float:
+    try:
+      value = float(text)
+    except ValueError:
+      raise argparse.ArgumentTypeError(f"invalid number: {text!r}") from None
+    if not (math.isfinite(value) and 0 < value <= most):
+      raise argparse.ArgumentTypeError(f"{text}: must be a number above 0 and at most {most:g}")
+    return value
+
+  return number
+
+
+_rate = _above_zero(1000.0)  # frames per second, as data.fps allows
+_scale = _above_zero(1e6)  # a length multiplier (metres to micrometres at most)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -59,7 +59,12 @@ class Controls:
       if name not in names:
         close = difflib.get_close_matches(name, names, n=1)
         raise UserError(f"{name!r} is not a sampling control" + (f"; did you mean {close[0]!r}?" if close else ""))
-    given = {**(calibrated or {}), **{k: v for k, v in given.items() if v is not None}}
+    from chorjax.config import check_sample_control
+
+    # checked as the same keys are in a config file: a value the CLI or a calibration.json gives that no
+    # [sample] could hold is refused here too (the API's keywords, a calibration edited by hand)
+    saved = {k: check_sample_control(k, v, "calibration.json") for k, v in (calibrated or {}).items()}
+    given = {**saved, **{k: check_sample_control(k, v, k) for k, v in given.items() if v is not None}}
     values = {k: given.get(k, getattr(sample_config, k)) for k in names}
     return cls(**{**values, **{k: bool(values[k]) for k in FLAGS}})
 

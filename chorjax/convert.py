@@ -111,5 +111,13 @@ def _write(motions, out: Path, character, joint_map, rigid: bool, force: bool) -
       return [(write_retargeted(to_mpii16(motions[0], joint_map), character, out), motions[0])]
     return [(write_bvh(motions[0], out, exact=not rigid), motions[0])]
   targets = [out / f"{m.name}.csv" for m in motions]
+  first: dict = {}
+  for m, t in zip(motions, targets):  # two takes of one name would be one file: refused before any is written
+    if t in first:
+      raise UserError(
+        f"{first[t].source or first[t].name} and {m.source or m.name} would both be written to {t}; "
+        "convert them into different folders"
+      )
+    first[t] = m
   refuse_existing(targets, force)
   return [(write_csv(m, t), m) for m, t in zip(motions, targets)]

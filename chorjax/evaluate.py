@@ -138,9 +138,9 @@ def evaluate_to(workdir, data, output=None, *, force: bool = False, **kw) -> tup
   """``chorjax eval``: :func:`evaluate` (``kw``: its arguments and the sampling controls), written to ``output``
   (default: the run's ``eval/metrics.json``) with its first dancer beside it; neither replaced unless
   ``force`` (checked before the draw). Returns ``(the result, the JSON written)``."""
-  from chorjax.errors import refuse_existing
+  from chorjax.errors import check_output, refuse_existing
 
-  out = Path(output) if output else metrics_path(workdir)
+  out = check_output(output, (".json",))[0] if output else metrics_path(workdir)
   refuse_existing([out, sample_path(out)], force)
   result = evaluate(workdir, data, **kw)
   return result, write_metrics(result, out)

@@ -17,6 +17,18 @@ def output_paths(out: Path, num: int) -> list[Path]:
   return [out.with_name(f"{out.stem}_{k}{out.suffix}") for k in range(num)]
 
 
+def written_paths(out: Path, num: int, skeleton) -> list[Path]:
+  """Every file :func:`write_motions` writes for ``num`` motions of ``skeleton`` at ``out``: the outputs, and
+  beside each CSV of a skeleton other than the 16-joint one its sidecar (``data.csv.sidecar_path``)."""
+  from chorjax.data.csv import sidecar_path
+  from chorjax.data.skeletons import MPII16
+
+  paths = output_paths(out, num)
+  if out.suffix.lower() == ".csv" and skeleton.joint_names != MPII16.joint_names:
+    paths += [sidecar_path(p) for p in paths]
+  return paths
+
+
 def load_character(path, out: Path):
   """The ``--skeleton`` character a BVH is retargeted onto (read and mapped now, before any long work), or
   None without one."""

@@ -60,7 +60,11 @@ def sample_dancers(run, frames: int, num: int, seed: int, prime=None, motion=Non
   id or blend that conditions the dance; ``controls``: sampling controls (unset: the run's own)."""
   from chorjax.models import motion_weight_vector
 
+  for name, value, low in (("frames", frames, 1), ("num", num, 1), ("seed", seed, 0)):
+    if not isinstance(value, int) or isinstance(value, bool) or not low <= value < 2**32:
+      raise UserError(f"{name} {value!r}: must be a whole number from {low} to 2**32 - 1")
   run = run.serving("sample")
+  run.check_drawn(frames * num, f"frames {frames} x num {num}")
   sampling = run.sampling(**(controls or {}))
   run = run.ranged(sampling)
   motion_BxM = np.tile(motion_weight_vector(run.num_motions, motion, mix)[None], (num, 1))
@@ -103,7 +107,7 @@ def write_sample(
   settings, BVH, onto the character ``skeleton`` where given, or HTML). Everything that can be refused is
   refused before the draw; an existing file is not replaced unless ``force``. Returns the paths written."""
   from chorjax.errors import check_output, refuse_existing
-  from chorjax.output import as_motions, load_character, output_paths, write_motions
+  from chorjax.output import as_motions, load_character, write_motions, written_paths
   from chorjax.run import load_run
 
   out, _ = check_output(output)
@@ -112,7 +116,7 @@ def write_sample(
   if character is not None and run.features.skeleton.name != "mpii16":
     raise UserError(f"--skeleton: {workdir} dances on its own skeleton, not the 16 joints it retargets from")
   run.check_drawn(frames * num, f"--frames {frames} x --num {num}")  # before naming 10^7 files
-  refuse_existing(output_paths(out, num), force)  # the files really written (OUT_k.csv for several dancers)
+  refuse_existing(written_paths(out, num, run.features.skeleton), force)  # OUT_k.csv for several, sidecars
   pos, settings = sample_dancers(run, frames, num, seed, prime, motion, mix, controls)
   settings["workdir"] = str(workdir)
   motions = as_motions(pos, run.fps, run.features.skeleton, run.features.up_axis)

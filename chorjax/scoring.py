@@ -398,12 +398,12 @@ def score_to(motion_specs, data_specs, output=None, *, force: bool = False, **kw
   ``output`` where given (not replaced unless ``force``). Returns ``(the result, the JSON written or None)``."""
   import json
 
-  from chorjax.errors import atomic_write, refuse_existing
+  from chorjax.errors import atomic_write, check_output, refuse_existing
 
   for name, most in MOST.items():
     if kw.get(name, 0) > most:
       raise UserError(f"--{name} {kw[name]}: at most {most}")
-  out = Path(output) if output else None
+  out = check_output(output, (".json",))[0] if output else None
   if out is not None:
     refuse_existing([out], force)
   result = score_files(motion_specs, data_specs, **kw)

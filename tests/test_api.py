@@ -78,3 +78,21 @@ def test_import_chorjax_is_light_and_help_lists_the_api():
   assert out.startswith("False")  # the command line starts without jax; the API loads it on first use
   for name in ("train", "load_run", "read_motion", "load_dataset", "score", "class Motion", "class Run"):
     assert name in out, name
+
+
+def test_motion_write_refuses_to_replace_a_sidecar_unless_forced(tmp_path):
+  """A take of its own skeleton writes x.csv and x.skeleton.json: an existing sidecar is the user's file too."""
+  import dataclasses
+
+  from chorjax.data.csv import sidecar_path
+
+  take = chorjax.load_dataset("cmu94")[0]
+  names = tuple(f"j{k}" for k in range(take.skeleton.num_joints))
+  own = chorjax.Motion.of(take.replace(skeleton=dataclasses.replace(take.skeleton, name="own", joint_names=names)))
+  out = tmp_path / "x.csv"
+  sidecar_path(out).write_text("mine")
+  with pytest.raises(chorjax.UserError, match=r"x\.skeleton\.json: already exists \(use force=True"):
+    own.write(out)
+  assert sidecar_path(out).read_text() == "mine" and not out.exists()
+  own.write(out, force=True)
+  assert chorjax.read_motion(out).skeleton.joint_names == names

@@ -135,6 +135,30 @@ def test_a_toy_family_trains_and_samples_through_the_api(toy_run):
     toy_run.sample(frames=5, temprature=0.5)  # a misspelt control is refused, not swallowed
 
 
+@pytest.mark.parametrize(
+  "bad",
+  [
+    {"frames": 2.5},
+    {"frames": "100"},
+    {"frames": True},
+    {"frames": 10**12},
+    {"num": 0},
+    {"seed": -1},
+    {"seed": 2**32 + 5},
+    {"seed": 1.5},
+    {"pi_temperature": -1.0},
+    {"sigma_temperature": float("nan")},
+    {"noise_order": 100},
+    {"crossfade": 5.0},
+    {"clamp": "no"},
+  ],
+)
+def test_the_api_refuses_what_the_command_line_refuses(toy_run, bad):
+  """The same checks as the flags (one validation layer): a UserError, never a traceback from JAX."""
+  with pytest.raises(chorjax.UserError):
+    toy_run.sample(**{"frames": 5, **bad})
+
+
 def test_a_toy_family_trains_samples_and_evaluates_through_the_cli(tmp_path, capsys):
   config = tmp_path / "toy.toml"
   config.write_text(cli_toml())

@@ -306,3 +306,38 @@ def test_a_c3d_point_rate_of_zero_is_named(shared_data, tmp_path, capsys):
   (tmp_path / "rate0.c3d").write_bytes(bytes(raw))
   assert cli.main(["data", "info", str(tmp_path / "rate0.c3d")]) == 2  # was a ZeroDivisionError downstream
   _one_line(capsys, "rate0.c3d: POINT:RATE", "outside 1-1000 fps")
+
+
+def test_two_takes_of_one_name_are_refused_before_either_is_written(tmp_path, capsys):
+  """`data convert a/t.bvh b/t.bvh -o OUT` would write OUT/t.csv twice: one take lost without a word."""
+  take = Path(__file__).resolve().parents[1] / "chorjax" / "data" / "bundled" / "cmu94" / "94_01_skeleton_3d.csv"
+  for d in ("a", "b"):
+    (tmp_path / d).mkdir()
+    assert cli.main(["data", "convert", str(take), "-o", str(tmp_path / d / "t.bvh")]) == 0
+  capsys.readouterr()
+  out = tmp_path / "out"
+  assert (
+    cli.main(["data", "convert", str(tmp_path / "a" / "t.bvh"), str(tmp_path / "b" / "t.bvh"), "-o", str(out)]) == 2
+  )
+  _one_line(capsys, "a/t.bvh and", "b/t.bvh would both be written to", "t.csv")
+  assert not out.exists()
+
+
+@pytest.mark.parametrize(
+  ("argv", "said"),
+  [
+    (["data", "check", "cmu94", "--fps", "1e300"], "1e300: must be a number above 0 and at most 1000"),
+    (["data", "check", "cmu94", "--fps", "0"], "0: must be a number above 0"),
+    (["data", "convert", "cmu94", "-o", "{tmp}/o", "--scale", "1e38"], "1e38: must be a number above 0 and at most"),
+    (["render", "cmu94", "-o", "{tmp}/r.html", "--columns", "-3"], "--columns -3: must be at least 1"),
+    (["metrics", "cmu94", "--data", "cmu94", "-o", "{tmp}/m.csv"], "m.csv: output must end in .json"),
+  ],
+)
+def test_flags_that_make_no_sense_are_one_line_and_write_nothing(tmp_path, capsys, argv, said):
+  try:
+    code = cli.main([a.replace("{tmp}", str(tmp_path)) for a in argv])
+  except SystemExit as e:  # argparse's own refusal of a flag's value
+    code = e.code
+  assert code == 2
+  assert said in capsys.readouterr().err
+  assert not any(tmp_path.iterdir())
