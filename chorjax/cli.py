@@ -713,6 +713,32 @@ _rate = _above_zero(1000.0)  # frames per second, as data.fps allows
 _scale = _above_zero(1e6)  # a length multiplier (metres to micrometres at most)
 
 
+def reference_markdown() -> str:
+  """Every command and flag as the docs' command-line reference (``docs/cli.md``), from the parser itself:
+  ``python -c "from chorjax.cli import reference_markdown as r; print(r(), end='')" > docs/cli.md``."""
+  lines = ["# Command-line reference", "", "Generated from `chorjax`'s argument parser.", ""]
+
+  def walk(parser: argparse.ArgumentParser, name: str, summary: str = "") -> None:
+    subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    if name != "chorjax" and not subs:
+      lines.extend([f"## `{name}`", "", (parser.description or summary).strip(), ""])
+      lines.extend(["| flag | what it does |", "| --- | --- |"])
+      for action in parser._actions:
+        if action.help is argparse.SUPPRESS or isinstance(action, argparse._HelpAction):
+          continue
+        flag = ", ".join(action.option_strings) or (action.metavar or action.dest)
+        text = (action.help or "").replace("|", "\\|")
+        lines.append(f"| `{flag}` | {text} |")
+      lines.append("")
+    for sub in subs:
+      said = {a.dest: a.help or "" for a in sub._choices_actions}
+      for command, child in sub.choices.items():
+        walk(child, f"{name} {command}", said.get(command, ""))
+
+  walk(build_parser(), "chorjax")
+  return "\n".join(lines) + "\n"
+
+
 def build_parser() -> argparse.ArgumentParser:
   parser = _Parser(
     prog="chorjax",

@@ -98,3 +98,25 @@ def test_every_flag_that_sets_a_key_says_the_keys_help_and_does_not_override_it(
   for command, flag, action, key in flags:
     assert action.help.startswith(key_docs(key)[0]["help"]), (command, flag)
     assert action.default in (None, False), (command, flag, action.default)  # unset: the run's or config's value
+
+
+def test_the_docs_command_line_reference_is_generated_and_every_flag_has_help():
+  """docs/cli.md is cli.reference_markdown() (regenerate it when a flag changes); no flag without help."""
+  from pathlib import Path
+
+  page = (Path(__file__).resolve().parents[1] / "docs" / "cli.md").read_text()
+  assert page == cli.reference_markdown(), "docs/cli.md is stale: see cli.reference_markdown's docstring"
+  silent = []
+
+  def walk(parser, name):
+    for action in parser._actions:
+      if isinstance(action, argparse._SubParsersAction):
+        for command, child in action.choices.items():
+          walk(child, f"{name} {command}")
+      elif not isinstance(action, argparse._HelpAction) and not (action.help or "").strip():
+        silent.append(f"{name} {'/'.join(action.option_strings) or action.dest}")
+
+  walk(cli.build_parser(), "chorjax")
+  assert not silent, f"flags without help: {silent}"
+  for command in ("train", "sample", "inbetween", "render", "live", "eval", "calibrate", "metrics", "sweep"):
+    assert f"## `chorjax {command}`" in page
