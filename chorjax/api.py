@@ -75,11 +75,16 @@ class Motion(_motion.Motion):
     from chorjax.output import write_motions, written_paths
 
     path, suffix = check_output(path)
+    if "\x00" in str(path):
+      raise UserError(f"{path!r}: a file name cannot hold a NUL character")
     refuse_existing(written_paths(path, 1, self.skeleton), force, how="force=True")  # a sidecar is the user's too
     if skeleton is not None and suffix != ".bvh":
       raise UserError(f"{path}: a character skeleton is for .bvh output")
     title = self.name or "chorjax"
-    return write_motions(path, [self], settings={"name": self.name}, character=skeleton, title=title)[0]
+    try:
+      return write_motions(path, [self], settings={"name": self.name}, character=skeleton, title=title)[0]
+    except OSError as e:  # a folder that is not there or not writable, a folder named like the file: one line
+      raise UserError(f"{path}: cannot be written ({e.strerror or e})") from None
 
   def show(self, *others: _motion.Motion, title: str | None = None) -> Player:
     """The HTML player with this motion and ``others`` side by side; shown inline by Jupyter (and kept in
@@ -87,6 +92,11 @@ class Motion(_motion.Motion):
     from chorjax.render.html import player_html
 
     motions = [self, *others]
+    for m in others:
+      if not isinstance(m, _motion.Motion):
+        raise UserError(f"show: expected motions (chorjax.Motion), got {type(m).__name__}")
+    if title is not None and not isinstance(title, str):
+      raise UserError(f"show: title must be text, got {type(title).__name__}")
     return Player(player_html(motions, title or " | ".join(m.name or "motion" for m in motions)))
 
   def strip(self, every: int = 6, poses: int = 12):

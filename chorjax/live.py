@@ -36,6 +36,7 @@ import contextlib
 import dataclasses
 import json
 import math
+import os
 import signal
 import tempfile
 from pathlib import Path
@@ -49,6 +50,8 @@ from chorjax.errors import UserError
 AHEAD = 2  # chunks generated ahead of the clock
 PRIME_RANGE = 10.0  # a primed frame's features may lie this many times the training range's span outside it
 MAX_MESSAGE = 4 * 2**20  # bytes of one client message (a prime of minutes of frames, a file's text)
+MAX_FPS = 1000  # frames sent per second at most
+MAX_TURN = 3600  # seconds of one turn of --alternate at most
 CLOSE_TIMEOUT = 0.5  # seconds a client gets to answer the closing handshake when the server stops
 
 
@@ -532,7 +535,9 @@ def _check_flags(port: int, record, force: bool, fps, alternate: float) -> None:
     import websockets  # noqa: F401
   except ImportError:
     raise UserError("chorjax live needs the live extra: pip install -e '.[live]'") from None
-  if fps is not None and not (math.isfinite(fps) and fps > 0):
-    raise UserError(f"--fps {fps}: must be a finite number above 0")
-  if alternate < 0 or not math.isfinite(alternate):
-    raise UserError(f"--alternate {alternate}: must be a number of seconds >= 0")
+  if fps is not None and not (math.isfinite(fps) and 0 < fps <= MAX_FPS):
+    raise UserError(f"--fps {fps}: must be a number above 0 and at most {MAX_FPS}")
+  if not 0 <= alternate <= MAX_TURN:  # (NaN fails it too)
+    raise UserError(f"--alternate {alternate}: must be a number of seconds from 0 to {MAX_TURN}")
+  if record is not None and not os.access(Path(record).absolute().parent, os.W_OK):
+    raise UserError(f"{record}: --record cannot be written there (no such folder, or not writable)")

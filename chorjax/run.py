@@ -213,6 +213,7 @@ def _read_step(manager, step: int):
     cfg = config_from_dict(meta["config"])
     features = Features.from_dict(meta["features"])
     graphdef, template = model_template(cfg, features, len(meta["id_map"]))
+    meta = {**meta, "step": int(meta["step"])}  # a step that is no whole number is damage too
   except (KeyError, TypeError, ValueError) as e:  # (a UserError, e.g. a newer version's key, stays as it is)
     raise ckpt.Damaged(f"{manager.directory}/{step}/meta/metadata: damaged checkpoint ({e})", step) from None
   return meta, cfg, features, graphdef, ckpt.restore_params(manager, step, template)

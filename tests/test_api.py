@@ -2,6 +2,7 @@
 
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -96,3 +97,15 @@ def test_motion_write_refuses_to_replace_a_sidecar_unless_forced(tmp_path):
   assert sidecar_path(out).read_text() == "mine" and not out.exists()
   own.write(out, force=True)
   assert chorjax.read_motion(out).skeleton.joint_names == names
+
+
+def test_motion_write_and_show_refuse_what_makes_no_sense_in_one_line(tmp_path):
+  take = chorjax.load_dataset("cmu94")[0]
+  (tmp_path / "taken.csv").mkdir()  # a folder where the file would go
+  for path in (tmp_path / "a\x00b.csv", Path("/proc/x.csv"), tmp_path / "taken.csv"):
+    with pytest.raises(chorjax.UserError):
+      take.write(path, force=True)
+  with pytest.raises(chorjax.UserError, match="title must be text"):
+    take.show(title=5)
+  with pytest.raises(chorjax.UserError, match="expected motions"):
+    take.show("not a motion")

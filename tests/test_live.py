@@ -334,6 +334,8 @@ def test_live_refuses_bad_flags_in_one_line(live_run, tmp_path, capsys):
     (["--alternate", "2"], "--alternate: needs an input"),
     (["--port", "-1"], "--port -1: must be at least 0"),
     (["--mix", "99:1"], "out of range"),
+    (["--alternate", "1e308", "--input", str(TAKE)], "--alternate 1e+308: must be a number of seconds from 0"),
+    (["--record", str(tmp_path / "no" / "such" / "rec.npz")], "--record cannot be written there"),
   ]
   for flags, expected in cases:
     assert cli.main(["live", str(live_run), *flags]) == 2

@@ -425,3 +425,19 @@ def test_the_aclstm_config_loads_and_feeds_its_own_outputs_on_5_of_every_10_fram
   mask = np.asarray(feedback_mask(Feedback.of(cfg), jax.random.key(0), jnp.asarray(0), 3, 100))
   own = [t for t in range(100) if (t % 10) >= 5]  # frames 5-9, 15-19, ...: the network's own outputs
   assert (mask == np.isin(np.arange(100), own)[None]).all()
+
+
+def test_a_checkpoint_whose_step_is_no_number_is_one_line(tmp_path):
+  """A meta step of 'abc' is damage, named with the file, not a ValueError from int()."""
+  import json as _json
+
+  from chorjax.errors import UserError as _UserError
+
+  run = tmp_path / "legacy"
+  shutil.copytree(ROOT / "tests" / "fixtures" / "legacy_run", run)
+  meta = run / "checkpoints" / "6" / "meta" / "metadata"
+  data = _json.loads(meta.read_text())
+  data["step"] = "abc"
+  meta.write_text(_json.dumps(data))
+  with pytest.raises(_UserError, match=r"6/meta/metadata: damaged checkpoint"):
+    load_run(run)
