@@ -36,8 +36,15 @@ def _faults_per_call(env_value):
 
 @pytest.mark.skipif(platform.libc_ver()[0] != "glibc", reason="the setting is for glibc malloc")
 def test_keeping_freed_memory_removes_the_per_call_page_faults():
-  applied, faults = _faults_per_call("")
   default_applied, default_faults = _faults_per_call("system")
-  assert applied and not default_applied
+  assert not default_applied
   assert default_faults > 10_000  # ~100 MB of scratch, faulted in again on every call
+  # With the setting, a call reuses the pages the last one had. The kernel may still reclaim idle pages of a
+  # process while another one (a second test worker) presses on memory: then every call of that run faults,
+  # so the run is measured again, up to three times (seen once in CI: 24,414 faults against 24,415).
+  for _ in range(3):
+    applied, faults = _faults_per_call("")
+    assert applied
+    if faults < default_faults / 20:
+      break
   assert faults < default_faults / 20
