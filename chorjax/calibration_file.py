@@ -9,9 +9,8 @@ from pathlib import Path
 from chorjax.errors import UserError
 
 # What calibration.json's settings may hold: what `chorjax calibrate` chooses, and the noise order and governor
-# gain it was chosen with (runs calibrated before 2026-11-25 hold noise_smoothing and sigma_temperature alone;
-# before 2026-11-27 no noise_order, and before session 27 of that day no pace: they were chosen with the run's
-# sample.noise_order and sample.pace)
+# gain it was chosen with (an older calibration may hold fewer: noise_smoothing and sigma_temperature alone, or
+# no noise_order or pace, which were then the run's sample.noise_order and sample.pace)
 CALIBRATED = ("noise_smoothing", "noise_order", "pace", "sigma_temperature", "persistence", "crossfade", "foot_lock")
 
 
