@@ -54,15 +54,22 @@ def read_pose(spec: str, features, data_cfg, flag: str = "--to") -> np.ndarray:
   return take[int(frame)]
 
 
+def check_counts(**counts) -> None:
+  """Refuses a ``frames``, ``num`` or ``seed`` that is no whole number (a bool, a float, text) or lies outside
+  1 (``seed``: 0) .. 2**32 - 1, in one line naming it."""
+  for name, value in counts.items():
+    low = 0 if name == "seed" else 1
+    if not isinstance(value, int) or isinstance(value, bool) or not low <= value < 2**32:
+      raise UserError(f"{name} {value!r}: must be a whole number from {low} to 2**32 - 1")
+
+
 def sample_dancers(run, frames: int, num: int, seed: int, prime=None, motion=None, mix=None, controls=None):
   """``(positions [num, frames (+ prime), J, 3] in data space, settings)``: what ``chorjax sample`` and
   ``Run.sample`` draw. ``run``: a loaded run; ``prime``: ``FILE[:START:LEN]``; ``motion`` / ``mix``: the take
   id or blend that conditions the dance; ``controls``: sampling controls (unset: the run's own)."""
   from chorjax.models import motion_weight_vector
 
-  for name, value, low in (("frames", frames, 1), ("num", num, 1), ("seed", seed, 0)):
-    if not isinstance(value, int) or isinstance(value, bool) or not low <= value < 2**32:
-      raise UserError(f"{name} {value!r}: must be a whole number from {low} to 2**32 - 1")
+  check_counts(frames=frames, num=num, seed=seed)
   run = run.serving("sample")
   run.check_drawn(frames * num, f"frames {frames} x num {num}")
   sampling = run.sampling(**(controls or {}))
@@ -110,6 +117,7 @@ def write_sample(
   from chorjax.output import as_motions, load_character, write_motions, written_paths
   from chorjax.run import load_run
 
+  check_counts(frames=frames, num=num, seed=seed)  # before any arithmetic on them
   out, _ = check_output(output)
   character = load_character(skeleton, out)
   run = load_run(workdir, checkpoint).serving("sample")

@@ -244,3 +244,10 @@ def test_the_end_of_a_run_is_the_hooks_handed_to_training(tmp_path):
   assert end_of_run.standard(tiny_config(*TOY)) == [end_of_run.end_sample]  # no calibration: nothing to choose
   summary = train_and_evaluate(tiny_config(*TOY), tmp_path / "w", finish=[hook])  # resumed at its end
   assert len(seen) == 2
+
+
+def test_writing_a_sample_refuses_counts_that_are_no_whole_numbers_before_any_work(toy_run, tmp_path):
+  for bad in ({"frames": "10"}, {"num": 1.5}, {"seed": -3}):
+    with pytest.raises(chorjax.UserError, match="must be a whole number"):
+      chorjax.api.write_sample(toy_run.workdir, tmp_path / "s.csv", **bad)
+  assert not any(tmp_path.iterdir())
