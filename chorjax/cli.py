@@ -362,9 +362,8 @@ def _add_run_commands(sub) -> None:
   sample = sub.add_parser(
     "sample",
     help="generate new dance from a trained run",
-    description="Generates new dance from a trained run. A GAN run (model.family = 'gan') draws each dancer as one "
-    "sequence of --frames frames from noise: no --prime, no --motion/--mix conditioning, and the MDN draw "
-    "controls do not apply (--clamp, --rigid-bones and --foot-lock do).",
+    description="Generates new dance from a trained run; unset sampling controls take the run's calibration, then its"
+    " [sample] keys. A GAN run draws from noise: no --prime, --motion or --mix.",
   )
   sample.add_argument("workdir", metavar="WORKDIR", help="a run directory with checkpoints")
   sample.add_argument(
@@ -400,12 +399,8 @@ def _add_inbetween_command(sub) -> None:
   p = sub.add_parser(
     "inbetween",
     help="write the movement between a phrase and key poses (an in-betweening run)",
-    description="Writes the frames between a context phrase (--from) and a target pose (--to) with a run trained "
-    "with model.family = 'inbetween' (configs/inbetween.toml). The output holds the LEN context frames, the N "
-    "written frames and the target frame (LEN + N + 1), in the data's units and axes; context and target are "
-    "copied in unchanged. Repeat --to (with one --frames per --to, or one for all) to chain key poses into one "
-    "piece: each transition continues from the piece so far. Different --seed values write different "
-    "transitions (the model's target noise; transitions of 5 frames or fewer hardly differ).",
+    description="Writes the frames between a phrase (--from) and key poses (--to) with an in-betweening run: LEN "
+    "context frames, N written frames, the target (docs/guides/inbetween.md).",
   )
   p.add_argument("workdir", metavar="WORKDIR", help="an in-betweening run directory with checkpoints")
   p.add_argument(
@@ -443,10 +438,8 @@ def _add_live_command(sub) -> None:
   live = sub.add_parser(
     "live",
     help="dance in real time: a live page and a WebSocket stream (and OSC) that clients steer",
-    description="Generates without end and streams one frame per 1/fps seconds: GET / is a live player "
-    "page, /ws a WebSocket (one JSON message per frame; clients send prime/set/pause), --osc sends every "
-    "frame as OSC. Prints 'serving http://HOST:PORT' when ready; Ctrl-C stops it (exit 0). The protocol is "
-    "described in chorjax/live.py and the README.",
+    description="Dances without end: a live player page at GET /, a WebSocket at /ws that clients steer, OSC out and "
+    "in. Ctrl-C stops it (docs/guides/live.md).",
   )
   live.add_argument("workdir", metavar="WORKDIR", help="a run directory with checkpoints")
   live.add_argument("--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1)")
@@ -485,10 +478,11 @@ def _add_live_command(sub) -> None:
   live.set_defaults(func=_live)
 
 
-SWEEP_FORMAT = """Train and evaluate every point of a grid over config keys. Points already finished are
-skipped, so an interrupted sweep continues where it stopped.
-
-The sweep file (TOML):
+SWEEP_DESCRIPTION = (
+  "Trains and evaluates every point of a grid over config keys; finished points are skipped,\n"
+  "so an interrupted sweep continues where it stopped (docs/guides/sweeps.md)."
+)
+SWEEP_FORMAT = """The sweep file (TOML):
   name = "lr_sweep"                      # run directories are named NAME-KEY=VALUE-...
   base = "../configs/quickstart.toml"    # the config every point starts from (relative to this file)
   root = "runs/lr_sweep"                 # where the run directories go (relative to the working directory)
@@ -556,17 +550,8 @@ def _add_calibrate_command(sub) -> None:
   cal = sub.add_parser(
     "calibrate",
     help="choose the run's sampling settings on its dancer's takes; the run's default after",
-    description="Samples the run over a grid of noise_smoothing (for the run's sample.noise_order and "
-    "sample.pace, or --noise-order and --pace, recorded with it), sigma_temperature, persistence, crossfade and "
-    "(canonical runs) foot_lock, 180 settings (an MSE head draws no noise: foot_lock alone), and past the "
-    "grid's ends where one of its three best settings' noise smoothing or sigma temperature is one, while that "
-    "helps; it keeps the one "
-    "whose dance moves like the reference takes "
-    "(movement over 0.5 s, jitter, joint speed and root travel, together nearest the takes' own, the "
-    "farthest of them counted twice) and whose "
-    "poses go together as theirs do (the geometric FID over the takes' own, counted above 1). The "
-    "reference is the run's training takes: never the takes it is judged on. Writes WORKDIR/calibration.json, "
-    "which sample, eval and live then use unless a flag says otherwise.",
+    description="Chooses the run's calibrated sampling settings on its training takes and writes "
+    "WORKDIR/calibration.json, the default of sample, eval and live (docs/guides/sampling.md).",
   )
   cal.add_argument("workdir", metavar="WORKDIR", help="a trained run directory")
   cal.add_argument(
@@ -639,10 +624,11 @@ def _add_report_commands(sub) -> None:
   sw = sub.add_parser(
     "sweep",
     help="train and evaluate every point of a grid over config keys",
-    description=SWEEP_FORMAT,
+    description=SWEEP_DESCRIPTION,
+    epilog=SWEEP_FORMAT,
     formatter_class=argparse.RawDescriptionHelpFormatter,
   )
-  sw.add_argument("sweep", metavar="SWEEP.toml", help="the sweep file (format above)")
+  sw.add_argument("sweep", metavar="SWEEP.toml", help="the sweep file (format below)")
   sw.add_argument(
     "--shard",
     type=_shard,
@@ -668,10 +654,8 @@ def _add_compare_command(sub) -> None:
   cmp_ = sub.add_parser(
     "compare",
     help="a markdown report comparing evaluated runs, with plots",
-    description="Groups runs that differ only in train.seed (mean ± sd), names a winner per metric only beyond "
-    "the spread, and, where the runs trained on several datasets (data.dataset), gives each dataset its own "
-    "table and winners. Where two or more runs were calibrated, it names the one whose calibrated draws came "
-    "nearest its own training takes (the lowest calibration objective): the pick made without the held-out takes.",
+    description="A Markdown report of evaluated runs: runs differing only in train.seed grouped (mean ± sd), a winner"
+    " named only beyond that spread, per dataset (docs/guides/sweeps.md).",
   )
   cmp_.add_argument("workdirs", nargs="+", metavar="WORKDIR", help="evaluated run directories (chorjax eval or sweep)")
   cmp_.add_argument("-o", "--output", required=True, metavar="report.md", help="the markdown report to write")

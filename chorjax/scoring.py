@@ -303,7 +303,10 @@ def score(
     fps: frame rate of all of them.
     train: the training takes, if any (novelty is measured against them).
     unseen: real takes that are not training takes (``novelty_real`` is theirs; None without any).
-    window, splits, segment, seed: see the module docstring.
+    window: frames per window of the FID and diversity features (60 = 2 s at 30 fps).
+    splits: how many random halvings of the reference the FIDs are averaged over.
+    segment: frames per segment of the movement and jitter measures.
+    seed: the seed of those halvings and subsamples.
 
   Returns:
     The JSON-ready dict described in the module docstring (plus a few labelled extras).

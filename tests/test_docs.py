@@ -1,30 +1,38 @@
-"""The README's examples work as written: every `.venv/bin/chorjax` line of its ``bash`` blocks runs
-(on a tiny model standing in for runs/quickstart, with toy training sizes and short renders)."""
+"""The documented examples work as written: every `.venv/bin/chorjax` line of the ``bash`` blocks of the
+README and of the guides in docs/ runs (on a tiny model standing in for runs/quickstart, with toy training
+sizes and short renders)."""
 
 import re
 import shlex
 import shutil
 from pathlib import Path
 
-from helpers import TINY
+from helpers import GAN_NETWORKS, TINY
 
 from chorjax import cli
 from chorjax.data.dataset import bundled_path
 from chorjax.training import train_and_evaluate
 
 ROOT = Path(__file__).resolve().parents[1]
+GUIDES = sorted((ROOT / "docs").rglob("*.md"))
 
 
-def readme_commands() -> list[str]:
-  blocks = re.findall(r"```bash\n(.*?)```", (ROOT / "README.md").read_text(), flags=re.S)
+def commands(page: Path) -> list[str]:
+  blocks = re.findall(r"```bash\n(.*?)```", page.read_text(), flags=re.S)
   lines = [line.strip() for block in blocks for line in block.splitlines()]
   return [line for line in lines if line.startswith(".venv/bin/chorjax ")]
 
 
+def readme_commands() -> list[str]:
+  return commands(ROOT / "README.md")
+
+
 def tiny(args: list[str]) -> list[str]:
-  """The same command at toy sizes: tiny training, at most 300 generated frames, 20 rendered."""
+  """The same command at toy sizes: tiny training (its calibration left to the documented `chorjax calibrate`
+  line and tests/test_calibrate.py), at most 300 generated frames, 20 rendered."""
   if args[0] == "train":
-    return [*args, *TINY, "log.tensorboard=false"]
+    gan = GAN_NETWORKS if "configs/gan.toml" in args else []
+    return [*args, *TINY, *gan, "log.tensorboard=false", "train.calibrate=false"]
   out = list(args)
   if "--frames" in out:
     i = out.index("--frames") + 1
@@ -32,6 +40,23 @@ def tiny(args: list[str]) -> list[str]:
   if args[0] == "render" and any(a.endswith((".mp4", ".gif")) for a in args) and "--frames" not in out:
     out += ["--frames", "20", "--size", "320x240"]
   return out
+
+
+def run_documented(lines: list[str], where: Path) -> None:
+  """Runs ``lines`` in ``where`` (a copy of configs/, the package, my_phrase.csv, and a tiny runs/quickstart)."""
+  from helpers import tiny_config
+
+  shutil.copytree(ROOT / "configs", where / "configs")
+  (where / "chorjax").symlink_to(ROOT / "chorjax")
+  shutil.copy(bundled_path("cmu94") / "94_03_skeleton_3d.csv", where / "my_phrase.csv")
+  train_and_evaluate(tiny_config("log.tensorboard=false", "train.eval_every=1"), where / "runs" / "quickstart")
+  for line in lines:
+    args = tiny(shlex.split(line)[1:])
+    try:
+      code = cli.main(args)
+    except SystemExit as e:  # argparse
+      code = e.code
+    assert code == 0, f"documented command failed: {line}"
 
 
 def test_the_readme_has_examples_and_no_bare_chorjax_command():
@@ -44,26 +69,14 @@ def test_the_readme_has_examples_and_no_bare_chorjax_command():
 
 def test_every_readme_command_runs(tmp_path, monkeypatch):
   monkeypatch.chdir(tmp_path)
-  shutil.copytree(ROOT / "configs", tmp_path / "configs")
-  (tmp_path / "chorjax").symlink_to(ROOT / "chorjax")
-  shutil.copy(bundled_path("cmu94") / "94_03_skeleton_3d.csv", tmp_path / "my_phrase.csv")
-  from helpers import tiny_config
-
-  train_and_evaluate(tiny_config("log.tensorboard=false", "train.eval_every=1"), tmp_path / "runs" / "quickstart")
-  for line in readme_commands():
-    args = tiny(shlex.split(line)[1:])
-    try:
-      code = cli.main(args)
-    except SystemExit as e:  # argparse
-      code = e.code
-    assert code == 0, f"README command failed: {line}"
+  run_documented(readme_commands(), tmp_path)
 
 
-def test_the_readme_sweep_file_is_a_valid_sweep(tmp_path):
+def test_the_guides_sweep_file_is_a_valid_sweep(tmp_path):
   from chorjax.config import load_config
   from chorjax.experiments import load_sweep, sweep_points
 
-  (example,) = re.findall(r"```toml\n(.*?)```", (ROOT / "README.md").read_text(), flags=re.S)
+  (example,) = re.findall(r"```toml\n(.*?)```", (ROOT / "docs" / "guides" / "sweeps.md").read_text(), flags=re.S)
   (tmp_path / "configs").symlink_to(ROOT / "configs")
   (tmp_path / "sweeps").mkdir()
   (tmp_path / "sweeps" / "s.toml").write_text(example)  # `base` is relative to the sweep file

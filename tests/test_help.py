@@ -120,3 +120,146 @@ def test_the_docs_command_line_reference_is_generated_and_every_flag_has_help():
   assert not silent, f"flags without help: {silent}"
   for command in ("train", "sample", "inbetween", "render", "live", "eval", "calibrate", "metrics", "sweep"):
     assert f"## `chorjax {command}`" in page
+
+
+ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
+
+
+def _walk_flags():
+  """(command, action) for every flag and argument of every command."""
+  found = []
+
+  def walk(parser, name):
+    for action in parser._actions:
+      if isinstance(action, argparse._SubParsersAction):
+        for command, child in action.choices.items():
+          walk(child, f"{name} {command}".strip())
+      elif not isinstance(action, argparse._HelpAction):
+        found.append((name, action))
+
+  walk(cli.build_parser(), "")
+  return found
+
+
+def test_the_site_builds_strictly_offline_with_every_flag_key_metric_and_api_name(tmp_path):
+  """mkdocs (material + mkdocstrings) in strict mode: a warning, a broken link or an unresolved docstring fails
+  the build. Its reference pages hold every flag and config key with help, every metric, the API's names."""
+  import html
+  import os
+  import subprocess
+  import sys
+
+  from chorjax.reports import METRIC_KEYS
+
+  site = tmp_path / "site"
+  env = {
+    **os.environ,
+    "NO_MKDOCS_2_WARNING": "1",
+    "no_proxy": "*",
+    "http_proxy": "http://0.0.0.0:9",
+    "https_proxy": "http://0.0.0.0:9",
+  }
+  out = subprocess.run(
+    [sys.executable, "-m", "mkdocs", "build", "--strict", "-f", str(ROOT / "mkdocs.yml"), "-d", str(site)],
+    capture_output=True,
+    text=True,
+    env=env,
+    cwd=ROOT,
+  )
+  assert out.returncode == 0, out.stderr[-3000:]
+  assert "WARNING" not in out.stderr, out.stderr[-3000:]
+  page = lambda name: html.unescape((site / name / "index.html").read_text())
+  cli_page, keys_page, metrics_page, api_page = page("cli"), page("config"), page("metrics"), page("api")
+  for command, action in _walk_flags():
+    assert f"chorjax {command}" in cli_page, command
+    shown = ", ".join(action.option_strings) or action.dest.upper()
+    assert action.help and action.help.strip(), (command, shown)
+    names = action.option_strings or [action.metavar or action.dest.upper()]
+    assert any(s in cli_page for s in names), (command, shown)
+  for row in key_docs():
+    assert row["key"] in keys_page and row["help"].strip(), row["key"]
+    assert html.unescape(row["help"]).split("`")[0][:40] in keys_page, row["key"]
+  missing = [k for k in METRIC_KEYS if k not in metrics_page]
+  assert not missing, f"metrics without a definition on the metrics page: {missing}"
+  names = ("train", "load_run", "read_motion", "load_dataset", "score", "Motion.write", "Motion.show", "Run.sample")
+  for name in names:
+    assert f'id="chorjax.api.{name}"' in api_page, name
+
+
+# Development-log wording that has no place in what a user reads: work periods, lent or borrowed machines,
+# "the development machine", issue numbers of a tracker the reader cannot see, dates as history markers
+# (history goes to CHANGELOG.md). Keep this list current.
+DEV_LOG = (
+  r"\b(work )?(session|round|period)s? \d+\b",
+  r"\bwork periods?\b",
+  r"\blent\b",
+  r"\bborrowed\b",
+  r"\bdevelopment machine\b",
+  r"\bissues? #?\d+\b",
+  r"\b(until|since|before) 20\d\d-\d\d-\d\d\b",
+)
+
+
+def _user_facing_texts():
+  from chorjax.config import reference_markdown
+
+  pages = [ROOT / "README.md", *ROOT.glob("docs/**/*.md"), *ROOT.glob("configs/*.toml")]
+  pages += [*ROOT.glob("experiments/**/README.md"), *ROOT.glob("experiments/*/*.toml")]
+  texts = {str(p.relative_to(ROOT)): p.read_text() for p in pages}
+  texts["chorjax --help texts"] = cli.reference_markdown()
+  texts["config help texts"] = reference_markdown()
+  return texts
+
+
+@pytest.mark.parametrize("pattern", DEV_LOG)
+def test_no_development_log_wording_in_docs_or_help(pattern):
+  import re
+
+  hits = [
+    f"{name}: {m.group(0)!r}" for name, text in _user_facing_texts().items() for m in re.finditer(pattern, text, re.I)
+  ]
+  assert not hits, hits[:20]
+
+
+def test_the_wording_check_catches_what_it_names():
+  import re
+
+  for bad in ("in session 25", "a lent H100", "the development machine", "see issue 35", "until 2026-11-27"):
+    assert any(re.search(p, bad, re.I) for p in DEV_LOG), bad
+  for fine in ("a one-line error", "the sessions of a dancer", "lentil", "measured on 2026-11-27"):
+    assert not any(re.search(p, fine, re.I) for p in DEV_LOG), fine
+
+
+MAX_DESCRIPTION = 200  # characters: a command's description is one or two lines; the guides hold the rest
+
+
+def test_every_command_description_and_flag_help_is_one_or_two_lines():
+  long = []
+
+  def walk(parser, name):
+    if len(parser.description or "") > MAX_DESCRIPTION:
+      long.append(f"{name} description ({len(parser.description)})")
+    for action in parser._actions:
+      if isinstance(action, argparse._SubParsersAction):
+        for command, child in action.choices.items():
+          walk(child, f"{name} {command}")
+
+  walk(cli.build_parser(), "chorjax")
+  assert not long, long
+
+
+def test_the_licence_is_in_the_package_metadata_and_the_citation_is_valid_cff():
+  import importlib.metadata
+  import subprocess
+  import sys
+  from pathlib import Path
+
+  meta = importlib.metadata.metadata("chorjax")
+  assert meta["License-Expression"] == "Apache-2.0" and "LICENSE" in meta.get_all("License-File")
+  assert (ROOT / "LICENSE").read_text().lstrip().startswith("Apache License")
+  cffconvert = Path(sys.executable).parent / "cffconvert"
+  command = [str(cffconvert), "--validate", "-i", str(ROOT / "CITATION.cff")]
+  out = subprocess.run(command, capture_output=True, text=True)
+  assert out.returncode == 0 and "are valid" in out.stdout, out.stdout + out.stderr
+  citation = (ROOT / "CITATION.cff").read_text()
+  assert "chor-rnn" in citation and "Crnkovic-Friis" in citation
