@@ -99,3 +99,44 @@ def test_every_experiment_sweep_loads_every_point():
   for sweep in sweeps:
     for _, overrides in sweep_points(sweep):
       load_config(sweep["file"].parent / sweep["base"], overrides)
+
+
+EXPERIMENT_PARTS = ("## Question", "## Reproduce", "## Answer", "## Pictures", "## Measured with")
+
+
+def _shown_images(readme: Path) -> set[Path]:
+  return {(readme.parent / m).resolve() for m in re.findall(r"!\[[^\]]*\]\(([^)\s]+\.png)\)", readme.read_text())}
+
+
+def test_every_experiment_has_one_shape_and_every_figure_is_shown():
+  """Each experiment's README says its question, how to reproduce it, its answer table, the pictures that show
+  it, and what it was measured with; experiments/README.md indexes them all; no figure lies unshown."""
+  folders = sorted(p for p in (ROOT / "experiments").iterdir() if p.is_dir() and not p.name.startswith(("_", ".")))
+  index = (ROOT / "experiments" / "README.md").read_text()
+  shown: set[Path] = set()
+  for folder in folders:
+    readme = folder / "README.md"
+    assert readme.exists(), f"{folder.name} has no README"
+    text = readme.read_text()
+    positions = [text.find(part + "\n") for part in EXPERIMENT_PARTS]
+    assert -1 not in positions and positions == sorted(positions), f"{folder.name}: parts {EXPERIMENT_PARTS}"
+    answer = text[positions[2] : positions[3]]
+    assert re.search(r"^\|.*\|\n\|[-| ]+\|$", answer, flags=re.M), f"{folder.name}: no table in its answer"
+    images = _shown_images(readme)
+    assert images, f"{folder.name} shows no picture"
+    missing = [str(p) for p in images if not p.exists()]
+    assert not missing, missing
+    shown |= images
+    assert f"({folder.name}/README.md)" in index, f"experiments/README.md does not index {folder.name}"
+  unshown = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "experiments").rglob("*.png") if p.resolve() not in shown)
+  assert not unshown, f"figures no README shows (delete them; git keeps them): {unshown}"
+
+
+def test_the_readme_results_table_names_the_command_that_reproduces_it():
+  text = (ROOT / "README.md").read_text()
+  section = text[text.index("## How well it dances") : text.index("## Commands")]
+  assert re.search(r"^\| dataset", section, flags=re.M)
+  assert "chorjax sweep experiments/dancers/sweep.toml" in section
+  for image in _shown_images(ROOT / "README.md"):
+    assert image.exists(), image
+  assert len(text.splitlines()) <= 200

@@ -1,12 +1,12 @@
-"""The comparisons users run, on every dataset of the dancers benchmark (issue 38): one table per measure, a
+"""The comparisons users run, on every dataset of the dancers benchmark : one table per measure, a
 row per configuration, a column per dataset; every figure on the dataset's held-out takes, mean (lowest-
 highest) over the training seeds.
 
   .venv/bin/python experiments/across_datasets/table.py     # writes experiments/across_datasets/table.md
 
 Reads, whichever are on this machine, the runs of experiments/dancers/sweep.toml as calibrated with the poses
-measure (runs/dancers_poses), as first calibrated without it (runs/dancers, session 17) and calibrated again
-past the grid's ends (runs/dancers_beyond, session 22), the LSTM cell's runs so calibrated (runs/dancers_lstm),
+measure (runs/dancers_poses), as first calibrated without it (runs/dancers) and calibrated again
+past the grid's ends (runs/dancers_beyond), the LSTM cell's runs so calibrated (runs/dancers_lstm),
 experiments/rnn_types/dancers.toml, experiments/mdn_vs_mse/dancers.toml and dancers_lstm.toml,
 experiments/families/dancers.toml and
 experiments/aclstm/ (its CPU runs in runs/aclstm_cpu). Each evaluated run's small files are copied beside its
@@ -33,28 +33,28 @@ DATASETS = ("cmu94", "salsa", "martial", "cmu05", "cmu131")
 # (label, runs folder, the folder its results are kept in, what a run's name holds besides dataset and seed, slug)
 CONFIGS = [
   (
-    "LN-LSTM, MDN (the quickstart until 2026-11-26)",
+    "LN-LSTM, MDN (the LN-LSTM quickstart)",
     "runs/dancers_poses",
     "dancers/results/dancers_poses",
     "",
     "quickstart",
   ),
   (
-    "LN-LSTM, MDN, calibrated without the poses measure (session 17)",
+    "LN-LSTM, MDN, calibrated without the poses measure",
     "runs/dancers",
     "dancers/results/dancers",
     "",
     "quickstart17",
   ),
   (
-    "LN-LSTM, MDN, calibrated past the grid's ends (session 22)",
+    "LN-LSTM, MDN, calibrated past the grid's ends",
     "runs/dancers_beyond",
     "dancers/results/dancers_beyond",
     "",
     "quickstart_beyond",
   ),
   (
-    "LSTM, MDN, calibrated past the grid's ends (the quickstart since session 22)",
+    "LSTM, MDN, calibrated past the grid's ends (the LSTM quickstart before four noise filters and pace 2)",
     "runs/dancers_lstm",
     "dancers/results/dancers_lstm",
     "",
@@ -64,7 +64,7 @@ CONFIGS = [
   ("GRU, MDN", "runs/rnn_types_dancers", "rnn_types/results/rnn_types_dancers", "cell=gru-", "gru"),
   ("LN-LSTM, MSE", "runs/mdn_vs_mse_dancers", "mdn_vs_mse/results/mdn_vs_mse_dancers", "head=mse-", "mse"),
   (
-    "LSTM, MSE (the quickstart's twin since session 22)",
+    "LSTM, MSE (the LSTM quickstart's twin)",
     "runs/mdn_vs_mse_lstm",
     "mdn_vs_mse/results/mdn_vs_mse_lstm",
     "head=mse-",
@@ -195,7 +195,7 @@ def selection() -> list[str]:
   return out
 
 
-CELLS = ("LN-LSTM, MDN (the quickstart until 2026-11-26)", "LSTM, MDN", "GRU, MDN")
+CELLS = ("LN-LSTM, MDN (the LN-LSTM quickstart)", "LSTM, MDN", "GRU, MDN")
 
 
 def cell_selection() -> list[str]:
@@ -255,16 +255,16 @@ if __name__ == "__main__":
   lines = [
     "# Every configuration on every dataset of the dancers benchmark",
     "",
-    "Written by `experiments/across_datasets/table.py` from the runs of issue 38's sweeps: every figure on the",
+    "Written by `experiments/across_datasets/table.py` from the runs of the comparisons' dancers sweeps: every figure on the",
     "dataset's held-out takes, 4 sampling seeds x 10,000 frames per run, mean (lowest-highest) over training",
     "seeds. A configuration is named beyond the spread only where every one of its 3 seeds beats every seed of",
     "every other configuration with 3 seeds.",
     "",
     "Machines: every run on an AMD EPYC machine's 2 CPU cores (jax 0.10.2), except those trained and scored on",
-    "a lent NVIDIA H100 (its image's jax 0.11.2 / flax 0.12.10, 6-11 sweep processes side by side, 2026-11-26):",
-    "GRU and LSTM on martial (the LSTM trained again on CPU for the session-22 row), the LN-LSTM's MSE twin on",
+    "an NVIDIA H100 (its image's jax 0.11.2 / flax 0.12.10, 6-11 sweep processes side by side, 2026-11-26):",
+    "GRU and LSTM on martial (the LSTM trained again on CPU for the calibrated row), the LN-LSTM's MSE twin on",
     "cmu05 (3 seeds) and cmu131 (seed 0), the LSTM's MSE twin (all), the LSTM-GAN on cmu94, martial seeds 1-2,",
-    "cmu05 seed 2 and cmu131 (session 23); and acLSTM's H200 row. Same configs, steps and",
+    "cmu05 seed 2 and cmu131; and acLSTM's H200 row. Same configs, steps and",
     "evaluation on both; a GPU rounds differently, so a seed there is another draw of the same recipe. cmu05",
     "holds one short held-out take: its FID_k reference (the training takes' own FID_k) is 9,272 +- 9,062 over",
     "the draws, so its FID_k column is not read; its FID_g is.",
