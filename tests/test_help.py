@@ -203,7 +203,7 @@ DEV_LOG = (
 def _user_facing_texts():
   from chorjax.config import reference_markdown
 
-  pages = [ROOT / "README.md", *ROOT.glob("docs/**/*.md"), *ROOT.glob("configs/*.toml")]
+  pages = [ROOT / "README.md", ROOT / "BENCHMARKS.md", *ROOT.glob("docs/**/*.md"), *ROOT.glob("configs/*.toml")]
   pages += [*ROOT.glob("experiments/**/README.md"), *ROOT.glob("experiments/*/*.toml")]
   texts = {str(p.relative_to(ROOT)): p.read_text() for p in pages}
   texts["chorjax --help texts"] = cli.reference_markdown()
@@ -245,6 +245,7 @@ def test_every_command_description_and_flag_help_is_one_or_two_lines():
           walk(child, f"{name} {command}")
 
   walk(cli.build_parser(), "chorjax")
+  long += [f"chorjax {c} {a.option_strings} ({len(a.help)})" for c, a in _walk_flags() if len(a.help) > MAX_DESCRIPTION]
   assert not long, long
 
 

@@ -1,0 +1,96 @@
+"""The shipped configuration's train step on this machine's CPU: chorjax's LSTM against PyTorch's ``nn.LSTM``
+for the quickstart's shape (2 x 192, batch 32 x 64) and the reference one (3 x 256, batch 50 x 100), with the
+quickstart's MDN head (8 diagonal components in the data's principal axes) and with an MSE head.
+
+    python -m benchmarks.shipped [--reps N] [--out benchmarks/results_shipped.json]
+
+Both frameworks in this one process, repetitions alternating after one untimed round, medians reported (as
+``benchmarks.run``). Synthetic batches of 48 features. BENCHMARKS.md's opening table is this script's output.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from pathlib import Path
+
+import jax
+import numpy as np
+
+from benchmarks.run import alternate, random_batch
+
+D, K = 48, 8
+SHAPES = {"shipped": (2, 192, 32, 64), "reference": (3, 256, 50, 100)}  # layers, hidden, batch, frames
+HERE = Path(__file__).resolve().parent
+
+
+def jax_step(head: str, shape: str):
+  """chorjax's jitted LSTM train step: ``run() -> loss`` and its compile seconds."""
+  from chorjax.config import load_config
+  from chorjax.families.recurrent.steps import create_train_state, train_step
+
+  layers, hidden, b, t = SHAPES[shape]
+  keys = ["model.cell=lstm", f"model.head={head}", f"model.num_layers={layers}", f"model.hidden_size={hidden}"]
+  basis = ["model.mdn_basis=pca"] if head == "mdn" else []
+  cfg = load_config(None, [*keys, f"model.num_mixtures={K}", *basis])
+  state, spec = create_train_state(cfg, D, 10, np.eye(D) if head == "mdn" else None)
+  batch, key, box = random_batch(np.random.default_rng(0), b, t, D), jax.random.key(0), {"state": state}
+  t0 = time.perf_counter()
+  step = train_step.lower(state, batch, key, spec).compile()
+  compile_s = time.perf_counter() - t0
+
+  def run():
+    box["state"], m = step(box["state"], batch, key)
+    return m["loss"]
+
+  return run, compile_s
+
+
+def torch_step(head: str, shape: str):
+  """PyTorch's ``nn.LSTM`` with the same head, Adam and global-norm clipping, eager."""
+  import torch
+
+  from benchmarks.torch_peer import Model, make_train_step
+
+  layers, hidden, b, t = SHAPES[shape]
+  torch.manual_seed(0)
+  step = make_train_step(Model("lstm", head, D, hidden, layers, K, "eager"))
+  x, y = torch.randn(b, t, D), torch.randn(b, t, D)
+  return lambda: step(x, y)
+
+
+def main(argv=None) -> None:
+  ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+  ap.add_argument("--reps", type=int, default=15, help="timed repetitions per step (default 15)")
+  ap.add_argument("--out", default=str(HERE / "results_shipped.json"))
+  args = ap.parse_args(argv)
+  from chorjax.experiments import machine_info
+  from chorjax.runtime import keep_freed_memory
+
+  keep_freed_memory()  # as the chorjax command does; the PyTorch peer in this process gains too
+  import torch
+
+  torch.set_num_threads(os.cpu_count() or 1)
+  res = {"machine": machine_info(), "jax": jax.__version__, "torch": torch.__version__, "reps": args.reps}
+  for shape in SHAPES:
+    for head in ("mdn", "mse"):
+      ours, compile_s = jax_step(head, shape)
+      times = alternate(
+        [("chorjax", ours, jax.block_until_ready), ("torch", torch_step(head, shape), lambda x: x.item())],
+        args.reps,
+      )
+      name = f"lstm {head} {shape}"
+      res[name] = {**times, "ratio": times["torch"] / times["chorjax"], "compile_s": compile_s}
+      print(
+        f"{name:22s} chorjax {times['chorjax'] * 1e3:7.1f} ms  torch nn.LSTM {times['torch'] * 1e3:7.1f} ms  "
+        f"x{times['torch'] / times['chorjax']:.2f} (compile {compile_s:.1f} s)",
+        flush=True,
+      )
+  Path(args.out).write_text(json.dumps(res, indent=2))
+  print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+  main()
