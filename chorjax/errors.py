@@ -9,6 +9,7 @@ from __future__ import annotations
 import glob
 import math
 import os
+import re
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -119,10 +120,23 @@ def check_up_axis(axis, where: str) -> str:
 LARGEST_VALUE = 1e7
 
 
+# Numbers as motion capture tools write them: ASCII digits, an optional sign, point and exponent. Python's
+# float() and int() also take underscores (1_000) and other scripts' digits, which no such tool writes.
+_DECIMAL = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?", re.ASCII)
+_WHOLE = re.compile(r"[+-]?\d+", re.ASCII)
+
+
+def whole_number(text: str) -> int:
+  """``int(text)`` for ASCII decimal digits only; ``ValueError`` otherwise."""
+  if not _WHOLE.fullmatch(text.strip()):
+    raise ValueError(f"not a whole number: {text!r}")
+  return int(text)
+
+
 def parse_numbers(cells, where: str, columns: bool = False) -> list[float]:
   """The floats in ``cells`` (one line of a text file), or a one-line ``UserError`` starting with
   ``where`` (``path:line``; with ``columns``, the 1-based column too) for the first cell that is not a
-  number, not finite (nan, inf) or beyond +-``LARGEST_VALUE``."""
+  plain decimal number, not finite (nan, inf) or beyond +-``LARGEST_VALUE``."""
   values = []
   for i, c in enumerate(cells):
     at = f"{where}: column {i + 1}" if columns else where
@@ -132,6 +146,8 @@ def parse_numbers(cells, where: str, columns: bool = False) -> list[float]:
       raise UserError(f"{at}: not a number: {c.strip()[:40]!r}") from None
     if not math.isfinite(v):
       raise UserError(f"{at}: non-finite value {c.strip()!r}")
+    if not _DECIMAL.fullmatch(c.strip()):
+      raise UserError(f"{at}: not a plain decimal number: {c.strip()[:40]!r} (ASCII digits, no underscores)")
     if abs(v) > LARGEST_VALUE:
       raise UserError(f"{at}: value {c.strip()[:40]} is out of range (beyond +-{LARGEST_VALUE:g})")
     values.append(v)

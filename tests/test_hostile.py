@@ -163,11 +163,30 @@ def _bvh_mutations(text: str) -> dict:
     "duplicate_name": (text.replace("JOINT LeftKnee", "JOINT LeftHip", 1), "joint name 'LeftHip' is used twice"),
     "nested_root": (text.replace("JOINT LHipJoint", "ROOT LHipJoint", 1), "inside another joint"),
     "offset_first": (text.replace("HIERARCHY", "HIERARCHY\nOFFSET 0 0 0", 1), "OFFSET outside a joint"),
+    # numbers as no mocap tool writes them, though Python's int() and float() read them
+    "other_digits": (re.sub(r"CHANNELS 3", "CHANNELS \u0663", text, count=1), "CHANNELS needs a count"),
+    "underscore_frames": (re.sub(r"Frames:\s*(\d)", r"Frames: 1_\1", text, count=1), "expected 'Frames: N'"),
+    "underscore_value": (
+      re.sub(r"(Frame Time:[^\n]*\n\s*)(\S+)", r"\g<1>1_0", text, count=1),
+      "not a plain decimal number: '1_0'",
+    ),
   }
 
 
 @pytest.mark.parametrize(
-  "case", ["extra_brace", "second_root", "junk_after_root", "three_x", "duplicate_name", "nested_root", "offset_first"]
+  "case",
+  [
+    "extra_brace",
+    "second_root",
+    "junk_after_root",
+    "three_x",
+    "duplicate_name",
+    "nested_root",
+    "offset_first",
+    "other_digits",
+    "underscore_frames",
+    "underscore_value",
+  ],
 )
 def test_bvh_structure_is_strict(shared_data, tmp_path, capsys, case):
   text, said = _bvh_mutations((shared_data / BVH).read_text())[case]
@@ -191,12 +210,32 @@ def _asf_amc_mutations(asf: str, amc: str) -> dict:
       re.sub(r"^(lowerback .*)$", r"\1\n\1", amc, count=1, flags=re.M),
       "twice in one frame",
     ),
+    "superscript_frame": (asf, amc.replace("\n2\n", "\n\u00b2\n", 1), "bone '\u00b2' is not in the skeleton"),
+    "underscore_value": (asf, re.sub(r"^(root) (\S+)", r"\1 4_2", amc, count=1, flags=re.M), "'4_2'"),
+    "zero_direction": (
+      asf.replace("direction 0.653368 -0.678499 0.335782", "direction 0 0 0", 1),
+      amc,
+      "zero direction",
+    ),
+    "undefined_bone": (asf.replace("lhipjoint lfemur", "lhipjoint lfemur ghost", 1), amc, "bone 'ghost'"),
   }
 
 
 @pytest.mark.parametrize(
   "case",
-  ["gradians", "zero_length_unit", "axis_order", "dof", "bone_twice", "frames_out_of_order", "bone_twice_in_frame"],
+  [
+    "gradians",
+    "zero_length_unit",
+    "axis_order",
+    "dof",
+    "bone_twice",
+    "frames_out_of_order",
+    "bone_twice_in_frame",
+    "superscript_frame",
+    "underscore_value",
+    "zero_direction",
+    "undefined_bone",
+  ],
 )
 def test_asf_and_amc_structure_is_strict(shared_data, tmp_path, capsys, case):
   folder = shared_data / "asfamc" / "cmu05"
@@ -341,3 +380,17 @@ def test_flags_that_make_no_sense_are_one_line_and_write_nothing(tmp_path, capsy
   assert code == 2
   assert said in capsys.readouterr().err
   assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("number", ["1_0", "\u0661\u0662", "\uff11\uff12", "4_2.5e1_0"])
+def test_a_csv_number_no_mocap_tool_writes_is_named(tmp_path, capsys, number):
+  """Python's float() reads underscores and other scripts' digits; a take's file holds ASCII decimals only."""
+  from chorjax.data.dataset import bundled_path
+
+  lines = (bundled_path("cmu94") / "94_01_skeleton_3d.csv").read_text().splitlines()[:30]
+  cells = lines[6].split(",")
+  cells[2] = number
+  lines[6] = ",".join(cells)
+  (tmp_path / "odd.csv").write_text("\n".join(lines) + "\n")
+  assert cli.main(["data", "info", str(tmp_path / "odd.csv")]) == 2
+  _one_line(capsys, "odd.csv:7: column 3", "not a plain decimal number")

@@ -136,12 +136,19 @@ def read_asf(path) -> Asf:
 
 
 def _check_bones(asf: Asf, path: Path) -> None:
-  """Every bone has a direction and a length and a place in the hierarchy; there is at least one."""
+  """Every bone has a direction (not zero) and a length and a place in the hierarchy, the hierarchy names only
+  bones the file defines, and there is at least one."""
   for name, b in asf.bones.items():
     if "direction" not in b or "length" not in b:
       raise UserError(f"{path}:{b['line']}: bone {name!r} lacks a direction or length")
+    if not np.linalg.norm(b["direction"]) > 0:
+      raise UserError(f"{path}:{b['line']}: bone {name!r} has a zero direction (it points nowhere)")
     if name not in asf.parent:
       raise UserError(f"{path}: bone {name!r} is missing from :hierarchy")
+  for child, parent in asf.parent.items():
+    for bone in (child, parent):
+      if bone != "root" and bone not in asf.bones:
+        raise UserError(f"{path}: :hierarchy names bone {bone[:40]!r}, which :bonedata does not define")
   if not asf.bones:
     raise UserError(f"{path}: no :bonedata")
 
@@ -173,7 +180,7 @@ def read_amc(path, asf_path=None, *, fps: float = 120.0, scale: float = 1.0, uni
     if not line or line.startswith("#") or line.startswith(":"):
       continue
     words = line.split()
-    if len(words) == 1 and words[0].isdigit():
+    if len(words) == 1 and words[0].isascii() and words[0].isdigit():
       if starts and int(words[0]) != number + 1:
         raise UserError(f"{path}:{lineno}: frame {words[0]} follows frame {number} (AMC frames count up by one)")
       number = int(words[0])

@@ -25,7 +25,7 @@ import numpy as np
 
 from chorjax.data.motion import Motion, Skeleton
 from chorjax.data.rotations import best_fit_rotation, euler_to_matrix, matrix_to_euler, swing
-from chorjax.errors import UserError, atomic_write, check_rate, parse_numbers, read_text
+from chorjax.errors import UserError, atomic_write, check_rate, parse_numbers, read_text, whole_number
 
 _ROT = {"xrotation": "x", "yrotation": "y", "zrotation": "z"}
 _POS = {"xposition": 0, "yposition": 1, "zposition": 2}
@@ -110,7 +110,7 @@ def _read_channels(path: Path, toks, i: int, joint: _Joint) -> int:
   """Reads ``CHANNELS n name...`` at token ``i`` into ``joint``; returns the next token's index."""
   line = toks[i][0]
   try:
-    n = int(toks[i + 1][1])
+    n = whole_number(toks[i + 1][1])
   except ValueError:
     raise UserError(f"{path}:{line}: CHANNELS needs a count") from None
   if i + 2 + n > len(toks):
@@ -145,8 +145,8 @@ def _parse_motion(path: Path, text: str, num_channels: int):
   if start is None:
     raise UserError(f"{path}: no MOTION section")
   try:
-    frames = int(lines[start + 1].split(":")[1])
-    frame_time = float(lines[start + 2].split(":")[1])
+    frames = whole_number(lines[start + 1].split(":")[1])
+    frame_time = parse_numbers([lines[start + 2].split(":")[1]], f"{path}:{start + 3}")[0]
     assert lines[start + 1].strip().lower().startswith("frames") and 0 < frame_time < 1e3
   except (IndexError, ValueError, AssertionError):
     raise UserError(f"{path}:{start + 2}: expected 'Frames: N' and 'Frame Time: T' after MOTION") from None

@@ -41,7 +41,7 @@ from chorjax.errors import UserError
 
 TARGETS = MPII16.joint_names
 
-# CMU ASF/AMC: joints are named after the bone that ends there.
+# Known rigs, by the joint names they use. CMU ASF/AMC: joints are named after the bone that ends there.
 FAMILIES = {
   "cmu_asf": {
     "right_foot": "rtibia",
@@ -61,6 +61,8 @@ FAMILIES = {
     "left_elbow": "lhumerus",
     "left_hand": "lradius",
   },
+  # chorjax's own 16 joints, as its BVH and CSV writers name them: a file chorjax wrote reads back as it was.
+  "chorjax": {name: name for name in TARGETS},
 }
 
 # Synonyms per limb joint, in order of preference (``Ankle`` before ``Foot``: where both exist, the
