@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from chorjax.errors import UserError
+from chorjax.errors import UserError, load_json
 
 # What calibration.json's settings may hold: what `chorjax calibrate` chooses, and the noise order and governor
 # gain it was chosen with (an older calibration may hold fewer: noise_smoothing and sigma_temperature alone, or
@@ -30,7 +30,7 @@ def _calibration(workdir) -> dict | None:
   if not path.is_file():
     return None
   try:
-    return json.loads(path.read_text(errors="replace"))
+    return load_json(path.read_text(errors="replace"))
   except json.JSONDecodeError:
     raise _damaged_calibration(workdir) from None
 

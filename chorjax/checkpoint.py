@@ -27,7 +27,7 @@ import jax
 import orbax.checkpoint as ocp
 from orbax.checkpoint.checkpoint_managers import preservation_policy as pp
 
-from chorjax.errors import UserError
+from chorjax.errors import UserError, load_json
 
 
 class _ReadOnlyNotice(logging.Filter):
@@ -63,7 +63,7 @@ def _write_missing_metrics(directory: Path) -> None:
     if not step.name.isdigit() or metrics.exists() or not (step / "commit_success.txt").exists():
       continue
     try:
-      val_loss = json.loads((step / "meta" / "metadata").read_text()).get("val_loss")
+      val_loss = load_json((step / "meta" / "metadata").read_text()).get("val_loss")
     except (OSError, ValueError, AttributeError):
       continue
     if isinstance(val_loss, (int, float)):

@@ -18,7 +18,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from chorjax.errors import UserError, check_memory
+from chorjax.errors import UserError, check_memory, load_toml, read_text
 from chorjax.registry import names as family_names
 
 
@@ -596,6 +596,12 @@ def check_sample_control(name: str, value, where: str):
   return _check_value(where, f"sample.{name}", field, value)
 
 
+def _short(value: Any) -> str:
+  """``repr(value)``, cut to 60 characters: an error line names the value, it does not reprint a huge one."""
+  text = repr(value)
+  return text if len(text) <= 60 else text[:57] + "..."
+
+
 def _check_value(where: str, key: str, field: dataclasses.Field, value: Any):
   """Returns ``value`` converted to the field's type, or raises a UserError naming ``key``."""
   hint = typing.get_type_hints(_SECTION_CLASSES[key.split(".")[0]])[field.name]
@@ -616,7 +622,7 @@ def _check_value(where: str, key: str, field: dataclasses.Field, value: Any):
     raise TypeError(hint)
   if not ok:
     tname = "list" if hint is tuple else hint.__name__
-    raise UserError(f"{where}: key {key!r}: expected {tname}, got {type(value).__name__} {value!r}")
+    raise UserError(f"{where}: key {key!r}: expected {tname}, got {type(value).__name__} {_short(value)}")
   if hint is float and not math.isfinite(value):
     raise UserError(f"{where}: key {key!r}: {value!r} is not a finite number")
   items = value if isinstance(value, tuple) else (value,)  # a list (a tuple by now): each element
@@ -671,10 +677,10 @@ def _apply(sections: dict[str, dict], tree: dict, where_of) -> None:
 def parse_override(text: str) -> tuple[str, Any]:
   """``'optim.lr=3e-4'`` -> ``('optim.lr', 0.0003)``; values are TOML, else bare strings."""
   if "=" not in text:
-    raise UserError(f"override {text!r}: expected KEY=VALUE, e.g. model.cell=gru")
+    raise UserError(f"override {text[:80]!r}: expected KEY=VALUE, e.g. model.cell=gru")
   key, raw = (s.strip() for s in text.split("=", 1))
   try:
-    value = tomllib.loads(f"v = {raw}")["v"]
+    value = load_toml(f"v = {raw}")["v"]
   except tomllib.TOMLDecodeError:
     value = raw
   return key, value
@@ -696,13 +702,11 @@ def load_config(path: str | Path | Config | None = None, overrides: Sequence[str
   elif path is not None:
     path = Path(path)
     try:
-      text = path.read_text(encoding="utf-8-sig")  # a byte-order mark some editors write is not TOML
-    except FileNotFoundError:
-      raise UserError(f"{path}: no such config file") from None
-    except (OSError, UnicodeDecodeError) as e:
+      text = read_text(path, "config")  # a byte-order mark some editors write is not TOML; pipes refused
+    except OSError as e:
       raise UserError(f"{path}: cannot read ({type(e).__name__})") from None
     try:
-      tree = tomllib.loads(text)
+      tree = load_toml(text)
     except tomllib.TOMLDecodeError as e:
       raise UserError(f"{path}: invalid TOML: {e}") from None
 
@@ -720,9 +724,9 @@ def load_config(path: str | Path | Config | None = None, overrides: Sequence[str
       name = str(value)
       continue
     if "." not in key:
-      raise UserError(f"override {item!r}: expected SECTION.KEY=VALUE" + suggest(key, valid_keys()))
+      raise UserError(f"override {item[:80]!r}: expected SECTION.KEY=VALUE" + suggest(key, valid_keys()))
     section, sub = key.split(".", 1)
-    _apply(sections, {section: {sub: value}}, lambda s, k, item=item: f"override {item!r}")
+    _apply(sections, {section: {sub: value}}, lambda s, k, item=item: f"override {item[:80]!r}")
   config = Config(**{s: cls(**sections[s]) for s, cls in _SECTION_CLASSES.items()}, name=plain_name(name, "name"))
   check_combinations(config)
   check_training_size(config)

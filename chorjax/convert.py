@@ -39,6 +39,8 @@ def convert(
 
   out = Path(output)
   character = load_character(skeleton, out)
+  if joint_map is not None and joints != "mpii16" and character is None:
+    raise UserError(f"{joint_map}: a joint map places the 16 training joints: give --joints mpii16 with it")
   motions = [
     m for spec in inputs for f in resolve_files(spec) for m in read_motions(f, fps=fps, asf=asf, amc_fps=amc_fps)
   ]
@@ -86,9 +88,13 @@ def like_reference(motions, like: str) -> list:
   canon = lambda m: np.asarray(transforms.to_y_up(m.positions, m.up_axis))
   ref_size = np.mean([body_size(canon(r), r.skeleton) for r in ref])
   motions = [to_up_axis(m, ref[0].up_axis) for m in motions]
+  sizes = [body_size(canon(m), m.skeleton) for m in motions]
+  for m, size in zip(motions, sizes, strict=True):
+    if not (np.isfinite(size) and size > 0):
+      raise UserError(f"{m.source or m.name}: its joints have no extent (body size {size:g}): --like cannot scale it")
   motions = [
-    m.replace(positions=m.positions * np.float32(ref_size / body_size(canon(m), m.skeleton)), units=ref[0].units)
-    for m in motions
+    m.replace(positions=m.positions * np.float32(ref_size / size), units=ref[0].units)
+    for m, size in zip(motions, sizes, strict=True)
   ]
   motions = [to_rate(m, ref[0].fps) for m in motions]
   ref_root = np.mean([r.positions[:, r.skeleton.root].mean(0) for r in ref], axis=0)

@@ -7,10 +7,12 @@ checkpoint). The CLI prints its message as one line and exits with code 2, witho
 from __future__ import annotations
 
 import glob
+import json
 import math
 import os
 import re
 import tempfile
+import tomllib
 from collections.abc import Callable
 from pathlib import Path
 
@@ -83,13 +85,30 @@ def read_text(path, kind: str, errors: str = "strict") -> str:
   (``kind``: e.g. "BVH"); anything but a regular file (a named pipe would block forever) is refused."""
   path = Path(path)
   if path.exists() and not path.is_file() and not path.is_dir():
-    raise UserError(f"{path}: not a regular file (a pipe or a device); motion files are read whole")
+    raise UserError(f"{path}: not a regular file (a pipe or a device); chorjax reads files whole")
   try:
     return path.read_text(encoding="utf-8-sig", errors=errors)
   except FileNotFoundError:
     raise UserError(f"{path}: no such {kind} file") from None
   except (UnicodeDecodeError, IsADirectoryError, PermissionError) as e:
     raise UserError(f"{path}: cannot read as a {kind} text file ({type(e).__name__})") from None
+
+
+def load_json(text: str):
+  """``json.loads``, with nesting too deep for the parser (a RecursionError) raised as a ``JSONDecodeError``
+  like any other malformed JSON, so every reader's one-line error covers it."""
+  try:
+    return json.loads(text)
+  except RecursionError:
+    raise json.JSONDecodeError("nested too deeply", text[:100], 0) from None
+
+
+def load_toml(text: str) -> dict:
+  """``tomllib.loads``, with nesting too deep for the parser raised as a ``TOMLDecodeError``."""
+  try:
+    return tomllib.loads(text)
+  except RecursionError:
+    raise tomllib.TOMLDecodeError("nested too deeply") from None
 
 
 RATES = (1.0, 1000.0)  # frames per second that motion capture uses (30-120 fps; high-speed 240-960)

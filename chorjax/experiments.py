@@ -50,7 +50,7 @@ import numpy as np
 
 from chorjax.config import load_config, plain_name, suggest, valid_keys
 from chorjax.controls import Controls
-from chorjax.errors import UserError, atomic_write
+from chorjax.errors import UserError, atomic_write, load_json, load_toml, read_text
 from chorjax.families import family_of
 from chorjax.scoring import mean_of, upgrade
 
@@ -65,7 +65,7 @@ def _fmt(v) -> str:
 def load_sweep(path) -> dict:
   path = Path(path)
   try:
-    sweep = tomllib.loads(path.read_text())
+    sweep = load_toml(read_text(path, "sweep"))
   except FileNotFoundError:
     raise UserError(f"{path}: no such sweep file") from None
   except tomllib.TOMLDecodeError as e:
@@ -304,7 +304,7 @@ EVAL_NEEDS = ("frames", "num", "data", "sampling", "segment_frames", "movement_c
 def _json_file(path: Path, what: str, fix: str) -> dict:
   """A JSON object from ``path``, or one line saying it is damaged and what to do."""
   try:
-    value = json.loads(path.read_text(errors="replace"))
+    value = load_json(path.read_text(errors="replace"))
   except json.JSONDecodeError as e:
     raise UserError(f"{path}: damaged {what} (not JSON: {e.msg} at line {e.lineno}); {fix}") from None
   if not isinstance(value, dict):

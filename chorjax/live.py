@@ -45,7 +45,7 @@ import jax
 import numpy as np
 
 from chorjax.controls import Controls
-from chorjax.errors import UserError
+from chorjax.errors import UserError, load_json
 
 AHEAD = 2  # chunks generated ahead of the clock
 PRIME_RANGE = 10.0  # a primed frame's features may lie this many times the training range's span outside it
@@ -264,7 +264,7 @@ class Live:
   async def handle(self, message) -> str:
     """One client message -> the reply (``{"ok": KIND}`` or ``{"error": ...}``)."""
     try:
-      data = json.loads(message)
+      data = load_json(message)
     except (json.JSONDecodeError, UnicodeDecodeError, TypeError) as e:
       return json.dumps({"error": f"not JSON: {e}"})
     kinds = ("prime", "prime_file", "set", "pause")

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import json
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -26,7 +25,7 @@ from chorjax.calibration_file import read_calibration
 from chorjax.config import Config, config_from_dict
 from chorjax.controls import Controls, with_ceiling
 from chorjax.data.features import Features
-from chorjax.errors import UserError, check_memory
+from chorjax.errors import UserError, check_memory, load_json
 from chorjax.families import family_of
 
 if TYPE_CHECKING:  # (the annotation only: a family reads runs back)
@@ -161,7 +160,7 @@ class Run:
 def _keeps_best(workdir: Path) -> bool:
   """Whether the run's config (``config.json``) says ``train.keep = "best"``."""
   try:
-    return json.loads((workdir / "config.json").read_text())["train"].get("keep") == "best"
+    return load_json((workdir / "config.json").read_text())["train"].get("keep") == "best"
   except (OSError, ValueError, KeyError, TypeError, AttributeError):
     return False
 

@@ -384,7 +384,7 @@ def score_motions(motions, reference, **kw) -> dict:
   for m in motions:
     p = y_up(m)
     if m.fps != fps:
-      p = np.asarray(transforms.resample(p, m.fps, fps), np.float64)
+      p = np.asarray(transforms.resample(p, m.fps, fps, m.source or m.name), np.float64)
     out.append(p * (size / metrics.body_size(p, skeleton)))
   short = [m.name for m, p in zip(motions, out) if len(p) < 2 * kw.get("window", 60)]
   if short:

@@ -34,7 +34,7 @@ from chorjax import end_of_run
 from chorjax.config import Config, config_diff, config_from_dict, resumable_keys
 from chorjax.controls import Controls, with_ceiling
 from chorjax.data.dataset import Dataset, dataset_notes, load_dataset
-from chorjax.errors import Interrupted, UserError, atomic_write
+from chorjax.errors import Interrupted, UserError, atomic_write, load_json
 from chorjax.families import family_of
 from chorjax.models import motion_weight_vector
 from chorjax.run import run_meta
@@ -205,7 +205,7 @@ def _check_saved_config(workdir: Path, cfg: Config, force: bool) -> bool:
   if not path.exists():
     return False
   try:
-    saved = config_from_dict(json.loads(path.read_text()))
+    saved = config_from_dict(load_json(path.read_text()))
   except (json.JSONDecodeError, UserError) as e:
     if not force:
       raise UserError(f"{path}: unreadable saved config ({e}); use --force to replace it") from None
@@ -248,7 +248,7 @@ def _truncate_metrics(path: Path, upto_step: int) -> None:
 def metrics_row(line: str) -> dict | None:
   """One ``metrics.jsonl`` row, or None where it is not one (torn by a kill)."""
   try:
-    row = json.loads(line)
+    row = load_json(line)
   except json.JSONDecodeError:
     return None
   return row if isinstance(row, dict) else None

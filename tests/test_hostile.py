@@ -394,3 +394,85 @@ def test_a_csv_number_no_mocap_tool_writes_is_named(tmp_path, capsys, number):
   (tmp_path / "odd.csv").write_text("\n".join(lines) + "\n")
   assert cli.main(["data", "info", str(tmp_path / "odd.csv")]) == 2
   _one_line(capsys, "odd.csv:7: column 3", "not a plain decimal number")
+
+
+def test_an_npz_of_no_dancers_complex_values_or_a_zip_bomb_is_named(tmp_path, capsys):
+  import zipfile
+
+  import chorjax
+
+  chorjax.read_motion(str(Path(__file__).parents[1] / "chorjax/data/bundled/cmu94/94_01_skeleton_3d.csv")).write(
+    tmp_path / "ok.npz"
+  )
+  good = dict(np.load(tmp_path / "ok.npz"))
+  np.savez(tmp_path / "none.npz", positions=good["positions"][:0], meta=good["meta"])
+  np.savez(tmp_path / "complex.npz", positions=good["positions"] + 1j, meta=good["meta"])
+  frames = 300 << 20 >> 8  # 300 MiB of zeros in rows of 16 x 3 float32 + padding: deflates about 1000x
+  with zipfile.ZipFile(tmp_path / "bomb.npz", "w", zipfile.ZIP_DEFLATED) as z:
+    with z.open("positions.npy", "w", force_zip64=True) as f:
+      np.lib.format.write_array_header_1_0(f, {"descr": "<f4", "fortran_order": False, "shape": (1, frames, 16, 4)})
+      zeros = bytes(1 << 20)
+      for _ in range(300):
+        f.write(zeros)
+    z.writestr("meta.npy", b"")
+  for name, said in (
+    ("none", "expected [K >= 1"),
+    ("complex", "positions are complex64 values, not real numbers"),
+    ("bomb", "positions.npy inflates from"),
+  ):
+    assert cli.main(["data", "info", str(tmp_path / f"{name}.npz")]) == 2, name
+    _one_line(capsys, f"{name}.npz:", said)
+
+
+def test_nesting_too_deep_for_a_parser_and_a_device_as_a_file_are_one_line(shared_data, tmp_path, capsys):
+  """Python's TOML and JSON parsers recurse: a file nested thousands deep must be one line, not a
+  RecursionError; a device (/dev/zero) given as a config or sweep file must be refused, not read forever."""
+  deep = "[" * 5000 + "]" * 5000
+  (tmp_path / "deep.toml").write_text(f"a = {deep}\n")
+  (tmp_path / "sweep.toml").write_text(f'name = "s"\nbase = "{QUICKSTART}"\n[grid]\n"train.seed" = {deep}\n')
+  (tmp_path / "map.toml").write_text(f"pelvis = {deep}\n")
+  (tmp_path / "t.skeleton.json").write_text(deep)
+  (tmp_path / "t.csv").write_text("0," * 47 + "0\n")
+  cases = [
+    (["config", "show", str(tmp_path / "deep.toml")], "deep.toml: invalid TOML: nested too deeply"),
+    (["config", "show", QUICKSTART, f"model.hidden_size={deep}"], "model.hidden_size=[[["),
+    (["sweep", str(tmp_path / "sweep.toml")], "sweep.toml: invalid TOML: nested too deeply"),
+    (
+      [
+        "data",
+        "convert",
+        str(shared_data / BVH),
+        "-o",
+        str(tmp_path / "o"),
+        "--joint-map",
+        str(tmp_path / "map.toml"),
+        "--joints",
+        "mpii16",
+      ],
+      "map.toml",
+    ),
+    (["data", "info", str(tmp_path / "t.csv")], "t.skeleton.json"),
+    (["config", "show", "/dev/zero"], "/dev/zero: not a regular file"),
+    (["sweep", "/dev/zero"], "/dev/zero: not a regular file"),
+  ]
+  for argv, said in cases:
+    assert cli.main(argv) == 2, argv
+    line = _one_line(capsys, said)
+    assert len(line) < 400, line
+  assert not (tmp_path / "o").exists()
+  assert cli.main(["data", "convert", str(shared_data / BVH), "-o", str(tmp_path / "o"), "--joint-map", "m.toml"]) == 2
+  _one_line(capsys, "m.toml: a joint map places the 16 training joints: give --joints mpii16 with it")
+
+
+def test_like_on_a_take_without_extent_and_a_rate_that_would_resample_past_memory_are_one_line(tmp_path, capsys):
+  from chorjax.data.dataset import bundled_path
+
+  (tmp_path / "point.csv").write_text(("5," * 47 + "5\n") * 40)  # every joint at one point: no body to scale
+  take = str(bundled_path("cmu94") / "94_01_skeleton_3d.csv")
+  for argv, said in (
+    (["data", "convert", str(tmp_path / "point.csv"), "-o", str(tmp_path / "a"), "--like", "cmu94"], "no extent"),
+    (["data", "convert", take, "-o", str(tmp_path / "b"), "--fps", "0.000001", "--like", "cmu94"], "resampled to 30"),
+  ):
+    assert cli.main(argv) == 2, argv
+    _one_line(capsys, said, "94_01" if "--fps" in argv else "point.csv")
+  assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()

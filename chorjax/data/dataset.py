@@ -100,7 +100,10 @@ def to_rate(motion: Motion, fps: float) -> Motion:
   if motion.fps == fps:
     return motion
   return motion.replace(
-    positions=np.asarray(transforms.resample(motion.positions, motion.fps, fps), np.float32), fps=fps
+    positions=np.asarray(
+      transforms.resample(motion.positions, motion.fps, fps, motion.source or motion.name), np.float32
+    ),
+    fps=fps,
   )
 
 

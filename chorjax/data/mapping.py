@@ -37,7 +37,7 @@ import numpy as np
 
 from chorjax.data.motion import Motion
 from chorjax.data.skeletons import MPII16
-from chorjax.errors import UserError
+from chorjax.errors import UserError, load_toml, read_text
 
 TARGETS = MPII16.joint_names
 
@@ -140,7 +140,7 @@ def read_joint_map(path) -> dict:
   """A mapping file: TOML, one ``target = "source joint"`` line per target joint (all 16)."""
   path = Path(path)
   try:
-    data = tomllib.loads(path.read_text(encoding="utf-8"))
+    data = load_toml(read_text(path, "joint-map"))
   except FileNotFoundError:
     raise UserError(f"{path}: no such joint-map file") from None
   except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:

@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 
 from chorjax.data.motion import Skeleton
-from chorjax.errors import UserError, check_rate, check_up_axis, read_text
+from chorjax.errors import UserError, check_rate, check_up_axis, load_json, read_text
 
 # Joint order as in the cmu94 CSV files (see bundled/cmu94/SOURCES.md).
 _MPII16_NAMES = (
@@ -94,7 +94,7 @@ def read_sidecar(path) -> tuple[Skeleton, float, str, str]:
   """``(skeleton, fps, up_axis, units)`` from a skeleton sidecar (or any JSON holding a ``skeleton``)."""
   path = Path(path)
   try:
-    data = json.loads(read_text(path, "skeleton JSON"))
+    data = load_json(read_text(path, "skeleton JSON"))
     sk = Skeleton.from_dict(data.get("skeleton", data))
     fps, up, units = data.get("fps", 30.0), data.get("up_axis", "y"), str(data.get("units", "arbitrary"))
   except (json.JSONDecodeError, KeyError, TypeError, ValueError, AttributeError) as e:

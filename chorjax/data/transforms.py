@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from chorjax.data.motion import topological_order
+from chorjax.errors import check_memory
 
 # ---------------------------------------------------------------- normalization statistics
 
@@ -142,10 +143,15 @@ def scale_units(pos, factor: float):
   return pos * factor
 
 
-def resample(pos_TxJx3, fps_in: float, fps_out: float):
-  """Linear interpolation in time to another frame rate (first frame kept; no exact inverse)."""
+def resample(pos_TxJx3, fps_in: float, fps_out: float, where: str = "resampling"):
+  """Linear interpolation in time to another frame rate (first frame kept; no exact inverse). Refused in one
+  line, before anything is allocated, when the frames it would make do not fit in memory."""
   t_in = pos_TxJx3.shape[-3]
   t_out = int(np.floor((t_in - 1) * fps_out / fps_in)) + 1
+  per_frame = int(np.prod(pos_TxJx3.shape[:-3], dtype=np.int64)) * pos_TxJx3.shape[-2] * 3 * 4 + 24
+  check_memory(
+    t_out * per_frame, f"{where}: {t_in:,} frames at {fps_in:g} fps resampled to {fps_out:g} fps ({t_out:,} frames)"
+  )
   src = np.arange(t_out) * (fps_in / fps_out)
   lo = np.minimum(np.floor(src).astype(np.int32), t_in - 1)
   hi = np.minimum(lo + 1, t_in - 1)
