@@ -373,6 +373,7 @@ def score_motions(motions, reference, **kw) -> dict:
   from chorjax.data.mapping import to_mpii16
   from chorjax.errors import UserError
 
+  check_options(kw)
   if not reference or not motions:
     raise UserError(f"{'--data' if not reference else 'MOTION'}: no takes found")
   reference, motions = [to_mpii16(m) for m in reference], [to_mpii16(m) for m in motions]
@@ -393,7 +394,23 @@ def score_motions(motions, reference, **kw) -> dict:
   return {"motions": [m.name for m in motions], "fps": fps, **result}
 
 
-MOST = {"window": 10_000, "splits": 1_000}  # beyond: minutes of work that say nothing more
+# The scoring options and the whole numbers each may be: beyond the highest, minutes of work that say nothing more.
+OPTIONS = {"window": (4, 10_000), "splits": (1, 1_000), "segment": (1, 2**31 - 1), "seed": (0, 2**32 - 1)}
+
+
+def check_options(kw: dict) -> None:
+  """Refuses, in one line naming it, an option :func:`score` does not take (with the closest name) or a value
+  outside ``OPTIONS`` (a bool, a float and text included): the CLI's flags and the API's keywords alike."""
+  from chorjax.config import suggest
+
+  for name, value in kw.items():
+    if name not in OPTIONS:
+      raise UserError(
+        f"{name!r} is not a scoring option{suggest(name, list(OPTIONS)) or '; they are ' + ', '.join(OPTIONS)}"
+      )
+    low, high = OPTIONS[name]
+    if not isinstance(value, int) or isinstance(value, bool) or not low <= value <= high:
+      raise UserError(f"{name} {value!r}: must be a whole number from {low:,} to {high:,}")
 
 
 def score_to(motion_specs, data_specs, output=None, *, force: bool = False, **kw) -> tuple[dict, Path | None]:
@@ -403,9 +420,7 @@ def score_to(motion_specs, data_specs, output=None, *, force: bool = False, **kw
 
   from chorjax.errors import atomic_write, check_output, refuse_existing
 
-  for name, most in MOST.items():
-    if kw.get(name, 0) > most:
-      raise UserError(f"--{name} {kw[name]}: at most {most}")
+  check_options(kw)
   out = check_output(output, (".json",))[0] if output else None
   if out is not None:
     refuse_existing([out], force)

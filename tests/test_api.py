@@ -1,5 +1,6 @@
 """chorjax as a Python library: the API drives what the command line does, with the same results."""
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -12,6 +13,7 @@ from helpers import TINY
 import chorjax
 from chorjax import cli
 from chorjax.data.bvh import read_bvh
+from chorjax.data.dataset import bundled_path
 from chorjax.data.npz import read_npz
 
 
@@ -109,3 +111,23 @@ def test_motion_write_and_show_refuse_what_makes_no_sense_in_one_line(tmp_path):
     take.show(title=5)
   with pytest.raises(chorjax.UserError, match="expected motions"):
     take.show("not a motion")
+
+
+@pytest.mark.parametrize(
+  "options, said",
+  [
+    ({"splits": 10**6}, "splits 1000000: must be a whole number from 1 to 1,000"),
+    ({"splits": 2.5}, "splits 2.5"),
+    ({"splits": True}, "splits True"),
+    ({"window": 10**9}, "window 1000000000"),
+    ({"seed": -1}, "seed -1"),
+    ({"segment": 0}, "segment 0"),
+    ({"windw": 30}, "'windw' is not a scoring option; did you mean 'window'?"),
+  ],
+)
+def test_score_refuses_the_options_the_command_line_refuses(options, said):
+  """One check serves `chorjax metrics` and chorjax.score: a million splits ran for minutes, a float seed was a
+  raw TypeError, a misspelt option a raw TypeError."""
+  take = chorjax.read_motion(str(bundled_path("cmu94") / "94_01_skeleton_3d.csv"))
+  with pytest.raises(chorjax.UserError, match=re.escape(said)):
+    chorjax.score(take, "cmu94", **options)
