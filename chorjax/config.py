@@ -747,18 +747,20 @@ def check_combinations(config: Config) -> None:
 FEATURES_GUESS = 256  # pose features per frame, more than any skeleton we read gives (mpii16 canonical: ~50)
 
 
-def check_training_size(config: Config) -> None:
+def check_training_size(config: Config, copies: int = 1) -> None:
   """A one-line ``UserError`` naming the keys when training would need more memory than this machine has,
   estimated from the sizes alone (before anything is allocated): the parameters with Adam's two moments,
-  and the activations a step keeps for its backward pass (about 16 values per unit, layer and frame)."""
+  and the activations a step keeps for its backward pass (about 16 values per unit, layer and frame); for
+  ``copies`` models trained together as one program (a list of seeds), all of them."""
   m, t, d = config.model, config.train, config.data
   h, layers, inputs = m.hidden_size, m.num_layers, FEATURES_GUESS
   params = layers * 4 * h * (h + max(h, inputs)) + h * FEATURES_GUESS * (2 * m.num_mixtures + 1)
   activations = t.batch_size * d.seq_length * layers * h * 16
+  together = f" x {copies:,} points trained together" if copies > 1 else ""
   check_memory(
-    4.0 * (3 * params + activations),
+    4.0 * (3 * params + activations) * copies,
     f"model.hidden_size={h}, model.num_layers={layers}, train.batch_size={t.batch_size}, "
-    f"data.seq_length={d.seq_length}",
+    f"data.seq_length={d.seq_length}{together}",
   )
 
 

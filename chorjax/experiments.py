@@ -48,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-from chorjax.config import load_config, plain_name, suggest, valid_keys
+from chorjax.config import check_training_size, load_config, plain_name, suggest, valid_keys
 from chorjax.controls import Controls
 from chorjax.errors import UserError, atomic_write, load_json, load_toml, read_text
 from chorjax.families import family_of
@@ -632,6 +632,7 @@ def train_command(config, overrides=(), *, workdir=None, force: bool = False, lo
   cfg = load_config(config, overrides)
   workdir = Path(workdir) if workdir else default_workdir(cfg)
   if len(points) > 1:
+    check_training_size(cfg, copies=len(points))  # before K configs are even built
     tag = lambda p: "-".join(f"{k.split('.')[-1]}={v}" for k, v in p)
     cfgs = [load_config(config, [*overrides, *(f"{k}={v!r}" for k, v in p)]) for p in points]
     dirs = [workdir / tag(p) for p in points]

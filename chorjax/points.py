@@ -5,6 +5,7 @@ into points."""
 from __future__ import annotations
 
 import json
+import math
 
 from chorjax.config import Config
 from chorjax.errors import UserError
@@ -55,6 +56,9 @@ def check_group(cfgs) -> list[str]:
   return [k for k in differ if k in VECTOR_KEYS]
 
 
+MAX_POINTS = 1024  # models one vectorized program trains together; split a larger grid into a sweep's shards
+
+
 def expand_overrides(overrides) -> tuple[list[str], list[list[tuple[str, object]]]]:
   """``train.seed=[0,1,2]`` (a list for a vectorizable key) -> the plain overrides and the points:
   one ``[(key, value), ...]`` per combination (a single point, ``[[]]``, when no list is given)."""
@@ -71,4 +75,9 @@ def expand_overrides(overrides) -> tuple[list[str], list[list[tuple[str, object]
       lists.append([(key, v) for v in value])
     else:
       plain.append(text)
+  count = math.prod(len(values) for values in lists)
+  if count > MAX_POINTS:
+    raise UserError(
+      f"{', '.join(k for k, _ in (v[0] for v in lists))}: {count:,} points; at most {MAX_POINTS:,} train as one program"
+    )
   return plain, [list(p) for p in itertools.product(*lists)] if lists else [[]]

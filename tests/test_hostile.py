@@ -476,3 +476,14 @@ def test_like_on_a_take_without_extent_and_a_rate_that_would_resample_past_memor
     assert cli.main(argv) == 2, argv
     _one_line(capsys, said, "94_01" if "--fps" in argv else "point.csv")
   assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
+def test_a_list_of_seeds_too_long_or_too_large_to_train_together_is_one_line(tmp_path, capsys):
+  """train.seed=[0, ..., 19999] built 20,000 configs before anything said no (minutes); it is refused at once,
+  and a list whose models together exceed memory is refused before any is built."""
+  for count, said in ((20_000, "train.seed: 20,000 points; at most 1,024"), (1_000, "x 1,000 points trained together")):
+    seeds = f"train.seed={list(range(count))}"
+    wide = "model.hidden_size=2048"  # 1.3 GB a model to train: a thousand of them fit no machine
+    assert cli.main(["train", QUICKSTART, seeds, wide, "--workdir", str(tmp_path / "w")]) == 2
+    _one_line(capsys, said)
+  assert not (tmp_path / "w").exists()
