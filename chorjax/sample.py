@@ -24,7 +24,7 @@ def read_phrase(spec: str, features, data_cfg, flag: str = "--prime") -> np.ndar
   """``FILE[:START:LEN]`` -> the phrase's positions ``[P, J, 3]`` in the run's data space (see
   :func:`read_prime`; ``flag`` names the setting in errors)."""
   parts = spec.rsplit(":", 2)
-  if len(parts) == 3 and parts[1].isdigit() and parts[2].isdigit():
+  if len(parts) == 3 and all(x.isascii() and x.isdigit() for x in parts[1:]):
     path, start, length = Path(parts[0]), int(parts[1]), int(parts[2])
   elif len(parts) == 3 and not Path(spec).exists() and Path(parts[0]).exists():
     raise UserError(f"{flag} {spec}: START and LEN must be whole numbers (FILE:START:LEN, e.g. {parts[0]}:0:60)")
@@ -40,13 +40,17 @@ def read_phrase(spec: str, features, data_cfg, flag: str = "--prime") -> np.ndar
     raise UserError(
       f"{flag} {spec}: frames {start}..{end} are not inside the take's {motion.num_frames} frames (need at least 2)"
     )
-  return np.asarray(motion.positions[start:end], np.float32)
+  phrase = np.asarray(motion.positions[start:end], np.float32)
+  flat = np.flatnonzero(np.ptp(phrase, axis=1).max(-1) == 0)  # frames whose joints all sit at one point
+  if len(flat):
+    raise UserError(f"{flag} {spec}: frame {start + flat[0]} has every joint at one point: no body to continue from")
+  return phrase
 
 
 def read_pose(spec: str, features, data_cfg, flag: str = "--to") -> np.ndarray:
   """``FILE[:FRAME]`` (frame 0 unless given) -> that frame's positions ``[J, 3]`` in the run's data space."""
   path, colon, frame = spec.rpartition(":")
-  if not colon or not frame.isdigit():
+  if not colon or not (frame.isascii() and frame.isdigit()):
     path, frame = spec, "0"
   take = read_phrase(path, features, data_cfg, flag=flag)
   if int(frame) >= len(take):

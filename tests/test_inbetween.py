@@ -200,6 +200,15 @@ def test_bad_inbetween_input_is_refused(trained, tmp_path, capsys):
   capsys.readouterr()
   assert cli.main([*base, "--to", f"{TAKE}:10", "--frames", "1000000000"]) == 2  # was a native abort
   assert "--frames 1000000000 x --num 1: needs about" in capsys.readouterr().err
+  point = tmp_path / "point.csv"  # every joint at one point: wrote a transition of zeros
+  point.write_text(("0," * 47 + "0\n") * 20)
+  from_point = ["inbetween", str(workdir), "--from", f"{point}:0:6", "--to", f"{TAKE}:10", "--frames", "5"]
+  assert cli.main([*from_point, "-o", str(out)]) == 2
+  assert "frame 0 has every joint at one point" in capsys.readouterr().err
+  assert cli.main([*base, "--to", f"{point}:3", "--frames", "5"]) == 2
+  assert "--to" in capsys.readouterr().err
+  assert cli.main([*base, "--to", f"{TAKE}:\u00b2", "--frames", "5"]) == 2  # int() of a superscript digit
+  assert "Traceback" not in capsys.readouterr().err
   assert not out.exists()
   assert cli.main(["sample", str(workdir), "-o", str(out)]) == 2
   assert "use `chorjax inbetween`" in capsys.readouterr().err
