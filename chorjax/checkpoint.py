@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import re
 import shutil
 import time
 import warnings
@@ -202,7 +203,14 @@ def _damaged(manager, step: int, item: str, e: Exception) -> Damaged:
   """Names the file when the storage layer's message does (it usually does), else the item's folder."""
   where = Path(manager.directory) / str(step) / item
   named = [w.strip("'\",:;()[]") for w in str(e).split() if str(where) in w]
-  return Damaged(f"{named[0] if named else where}: damaged checkpoint ({type(e).__name__}: {_first_line(e)})", step)
+  shapes = re.search(r"Requested shape: (\([^)]*\)).*stored shape: (\([^)]*\))", str(e))
+  if shapes:  # the files are whole, but not of the model the step's meta describes (an edited meta, mixed runs)
+    why = (
+      f"its parameters do not fit the model its meta describes: an array of shape {shapes[2]} where {shapes[1]} is due"
+    )
+  else:
+    why = f"{type(e).__name__}: {_first_line(e)}"
+  return Damaged(f"{named[0] if named else where}: damaged checkpoint ({why})", step)
 
 
 def step_meta(manager, step) -> dict:

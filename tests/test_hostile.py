@@ -487,3 +487,19 @@ def test_a_list_of_seeds_too_long_or_too_large_to_train_together_is_one_line(tmp
     assert cli.main(["train", QUICKSTART, seeds, wide, "--workdir", str(tmp_path / "w")]) == 2
     _one_line(capsys, said)
   assert not (tmp_path / "w").exists()
+
+
+def test_a_checkpoint_whose_meta_no_longer_fits_its_parameters_is_one_line(tmp_path, capsys):
+  """A hand-edited meta (hidden 16 -> 24) once surfaced as orbax's ValueError; it is a UserError naming the
+  file and what does not fit, from the API as from the command line."""
+  import chorjax
+
+  run = tmp_path / "run"
+  train_and_evaluate(tiny_config("log.tensorboard=false"), run)
+  meta = next(run.glob("checkpoints/*/meta/metadata"))
+  meta.write_text(meta.read_text().replace('"hidden_size": 16', '"hidden_size": 24'))
+  with pytest.raises(UserError, match=r"metadata|params.*do not fit the model its meta describes"):
+    chorjax.load_run(run)
+  assert cli.main(["sample", str(run), "-o", str(tmp_path / "s.csv")]) == 2
+  _one_line(capsys, "damaged checkpoint (its parameters do not fit the model its meta describes")
+  assert not (tmp_path / "s.csv").exists()
