@@ -131,3 +131,13 @@ def test_score_refuses_the_options_the_command_line_refuses(options, said):
   take = chorjax.read_motion(str(bundled_path("cmu94") / "94_01_skeleton_3d.csv"))
   with pytest.raises(chorjax.UserError, match=re.escape(said)):
     chorjax.score(take, "cmu94", **options)
+
+
+def test_a_name_with_a_lone_surrogate_writes_and_shows_as_a_replacement_character(tmp_path):
+  """A file name's invalid byte decodes to a lone surrogate (os.fsdecode); the player page is UTF-8, so it was a
+  UnicodeEncodeError. It is shown as U+FFFD."""
+  take = chorjax.read_motion(str(bundled_path("cmu94") / "94_01_skeleton_3d.csv")).replace(name="take\udcff")
+  page = take.write(tmp_path / "take.html").read_text(encoding="utf-8")
+  assert "take\\udcff" in page  # the name, escaped inside the JSON the page reads
+  shown = take.show(title="dance \udcff\ud800")._repr_html_()
+  assert "dance \ufffd\ufffd" in shown

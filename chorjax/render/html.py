@@ -47,7 +47,12 @@ def player_html(motions: Sequence[Motion], title: str = "chorjax", columns: int 
   grid = f"repeat({columns}, minmax(0, 1fr))" if columns else "repeat(auto-fit, minmax(min(100%, 300px), 1fr))"
   data = script_json([_payload(m) for m in motions])
   page = _fill(_TEMPLATE, STYLE=_STYLE, FIGURE=_FIGURE)  # our own parts first, then what came from outside
-  return _fill(page, TITLE=html_lib.escape(title), GRID=grid, DATA=data)
+  return _fill(page, TITLE=html_lib.escape(_unicode(title)), GRID=grid, DATA=data)
+
+
+def _unicode(text: str) -> str:
+  """``text`` with any lone surrogate (what a file name's invalid byte decodes to) as U+FFFD: a page is UTF-8."""
+  return text.encode("utf-16", "surrogatepass").decode("utf-16", "replace")
 
 
 def script_json(value) -> str:
@@ -72,7 +77,7 @@ def live_html(title: str = "chorjax live") -> str:
   motion mix, pause/resume and "prime from file". ``window.__live`` holds what a test reads (frames
   received, replies, errors)."""
   page = _fill(_LIVE, STYLE=_STYLE, FIGURE=_FIGURE)
-  return _fill(page, TITLE=html_lib.escape(title), GRID="minmax(0, 1fr)")
+  return _fill(page, TITLE=html_lib.escape(_unicode(title)), GRID="minmax(0, 1fr)")
 
 
 def write_player(motions: Sequence[Motion], path, title: str = "chorjax", columns: int | None = None) -> Path:
