@@ -39,6 +39,7 @@ import math
 import os
 import signal
 import tempfile
+import typing
 from pathlib import Path
 
 import jax
@@ -261,8 +262,9 @@ class Live:
     finally:
       self.priming = False
 
-  async def handle(self, message) -> str:
-    """One client message -> the reply (``{"ok": KIND}`` or ``{"error": ...}``)."""
+  async def handle(self, message, budget: Budget | None = None) -> str:
+    """One client message -> the reply (``{"ok": KIND}`` or ``{"error": ...}``); past the client's ``budget``
+    a message is answered, not served."""
     try:
       data = load_json(message)
     except (json.JSONDecodeError, UnicodeDecodeError, TypeError) as e:
@@ -271,6 +273,8 @@ class Live:
     if not isinstance(data, dict) or len(data) != 1 or next(iter(data)) not in kinds:
       return json.dumps({"error": f"expected one of {', '.join(kinds)} as the only key"})
     kind, value = next(iter(data.items()))
+    if budget is not None and not budget.take(kind):
+      return json.dumps({"error": f"too many {kind} messages: at most {Budget.RATES[kind]:g} a second from one client"})
     try:
       await self.apply(kind, value)
     except UserError as e:
@@ -333,6 +337,29 @@ class OscInput:
     return self.frames.popleft() if self.frames else None
 
 
+class Budget:
+  """What one client may send a second, by kind: a prime re-starts the shared stream, so a client sending
+  thousands would starve every other viewer; past its budget a message gets an error reply and is not served."""
+
+  RATES: typing.ClassVar[dict[str, float]] = {"prime": 2.0, "prime_file": 1.0, "set": 20.0, "pause": 20.0}
+
+  def __init__(self, clock=None):
+    import time
+
+    self.clock = clock or time.monotonic
+    self.tokens = dict(self.RATES)
+    self.at = dict.fromkeys(self.RATES, self.clock())
+
+  def take(self, kind: str) -> bool:
+    now, rate = self.clock(), self.RATES[kind]
+    self.tokens[kind] = min(rate, self.tokens[kind] + (now - self.at[kind]) * rate)
+    self.at[kind] = now
+    if self.tokens[kind] < 1:
+      return False
+    self.tokens[kind] -= 1
+    return True
+
+
 def host_port(text: str, flag: str) -> tuple[str, int]:
   """``HOST:PORT`` (or ``PORT``, on 127.0.0.1) -> ``(host, port)``; a bad one is a UserError."""
   host, _, port = text.rpartition(":")
@@ -344,19 +371,53 @@ def host_port(text: str, flag: str) -> tuple[str, int]:
 LOOPBACK = {"127.0.0.1", "localhost", "::1", "[::1]"}
 
 
-def origin_refusal(headers, host: str, allowed=()) -> str | None:
+def server_names(host: str) -> set[str]:
+  """The names a request's ``Host`` may use for a server listening on ``host``: loopback names alone on
+  loopback; off it, also the listening address, this machine's host names and its addresses."""
+  import socket
+
+  names = set(LOOPBACK)
+  if host in LOOPBACK:
+    return names
+  if host not in ("", "0.0.0.0", "::"):
+    names.add(host)
+  names |= {socket.gethostname(), socket.getfqdn()}
+  with contextlib.suppress(OSError):
+    names |= {str(info[4][0]) for info in socket.getaddrinfo(socket.gethostname(), None)}
+  with contextlib.suppress(OSError), socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+    s.connect(("192.0.2.1", 9))  # no packet is sent: this only picks the outgoing interface's address
+    names.add(s.getsockname()[0])
+  return {n.lower() for n in names}
+
+
+def _host_name(hostport: str) -> str:
+  """``evil.example:8765`` -> ``evil.example``; ``[::1]:8765`` -> ``[::1]``; the scheme of an origin dropped."""
+  hostport = hostport.split("://", 1)[-1].lower()
+  return hostport if hostport.endswith("]") else hostport.rsplit(":", 1)[0] if ":" in hostport else hostport
+
+
+def header_refusal(headers) -> str | None:
+  """Why a request's headers are malformed for this server (one ``Host``, at most one ``Origin``), or None."""
+  hosts, origins = headers.get_all("Host"), headers.get_all("Origin")
+  if len(hosts) != 1 or len(origins) > 1:
+    return f"{len(hosts)} Host and {len(origins)} Origin headers (expected one Host and at most one Origin)"
+  return None
+
+
+def origin_refusal(headers, host: str, allowed=(), names=None) -> str | None:
   """Why a WebSocket handshake with these request ``headers`` is refused, or None to accept it.
 
   Browsers send ``Origin`` with every WebSocket handshake, and any page the user has open may open one:
   only the page this server serves (Origin ``http://`` + the request's own Host) is let in, and programs
   that send no Origin (a script, a creative tool). ``allowed`` adds origins (``null`` for a page opened from
-  a file, ``*`` for any). The Host must name this server (a loopback name when it listens on loopback), so
-  a foreign domain resolved to 127.0.0.1 (DNS rebinding) is refused too.
+  a file, ``*`` for any). The Host must name this server (``server_names``: a loopback name when it listens
+  on loopback) or an allowed origin's host, so a foreign domain resolved to this machine (DNS rebinding) is
+  refused too, on loopback and off it. ``names``: the server's names, computed once by the caller.
   """
   origin, host_header = headers.get("Origin"), headers.get("Host", "")
-  name = host_header.rsplit(":", 1)[0] if not host_header.endswith("]") else host_header
-  if host in LOOPBACK and name not in LOOPBACK:
-    return f"Host {host_header!r} is not this server"
+  known = (server_names(host) if names is None else names) | {_host_name(a) for a in allowed}
+  if _host_name(host_header) not in known:
+    return f"Host {host_header!r} is not this server (chorjax live --allow-origin http://{host_header} lets it in)"
   if origin is None or "*" in allowed or origin in allowed:
     return None
   if origin == f"http://{host_header}":
@@ -375,8 +436,14 @@ async def serve(live: Live, host: str, port: int, *, osc_in=None, on_ready=print
 
   page = live_html(title=f"chorjax live ({live.stream.run.workdir})").encode("utf-8")
 
+  names = server_names(host)
+
   def route(connection, request):
-    refused = origin_refusal(request.headers, host, origins)
+    malformed = header_refusal(request.headers)
+    if malformed:
+      print(f"chorjax live: refused a malformed request: {malformed}", flush=True)
+      return connection.respond(400, f"malformed request: {malformed}\n")
+    refused = origin_refusal(request.headers, host, origins, names)
     if refused:
       return connection.respond(403, f"refused: {refused}\n")
     if request.path == "/ws":
@@ -388,10 +455,11 @@ async def serve(live: Live, host: str, port: int, *, osc_in=None, on_ready=print
 
   async def client(ws):
     live.clients.add(ws)
+    budget = Budget()
     try:
       await ws.send(live.hello())
       async for message in ws:
-        await ws.send(await live.handle(message))
+        await ws.send(await live.handle(message, budget))
     except Exception:  # a client that goes away mid-message is its own business, never the stream's
       pass
     finally:

@@ -449,3 +449,97 @@ def test_a_mix_of_huge_weights_is_normalized_and_bad_ones_are_one_line():
       parse_mix(bad, 3)
   with pytest.raises(UserError, match="at most"):
     parse_mix("0:1," * 5000, 3)
+
+
+def test_off_loopback_the_host_must_name_this_server_and_headers_must_be_well_formed():
+  from websockets.datastructures import Headers
+
+  from chorjax.live import header_refusal, origin_refusal
+
+  names = {"127.0.0.1", "localhost", "::1", "[::1]", "studio", "10.0.0.5"}  # a server on 0.0.0.0
+  h = lambda **kw: Headers([(k.replace("_", "-").title(), v) for k, v in kw.items()])
+  # DNS rebinding off loopback: a foreign name resolved to this machine, its Host and Origin matching
+  assert "is not this server" in origin_refusal(
+    h(host="evil.com:8765", origin="http://evil.com:8765"), "0.0.0.0", (), names
+  )
+  assert origin_refusal(h(host="10.0.0.5:8765", origin="http://10.0.0.5:8765"), "0.0.0.0", (), names) is None
+  assert origin_refusal(h(host="studio:8765"), "0.0.0.0", (), names) is None  # a program on the LAN
+  allowed = ("http://dance.example:8765",)  # --allow-origin: the user names the host it is served under
+  assert origin_refusal(h(host="dance.example:8765", origin=allowed[0]), "0.0.0.0", allowed, names) is None
+  twice = Headers([("Host", "10.0.0.5:8765"), ("Origin", "http://a"), ("Origin", "http://b")])
+  assert "2 Origin headers" in header_refusal(twice)
+  assert "0 Host" in header_refusal(Headers([("Origin", "http://a")]))
+  assert header_refusal(h(host="10.0.0.5:8765")) is None
+
+
+def test_a_client_s_budget_refills_at_its_rate():
+  from chorjax.live import Budget
+
+  now = [0.0]
+  budget = Budget(clock=lambda: now[0])
+  assert [budget.take("prime") for _ in range(3)] == [True, True, False]  # 2 a second, a burst of 2
+  now[0] += 0.5
+  assert budget.take("prime") and not budget.take("prime")
+  assert all(budget.take("set") for _ in range(20)) and not budget.take("set")
+
+
+def _raw_handshake(url: str, host: str, origin: str, extra: str = "") -> str:
+  """The status line a raw WebSocket handshake with these headers gets (a client can forge any of them)."""
+  address = url.removeprefix("http://")
+  h, _, port = address.rpartition(":")
+  key = base64.b64encode(os.urandom(16)).decode()
+  request = (
+    f"GET /ws HTTP/1.1\r\nHost: {host}\r\nOrigin: {origin}\r\n{extra}Upgrade: websocket\r\nConnection: Upgrade\r\n"
+    f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n"
+  )
+  with socket.create_connection(("127.0.0.1" if h == "0.0.0.0" else h, int(port)), timeout=5) as s:
+    s.sendall(request.encode())
+    return s.recv(4096).decode(errors="replace").splitlines()[0]
+
+
+@pytest.mark.slow
+def test_a_server_on_every_interface_refuses_forged_hosts_and_a_flooding_client_starves_no_one(live_run):
+  """Off loopback: a handshake whose Host and Origin are both a foreign name gets 403, doubled headers 400 (not
+  a 500 and a traceback); a client sending primes as fast as it can gets errors past its budget while another
+  client's stream keeps its fps."""
+  from websockets.sync.client import connect
+
+  proc, url = _start_live(live_run, "--host", "0.0.0.0", "--fps", str(FPS))
+  try:
+    port = url.rsplit(":", 1)[1]
+    assert " 403 " in _raw_handshake(url, f"evil.com:{port}", f"http://evil.com:{port}")
+    assert " 400 " in _raw_handshake(url, f"localhost:{port}", f"http://localhost:{port}", "Origin: http://x\r\n")
+    ws_url = f"ws://127.0.0.1:{port}/ws"
+    phrase = json.dumps({"prime": read_csv(TAKE).positions[:8].tolist()})
+    replies, stop = [], threading.Event()
+
+    def flood():
+      with connect(ws_url) as ws:
+        ws.recv()  # hello
+        while not stop.is_set():
+          ws.send(phrase)
+          while True:  # frames stream in between the replies
+            msg = json.loads(ws.recv())
+            if "frame" not in msg:
+              replies.append(msg)
+              break
+
+    flooder = threading.Thread(target=flood, daemon=True)
+    with connect(ws_url) as watcher:
+      watcher.recv()
+      flooder.start()
+      start, count = time.monotonic(), 0
+      while time.monotonic() - start < 4.0:
+        if "frame" in json.loads(watcher.recv()):
+          count += 1
+      rate = count / (time.monotonic() - start)
+    stop.set()
+    flooder.join(timeout=5)
+    assert rate > 0.8 * FPS, rate
+    refused = [r for r in replies if "too many prime messages" in r.get("error", "")]
+    assert len(replies) > 20 and len(refused) > 0.8 * len(replies), (len(replies), len(refused))
+  finally:
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=30)
+  assert proc.returncode == 0 and "Traceback" not in err, err[-2000:]
+  assert "refused a malformed request: 1 Host and 2 Origin headers" in out  # one log line, no traceback
