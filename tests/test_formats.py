@@ -326,3 +326,21 @@ def test_every_format_chorjax_writes_reads_back_onto_the_16_joints(tmp_path, ext
     back = read_csv(back_dir / f"{path.stem}.csv")
     assert back.skeleton.joint_names == MPII16.joint_names
     assert np.abs(back.positions - take.positions).max() < 1e-3 * height(take), ext
+
+
+def test_a_bvh_of_joint_names_with_spaces_braces_or_markup_reads_back(tmp_path):
+  """BVH names are single tokens: a take whose joint names hold spaces ('right foot') or braces wrote a file
+  chorjax could not read back ("expected '{' after right"). They are written as unique tokens."""
+  import dataclasses
+
+  from chorjax.data.bvh import bvh_names
+
+  take = read_csv(resolve_files("cmu94")[0])
+  names = list(take.skeleton.joint_names)
+  names[:4] = ["right foot", "<b>knee</b>", "right_foot", "left {hip}"]
+  odd = take.replace(skeleton=dataclasses.replace(take.skeleton, joint_names=tuple(names)))
+  back = read_bvh(write_bvh(odd, tmp_path / "odd.bvh"))
+  written = bvh_names(names)
+  assert written[:4] == ["right_foot", "<b>knee</b>", "right_foot_2", "left_hip_"]
+  idx = [back.skeleton.joint_names.index(n) for n in written]
+  assert np.abs(back.positions[:, idx] - take.positions).max() < 1e-3 * height(take)

@@ -263,6 +263,18 @@ def _guess_feet(names) -> tuple[int, ...]:
 # ---------------------------------------------------------------- writing
 
 
+def bvh_names(joint_names) -> list[str]:
+  """Joint names a BVH can hold: one token each (whitespace and braces become ``_``), unique, not empty."""
+  out: list[str] = []
+  for name in joint_names:
+    base = re.sub(r"[\s{}]+", "_", name) or "joint"
+    token, k = base, 2
+    while token in out:
+      token, k = f"{base}_{k}", k + 1
+    out.append(token)
+  return out
+
+
 def write_bvh(motion: Motion, path, *, exact: bool = True, order: str = "zyx", overwrite: bool = True) -> Path:
   """Writes joint positions as a BVH file by inverse kinematics (see the module docstring)."""
   pos = np.asarray(motion.positions, np.float64)
@@ -288,6 +300,7 @@ def write_bvh(motion: Motion, path, *, exact: bool = True, order: str = "zyx", o
   axes = {"x": "X", "y": "Y", "z": "Z"}
   rot_names = " ".join(f"{axes[a]}rotation" for a in order)
   lines = ["HIERARCHY"]
+  names = bvh_names(sk.joint_names)
 
   def offset_of(k):
     if sk.parents[k] < 0:
@@ -303,7 +316,7 @@ def write_bvh(motion: Motion, path, *, exact: bool = True, order: str = "zyx", o
       return
     kind = "ROOT" if sk.parents[k] < 0 else "JOINT"
     with_channels.append(k)  # MOTION columns follow the order channels are declared in
-    lines.extend([f"{ind}{kind} {sk.joint_names[k]}", f"{ind}{{", f"{ind}  OFFSET {_fmt(offset_of(k))}"])
+    lines.extend([f"{ind}{kind} {names[k]}", f"{ind}{{", f"{ind}  OFFSET {_fmt(offset_of(k))}"])
     six = sk.parents[k] < 0 or exact
     lines.append(f"{ind}  CHANNELS {6 if six else 3} " + ("Xposition Yposition Zposition " if six else "") + rot_names)
     for c in children[k]:
