@@ -43,6 +43,7 @@ from chorjax.data.motion import Skeleton  # noqa: F401
 from chorjax.errors import (
   Interrupted,  # noqa: F401
   UserError,
+  as_path,
 )
 from chorjax.evaluate import evaluate_to  # noqa: F401
 from chorjax.experiments import compare_to, run_sweep, train_command  # noqa: F401
@@ -199,7 +200,7 @@ def read_motion(path) -> Motion | list[Motion]:
   dancers of a sample ``.npz`` (a list when it holds several)."""
   from chorjax.data.dataset import read_motions
 
-  path = Path(path)
+  path = as_path(path, "read_motion")
   if not path.is_file():
     raise UserError(f"{path}: no such file")
   motions = [Motion.of(m) for m in read_motions(path)]

@@ -325,10 +325,10 @@ def resolve_step(manager, which, workdir) -> int:
     if best is None:
       raise UserError(f"{workdir}: no checkpoint has a validation loss (no held-out takes?); use latest")
     return best
-  try:
-    step = int(which)
-  except ValueError:
-    raise UserError(f"--checkpoint {which!r}: expected a step number, 'kept', 'latest' or 'best'") from None
+  text = str(which).strip() if isinstance(which, int | str) and not isinstance(which, bool) else ""
+  if not (text.isascii() and text.isdigit()):
+    raise UserError(f"--checkpoint {str(which)[:40]!r}: expected a step number, 'kept', 'latest' or 'best'")
+  step = int(text)
   if step not in steps:
     raise UserError(f"{workdir}: no checkpoint at step {step}; available: {', '.join(map(str, sorted(steps)))}")
   return step

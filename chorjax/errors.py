@@ -208,9 +208,20 @@ def check_array(values, where: str) -> None:
 WRITES = (".csv", ".npz", ".bvh", ".html")  # what a dance may be written as
 
 
+def as_path(value, what: str = "path") -> Path:
+  """``value`` as a ``Path``, or a one-line ``UserError`` when it is no path (None, a number, text holding a
+  NUL byte, which no file system takes)."""
+  if not isinstance(value, str | os.PathLike):
+    raise UserError(f"{what} {value!r}: expected a file path")
+  text = os.fspath(value)
+  if not isinstance(text, str) or "\x00" in text or not text:
+    raise UserError(f"{what} {str(text)[:60]!r}: not a usable file path")
+  return Path(text)
+
+
 def check_output(path, allowed=WRITES) -> tuple[Path, str]:
   """The output path and its suffix, checked to be an allowed kind."""
-  out = Path(path)
+  out = as_path(path, "output")
   suffix = out.suffix.lower()
   if suffix not in allowed:
     kinds = allowed[0] if len(allowed) == 1 else f"{', '.join(allowed[:-1])} or {allowed[-1]}"

@@ -344,3 +344,30 @@ def test_a_bvh_of_joint_names_with_spaces_braces_or_markup_reads_back(tmp_path):
   assert written[:4] == ["right_foot", "<b>knee</b>", "right_foot_2", "left_hip_"]
   idx = [back.skeleton.joint_names.index(n) for n in written]
   assert np.abs(back.positions[:, idx] - take.positions).max() < 1e-3 * height(take)
+
+
+def test_readers_work_under_an_address_space_limit_of_4_gb(shared_data):
+  """Clusters cap a job's address space: the C3D reader's child once raised its own limit above the inherited
+  one and failed on every file; under 4 GB a C3D, a BVH and an AMC read as without the limit."""
+  import resource
+  import subprocess
+  import sys
+
+  limit = 4 * 10**9
+
+  def capped():
+    resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+
+  for path in (
+    shared_data / "c3d" / "ezc3d" / "Qualisys.c3d",
+    shared_data / "bvh" / "cmu131" / "131_01.bvh",
+    shared_data / "asfamc" / "cmu131" / "131_01.amc",
+  ):
+    done = subprocess.run(
+      [sys.executable, "-m", "chorjax.cli", "data", "info", str(path)],
+      capture_output=True,
+      text=True,
+      preexec_fn=capped,
+    )
+    assert done.returncode == 0, (path.name, done.stderr[-500:])
+    assert path.stem in done.stdout

@@ -65,7 +65,9 @@ _CHILD = """
 import json, resource, sys
 import numpy as np
 import ezc3d
-resource.setrlimit(resource.RLIMIT_AS, (int(sys.argv[3]), int(sys.argv[3])))
+soft, hard = resource.getrlimit(resource.RLIMIT_AS)  # a limit the process already runs under stays the bound
+ceiling = int(sys.argv[3]) if hard == resource.RLIM_INFINITY else min(int(sys.argv[3]), hard)
+resource.setrlimit(resource.RLIMIT_AS, (ceiling, hard))
 try:
   c = ezc3d.c3d(sys.argv[1])
   point = c["parameters"]["POINT"]
