@@ -762,6 +762,10 @@ def check_training_size(config: Config, copies: int = 1) -> None:
     f"model.hidden_size={h}, model.num_layers={layers}, train.batch_size={t.batch_size}, "
     f"data.seq_length={d.seq_length}{together}",
   )
+  # the sample written at the end of training (as Run.check_drawn counts a draw), before training starts
+  check_memory(
+    config.sample.frames * (FEATURES_GUESS // 4 + 48) * 8 * 6 * copies, f"sample.frames={config.sample.frames}"
+  )
 
 
 def plain_name(name: str, what: str) -> str:

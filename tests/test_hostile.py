@@ -503,3 +503,10 @@ def test_a_checkpoint_whose_meta_no_longer_fits_its_parameters_is_one_line(tmp_p
   assert cli.main(["sample", str(run), "-o", str(tmp_path / "s.csv")]) == 2
   _one_line(capsys, "damaged checkpoint (its parameters do not fit the model its meta describes")
   assert not (tmp_path / "s.csv").exists()
+
+
+def test_an_end_sample_too_large_for_memory_is_refused_before_training(tmp_path, capsys):
+  """sample.frames=10**9 trained, then aborted natively (a failed XLA check) while drawing the end sample."""
+  assert cli.main(["train", QUICKSTART, "sample.frames=1000000000", "--workdir", str(tmp_path / "w")]) == 2
+  _one_line(capsys, "sample.frames=1000000000: needs about")
+  assert not (tmp_path / "w").exists()
