@@ -86,6 +86,8 @@ def read_text(path, kind: str, errors: str = "strict") -> str:
   path = Path(path)
   if path.exists() and not path.is_file() and not path.is_dir():
     raise UserError(f"{path}: not a regular file (a pipe or a device); chorjax reads files whole")
+  if path.is_file():  # text, its lines and the numbers parsed from them: about 16 bytes a byte of file, at most
+    check_memory(path.stat().st_size * 16, f"{path}: a {path.stat().st_size:,}-byte {kind} file, read whole")
   try:
     return path.read_text(encoding="utf-8-sig", errors=errors)
   except FileNotFoundError:

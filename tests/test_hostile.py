@@ -510,3 +510,14 @@ def test_an_end_sample_too_large_for_memory_is_refused_before_training(tmp_path,
   assert cli.main(["train", QUICKSTART, "sample.frames=1000000000", "--workdir", str(tmp_path / "w")]) == 2
   _one_line(capsys, "sample.frames=1000000000: needs about")
   assert not (tmp_path / "w").exists()
+
+
+def test_a_file_too_large_to_read_whole_is_refused_before_it_is_read(monkeypatch, capsys):
+  """Readers take a file whole: one larger than memory allows (here, a machine of 100 kB) is named first."""
+  import chorjax.errors
+  from chorjax.data.dataset import bundled_path
+
+  monkeypatch.setattr(chorjax.errors, "memory_bytes", lambda: 100_000)
+  take = bundled_path("cmu94") / "94_01_skeleton_3d.csv"
+  assert cli.main(["data", "info", str(take)]) == 2
+  _one_line(capsys, "94_01_skeleton_3d.csv: a 395,435-byte CSV file, read whole: needs about")
