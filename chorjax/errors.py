@@ -18,7 +18,16 @@ from pathlib import Path
 
 
 class UserError(Exception):
-  """Bad input from the user; its message is one line that names the file/line or key."""
+  """Bad input from the user; its message is one line that names the file/line or key (a line break or other
+  control character in what it quotes, such as a file name holding a newline, is written as an escape)."""
+
+  def __init__(self, message: str = "", *args):
+    super().__init__(_one_line(str(message)), *args)
+
+
+def _one_line(text: str) -> str:
+  """``text`` with control characters (newlines, carriage returns, escapes) as ``\\n``-style escapes."""
+  return "".join(c if c.isprintable() or c == " " else repr(c)[1:-1] for c in text)
 
 
 class Interrupted(Exception):

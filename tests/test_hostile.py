@@ -521,3 +521,10 @@ def test_a_file_too_large_to_read_whole_is_refused_before_it_is_read(monkeypatch
   take = bundled_path("cmu94") / "94_01_skeleton_3d.csv"
   assert cli.main(["data", "info", str(take)]) == 2
   _one_line(capsys, "94_01_skeleton_3d.csv: a 395,435-byte CSV file, read whole: needs about")
+
+
+def test_an_error_quoting_a_name_with_a_line_break_stays_one_line(tmp_path, capsys):
+  """A file name may hold a newline or a terminal escape; the one-line error writes them as escapes."""
+  assert cli.main(["data", "info", str(tmp_path / "take\n\x1b[31mred.csv")]) == 2
+  line = _one_line(capsys, "take\\n\\x1b[31mred.csv")
+  assert "\x1b" not in line
