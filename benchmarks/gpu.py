@@ -14,7 +14,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import time
 
 os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")  # leave PyTorch its share of the GPU
 
@@ -22,7 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from benchmarks.run import alternate, random_batch
+from benchmarks.run import alternate, compiled_train_step, random_batch
 
 D, K, FRAMES = 48, 8, 1000
 SHAPES = {"shipped": (2, 192, 32, 64), "reference": (3, 256, 50, 100)}  # layers, hidden, batch, frames
@@ -37,21 +36,8 @@ def _config(cell: str, layers: int, hidden: int, extra=()):
 
 def jax_step(cell: str, shape: str, kernel: str = "fused"):
   """chorjax's jitted train step on the GPU: ``run() -> loss``, and its compile seconds."""
-  from chorjax.families.recurrent.steps import create_train_state, train_step
-
   layers, hidden, b, t = SHAPES[shape]
-  state, spec = create_train_state(_config(cell, layers, hidden, [f"model.lstm_kernel={kernel}"]), D, 10, np.eye(D))
-  batch = jax.device_put(random_batch(np.random.default_rng(0), b, t, D))
-  key, box = jax.random.key(0), {"state": state}
-  t0 = time.perf_counter()
-  step = train_step.lower(state, batch, key, spec).compile()
-  compile_s = time.perf_counter() - t0
-
-  def run():
-    box["state"], m = step(box["state"], batch, key)
-    return m["loss"]
-
-  return run, compile_s
+  return compiled_train_step(_config(cell, layers, hidden, [f"model.lstm_kernel={kernel}"]), b, t, np.eye(D))
 
 
 def torch_step(cell: str, shape: str, variant: str = "eager"):

@@ -55,6 +55,25 @@ def random_batch(rng, b: int, t: int, d: int) -> dict:
   }
 
 
+def compiled_train_step(cfg, b: int, t: int, basis=None):
+  """chorjax's train step for ``cfg`` on a random batch of ``b`` windows of ``t`` frames (``basis``: the MDN's
+  principal axes where ``model.mdn_basis = "pca"``), compiled: ``(run() -> loss, compile seconds)``."""
+  from chorjax.families.recurrent.steps import create_train_state, train_step
+
+  state, spec = create_train_state(cfg, D, 10, basis)
+  batch = jax.device_put(random_batch(np.random.default_rng(0), b, t, D))
+  key, box = jax.random.key(0), {"state": state}
+  t0 = time.perf_counter()
+  step = train_step.lower(state, batch, key, spec).compile()  # trace + XLA compile, timed apart from running
+  compile_s = time.perf_counter() - t0
+
+  def run():
+    box["state"], m = step(box["state"], batch, key)
+    return m["loss"]
+
+  return run, compile_s
+
+
 def jax_train_step(cell, head):
   from chorjax.config import load_config
   from chorjax.families.recurrent.steps import create_train_state, train_step

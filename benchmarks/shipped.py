@@ -13,13 +13,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import time
 from pathlib import Path
 
 import jax
 import numpy as np
 
-from benchmarks.run import alternate, random_batch
+from benchmarks.run import alternate, compiled_train_step
 
 D, K = 48, 8
 SHAPES = {"shipped": (2, 192, 32, 64), "reference": (3, 256, 50, 100)}  # layers, hidden, batch, frames
@@ -29,23 +28,12 @@ HERE = Path(__file__).resolve().parent
 def jax_step(head: str, shape: str):
   """chorjax's jitted LSTM train step: ``run() -> loss`` and its compile seconds."""
   from chorjax.config import load_config
-  from chorjax.families.recurrent.steps import create_train_state, train_step
 
   layers, hidden, b, t = SHAPES[shape]
   keys = ["model.cell=lstm", f"model.head={head}", f"model.num_layers={layers}", f"model.hidden_size={hidden}"]
   basis = ["model.mdn_basis=pca"] if head == "mdn" else []
   cfg = load_config(None, [*keys, f"model.num_mixtures={K}", *basis])
-  state, spec = create_train_state(cfg, D, 10, np.eye(D) if head == "mdn" else None)
-  batch, key, box = random_batch(np.random.default_rng(0), b, t, D), jax.random.key(0), {"state": state}
-  t0 = time.perf_counter()
-  step = train_step.lower(state, batch, key, spec).compile()
-  compile_s = time.perf_counter() - t0
-
-  def run():
-    box["state"], m = step(box["state"], batch, key)
-    return m["loss"]
-
-  return run, compile_s
+  return compiled_train_step(cfg, b, t, np.eye(D) if head == "mdn" else None)
 
 
 def torch_step(head: str, shape: str):
