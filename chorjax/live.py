@@ -274,7 +274,8 @@ class Live:
       return json.dumps({"error": f"expected one of {', '.join(kinds)} as the only key"})
     kind, value = next(iter(data.items()))
     if budget is not None and not budget.take(kind):
-      return json.dumps({"error": f"too many {kind} messages: at most {Budget.RATES[kind]:g} a second from one client"})
+      most = f"at most {Budget.RATES[kind]:g} a second (bursts of {Budget.BURST[kind]:g}) from one client"
+      return json.dumps({"error": f"too many {kind} messages: {most}"})
     try:
       await self.apply(kind, value)
     except UserError as e:
@@ -341,18 +342,19 @@ class Budget:
   """What one client may send a second, by kind: a prime re-starts the shared stream, so a client sending
   thousands would starve every other viewer; past its budget a message gets an error reply and is not served."""
 
-  RATES: typing.ClassVar[dict[str, float]] = {"prime": 2.0, "prime_file": 1.0, "set": 20.0, "pause": 20.0}
+  RATES: typing.ClassVar[dict[str, float]] = {"prime": 4.0, "prime_file": 2.0, "set": 30.0, "pause": 30.0}
+  BURST: typing.ClassVar[dict[str, float]] = {"prime": 16.0, "prime_file": 4.0, "set": 60.0, "pause": 60.0}
 
   def __init__(self, clock=None):
     import time
 
     self.clock = clock or time.monotonic
-    self.tokens = dict(self.RATES)
+    self.tokens = dict(self.BURST)
     self.at = dict.fromkeys(self.RATES, self.clock())
 
   def take(self, kind: str) -> bool:
     now, rate = self.clock(), self.RATES[kind]
-    self.tokens[kind] = min(rate, self.tokens[kind] + (now - self.at[kind]) * rate)
+    self.tokens[kind] = min(self.BURST[kind], self.tokens[kind] + (now - self.at[kind]) * rate)
     self.at[kind] = now
     if self.tokens[kind] < 1:
       return False

@@ -477,10 +477,10 @@ def test_a_client_s_budget_refills_at_its_rate():
 
   now = [0.0]
   budget = Budget(clock=lambda: now[0])
-  assert [budget.take("prime") for _ in range(3)] == [True, True, False]  # 2 a second, a burst of 2
+  assert [budget.take("prime") for _ in range(17)] == [True] * 16 + [False]  # a burst of 16, then 4 a second
   now[0] += 0.5
-  assert budget.take("prime") and not budget.take("prime")
-  assert all(budget.take("set") for _ in range(20)) and not budget.take("set")
+  assert budget.take("prime") and budget.take("prime") and not budget.take("prime")
+  assert all(budget.take("set") for _ in range(60)) and not budget.take("set")
 
 
 def _raw_handshake(url: str, host: str, origin: str, extra: str = "") -> str:
