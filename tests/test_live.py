@@ -535,7 +535,7 @@ def test_a_server_on_every_interface_refuses_forged_hosts_and_a_flooding_client_
       rate = count / (time.monotonic() - start)
     stop.set()
     flooder.join(timeout=5)
-    assert rate > 0.8 * FPS, rate
+    assert rate > 0.6 * FPS, rate  # a flood once held every viewer to 0.27x; 0.6 leaves room for a loaded CI machine
     refused = [r for r in replies if "too many prime messages" in r.get("error", "")]
     assert len(replies) > 20 and len(refused) > 0.8 * len(replies), (len(replies), len(refused))
   finally:
