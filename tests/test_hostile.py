@@ -528,3 +528,33 @@ def test_an_error_quoting_a_name_with_a_line_break_stays_one_line(tmp_path, caps
   assert cli.main(["data", "info", str(tmp_path / "take\n\x1b[31mred.csv")]) == 2
   line = _one_line(capsys, "take\\n\\x1b[31mred.csv")
   assert "\x1b" not in line
+
+
+def test_saved_state_nested_too_deep_is_one_line(tmp_path, capsys):
+  """calibration.json, an evaluation's metrics.json, an NPZ's meta and a live message nested 5,000 deep were
+  RecursionErrors; each is its reader's one-line error."""
+  import asyncio
+
+  from chorjax.data.dataset import bundled_path
+  from chorjax.live import Live
+
+  deep = "[" * 5000 + "]" * 5000
+  w = tmp_path / "run"
+  train_and_evaluate(tiny_config("log.tensorboard=false"), w)
+  (w / "calibration.json").write_text(deep)
+  assert cli.main(["sample", str(w), "-o", str(tmp_path / "s.csv"), "--frames", "10"]) == 2
+  _one_line(capsys, "calibration.json")
+  (w / "calibration.json").unlink()
+  (w / "eval").mkdir()
+  (w / "eval" / "metrics.json").write_text(deep)
+  assert cli.main(["compare", str(w), "-o", str(tmp_path / "r.md")]) == 2
+  _one_line(capsys, "metrics.json: damaged evaluation (not JSON: nested too deeply")
+  import chorjax
+
+  chorjax.read_motion(str(bundled_path("cmu94") / "94_01_skeleton_3d.csv")).write(tmp_path / "t.npz")
+  positions = np.load(tmp_path / "t.npz")["positions"]
+  np.savez(tmp_path / "deep.npz", positions=positions, meta=np.array(deep))
+  assert cli.main(["data", "info", str(tmp_path / "deep.npz")]) == 2
+  _one_line(capsys, "deep.npz: not a chorjax sample .npz (JSONDecodeError)")
+  reply = json.loads(asyncio.run(Live.handle(None, deep)))  # type: ignore[arg-type]  (refused before self is used)
+  assert "nested too deeply" in reply["error"]
