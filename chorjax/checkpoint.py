@@ -28,7 +28,7 @@ import jax
 import orbax.checkpoint as ocp
 from orbax.checkpoint.checkpoint_managers import preservation_policy as pp
 
-from chorjax.errors import UserError, load_json
+from chorjax.errors import UserError, load_json, whole_number
 
 
 class _ReadOnlyNotice(logging.Filter):
@@ -325,10 +325,12 @@ def resolve_step(manager, which, workdir) -> int:
     if best is None:
       raise UserError(f"{workdir}: no checkpoint has a validation loss (no held-out takes?); use latest")
     return best
-  text = str(which).strip() if isinstance(which, int | str) and not isinstance(which, bool) else ""
-  if not (text.isascii() and text.isdigit()):
-    raise UserError(f"--checkpoint {str(which)[:40]!r}: expected a step number, 'kept', 'latest' or 'best'")
-  step = int(text)
+  try:
+    if isinstance(which, bool) or not isinstance(which, int | str):
+      raise ValueError(which)
+    step = whole_number(str(which))
+  except ValueError:
+    raise UserError(f"--checkpoint {str(which)[:40]!r}: expected a step number, 'kept', 'latest' or 'best'") from None
   if step not in steps:
     raise UserError(f"{workdir}: no checkpoint at step {step}; available: {', '.join(map(str, sorted(steps)))}")
   return step

@@ -18,7 +18,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from chorjax.errors import UserError, check_memory, load_toml, read_text
+from chorjax.errors import UserError, check_draw, check_memory, load_toml, read_text
 from chorjax.registry import names as family_names
 
 
@@ -763,9 +763,7 @@ def check_training_size(config: Config, copies: int = 1) -> None:
     f"data.seq_length={d.seq_length}{together}",
   )
   # the sample written at the end of training (as Run.check_drawn counts a draw), before training starts
-  check_memory(
-    config.sample.frames * (FEATURES_GUESS // 4 + 48) * 8 * 6 * copies, f"sample.frames={config.sample.frames}"
-  )
+  check_draw(config.sample.frames * copies, FEATURES_GUESS // 4 + 48, f"sample.frames={config.sample.frames}")
 
 
 def plain_name(name: str, what: str) -> str:

@@ -96,7 +96,8 @@ def read_text(path, kind: str, errors: str = "strict") -> str:
   if path.exists() and not path.is_file() and not path.is_dir():
     raise UserError(f"{path}: not a regular file (a pipe or a device); chorjax reads files whole")
   if path.is_file():  # text, its lines and the numbers parsed from them: about 16 bytes a byte of file, at most
-    check_memory(path.stat().st_size * 16, f"{path}: a {path.stat().st_size:,}-byte {kind} file, read whole")
+    size = path.stat().st_size
+    check_memory(size * 16, f"{path}: a {size:,}-byte {kind} file, read whole")
   try:
     return path.read_text(encoding="utf-8-sig", errors=errors)
   except FileNotFoundError:
@@ -201,6 +202,12 @@ def check_memory(nbytes: float, what: str) -> None:
       f"{what}: needs about {nbytes / 2**30:,.3g} GiB, more than half this machine's memory "
       f"({limit / 2**30:.3g} GiB is the limit); ask for less"
     )
+
+
+def check_draw(frames: int, values_per_frame: int, what: str) -> None:
+  """Refuses a draw of ``frames`` frames (frames x dancers) of ``values_per_frame`` values each (features and
+  positions) that this machine cannot hold: float64, a few copies on the way out (``check_memory``)."""
+  check_memory(frames * values_per_frame * 8 * 6, what)
 
 
 def check_array(values, where: str) -> None:

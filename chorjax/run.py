@@ -25,7 +25,7 @@ from chorjax.calibration_file import read_calibration
 from chorjax.config import Config, config_from_dict
 from chorjax.controls import Controls, with_ceiling
 from chorjax.data.features import Features
-from chorjax.errors import UserError, check_memory, load_json
+from chorjax.errors import UserError, check_draw, load_json
 from chorjax.families import family_of
 
 if TYPE_CHECKING:  # (the annotation only: a family reads runs back)
@@ -117,9 +117,8 @@ class Run:
 
   def check_drawn(self, frames: int, what: str) -> None:
     """Refuses a draw of ``frames`` frames in all (frames x dancers) that this machine cannot hold: each
-    frame's features and positions in float64, a few copies on the way out (``errors.check_memory``)."""
-    f = self.features
-    check_memory(frames * (f.dim + f.skeleton.num_joints * 3) * 8 * 6, what)
+    frame's features and positions in float64, a few copies on the way out (``errors.check_draw``)."""
+    check_draw(frames, self.features.dim + self.features.skeleton.num_joints * 3, what)
 
   def ranged(self, sampling: Controls) -> Run:
     """This run with the training range, per-frame changes and pace that ``sampling`` (``clamp``,
