@@ -16,7 +16,7 @@ import numpy as np
 
 from chorjax.data import transforms
 from chorjax.data.csv import read_csv
-from chorjax.data.features import Features, feature_dim, floor_height, take_joint_pace
+from chorjax.data.features import Features, feature_dim, floor_height, takes_joint_pace
 from chorjax.data.motion import Motion, bone_lengths
 from chorjax.data.skeletons import get_skeleton
 from chorjax.errors import UserError
@@ -340,7 +340,7 @@ def _generation_stats(features: Features, train, fps: float) -> Features:
   pace = float(np.concatenate(moved).mean())
   joints = features.joint_motion
   if joints is not None:  # the same as the judge measures it: joints relative to the root, turning included
-    moved = [take_joint_pace(x, lag, joints) for _, x in train if len(x) > lag]
+    moved = takes_joint_pace([x for _, x in train if len(x) > lag], lag, joints)
   steps = np.concatenate([np.diff(x, axis=0) for _, x in train if len(x) > 1])
   return dataclasses.replace(
     features,

@@ -47,8 +47,20 @@ def joint_pace(now_xD, then_xD, turn_x, m: JointMotion):
 def take_joint_pace(z_TxD, lag: int, m: JointMotion) -> np.ndarray:
   """:func:`joint_pace` of a whole take (normalized canonical frames ``[T, D]``) at every frame ``lag`` frames
   after another, ``[T - lag]``: the turn between them summed from the heading changes (channel 0)."""
-  turned = np.cumsum(z_TxD[:, 0] * m.std[0] + m.mean[0])
-  return np.asarray(joint_pace(z_TxD[lag:], z_TxD[:-lag], turned[lag:] - turned[:-lag], m))
+  return takes_joint_pace([z_TxD], lag, m)[0]
+
+
+def takes_joint_pace(takes, lag: int, m: JointMotion) -> list[np.ndarray]:
+  """:func:`take_joint_pace` of each take in ``takes``, computed in one call over all their frame pairs (one
+  program per operation, not one for each take's length: a library of takes of many lengths compiles once)."""
+  now, then, turn = [], [], []
+  for z_TxD in takes:
+    turned = np.cumsum(z_TxD[:, 0] * m.std[0] + m.mean[0])
+    now.append(z_TxD[lag:])
+    then.append(z_TxD[:-lag])
+    turn.append(turned[lag:] - turned[:-lag])
+  pace = np.asarray(joint_pace(np.concatenate(now), np.concatenate(then), np.concatenate(turn), m))
+  return np.split(pace, np.cumsum([len(t) for t in turn])[:-1])
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
