@@ -35,3 +35,38 @@ def shared_data() -> Path:
   """The real recordings in ../shared/data (CI has them beside the clone)."""
   assert SHARED.is_dir(), f"{SHARED} is missing: tests read the real recordings from ../shared/data"
   return SHARED
+
+
+# The test files by how long they take (seconds of one worker on 2 cores, `--durations 0`), longest first.
+# xdist hands whole files to its two workers in collection order, each taking the next when it runs dry: the
+# long files go first and the short ones fill in the end (a 45 s file collected last leaves one worker idle
+# for most of that). A file not listed goes after these; the order is a schedule, not a dependency.
+LONGEST_FIRST = (
+  "test_train.py",  # 92
+  "test_models.py",  # 77
+  "test_live.py",  # 74
+  "test_sample_render.py",  # 60
+  "test_calibrate.py",  # 59
+  "test_parallel.py",  # 56
+  "test_draws.py",  # 48
+  "test_gan.py",  # 47
+  "test_vectorized.py",  # 44
+  "test_guides.py",  # 44
+  "test_metrics.py",  # 43
+  "test_bad_inputs.py",  # 36
+  "test_transforms.py",  # 34
+  "test_dataset.py",  # 32
+  "test_inbetween.py",  # 28
+  "test_hostile.py",  # 22
+  "test_formats.py",  # 21
+  "test_notebook.py",  # 20
+  "test_mdn_basis.py",  # 20
+  "test_own_data.py",  # 15
+  "test_one_skeleton.py",  # 14
+  "test_families.py",  # 13
+)
+
+
+def pytest_collection_modifyitems(config, items):
+  rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
+  items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: a file's own order is kept
