@@ -42,8 +42,8 @@ class MSEHead(nnx.Module):
     del key, pi_temperature, sigma_temperature, greedy  # a point estimate has nothing to draw
     return out_BxD
 
-  def draw(self, out_BxD, key, noise_BxD, state, **_):
-    del key, noise_BxD  # nothing to draw
+  def draw(self, out_BxD, gumbel_BxK, noise_BxD, state, **_):
+    del gumbel_BxK, noise_BxD  # nothing to draw
     return out_BxD, state
 
   def mean(self, out_xD):
@@ -84,19 +84,37 @@ def mdn_sample(key, logpi_BxK, mu_BxKxD, scale_BxKxS, pi_temperature=1.0, sigma_
   best = jnp.argmax(logpi_BxK, axis=-1)
   if greedy:
     return jnp.take_along_axis(mu_BxKxD, best[:, None, None], axis=1)[:, 0]
-  k_key, n_key = jax.random.split(key)
-  noise_BxD = jax.random.normal(n_key, mu_BxKxD[:, 0].shape, mu_BxKxD.dtype)
-  return mdn_draw(k_key, logpi_BxK, mu_BxKxD, scale_BxKxS, noise_BxD, pi_temperature, sigma_temperature)[0]
+  gumbel_BxK, noise_BxD = frame_numbers(key, *mu_BxKxD.shape)
+  return mdn_draw(gumbel_BxK, logpi_BxK, mu_BxKxD, scale_BxKxS, noise_BxD, pi_temperature, sigma_temperature)[0]
+
+
+def frame_numbers(key, batch: int, num_mixtures: int, dim: int):
+  """The random numbers one frame is drawn with: ``(standard Gumbel [B, K], standard normal [B, D])`` from the
+  two halves of ``key``. Everything else in a draw is a function of them, so a host that brings its own
+  (``chorjax export``) draws what chorjax draws."""
+  k_comp, k_noise = jax.random.split(key)
+  return (
+    jax.random.gumbel(k_comp, (batch, num_mixtures), jnp.float32),
+    jax.random.normal(k_noise, (batch, dim), jnp.float32),
+  )
 
 
 def mdn_draw(
-  key, logpi_BxK, mu_BxKxD, scale_BxKxS, noise_BxD, pi_temperature=1.0, sigma_temperature=1.0, bias_BxK: Any = 0.0
+  gumbel_BxK,
+  logpi_BxK,
+  mu_BxKxD,
+  scale_BxKxS,
+  noise_BxD,
+  pi_temperature=1.0,
+  sigma_temperature=1.0,
+  bias_BxK: Any = 0.0,
 ):
-  """One frame per row from the component drawn with ``key`` and the given standard-normal ``noise_BxD``
+  """One frame per row from the component the standard Gumbel noise ``gumbel_BxK`` picks (the largest tempered
+  log-weight plus it: what ``jax.random.categorical`` draws) and the given standard-normal ``noise_BxD``
   (smoothed noise makes smooth motion); ``bias_BxK`` is added to the tempered log-weights (persistence).
   Returns ``(frame [B, D], component [B])``."""
   t = jnp.asarray(pi_temperature, jnp.float32)
-  drawn = jax.random.categorical(key, logpi_BxK / jnp.maximum(t, 1e-6) + bias_BxK, axis=-1)
+  drawn = jnp.argmax(logpi_BxK / jnp.maximum(t, 1e-6) + bias_BxK + gumbel_BxK, axis=-1)
   comp = jnp.where(t > 0, drawn, jnp.argmax(logpi_BxK + bias_BxK, axis=-1))
   mu = jnp.take_along_axis(mu_BxKxD, comp[:, None, None], axis=1)[:, 0]
   scale = jnp.take_along_axis(scale_BxKxS, comp[:, None, None], axis=1)[:, 0]
@@ -170,7 +188,7 @@ class MDNHead(nnx.Module):
   def draw(
     self,
     out_BxP,
-    key,
+    gumbel_BxK,
     noise_BxD,
     state,
     *,
@@ -180,7 +198,8 @@ class MDNHead(nnx.Module):
     crossfade=0.0,
     scale_cap=None,
   ):
-    """A frame drawn with the given noise; ``state = (previous component [B] (-1: none), offset [B, D])``.
+    """A frame drawn with the given random numbers (:func:`frame_numbers`); ``state = (previous component [B]
+    (-1: none), offset [B, D])``.
 
     ``persistence`` is added to the previous component's log-weight. ``crossfade``: when the component
     changes, the jump between the two components' means is carried into the frame and decays by this
@@ -193,7 +212,7 @@ class MDNHead(nnx.Module):
     if scale_cap is not None:
       scale = jnp.minimum(scale, scale_cap)
     bias = persistence * jax.nn.one_hot(previous_B, self.num_mixtures)
-    x, comp = mdn_draw(key, logpi, mu, scale, noise_BxD, pi_temperature, sigma_temperature, bias)
+    x, comp = mdn_draw(gumbel_BxK, logpi, mu, scale, noise_BxD, pi_temperature, sigma_temperature, bias)
     mean_of = lambda c: jnp.take_along_axis(mu, jnp.maximum(c, 0)[:, None, None], axis=1)[:, 0]
     switched = ((comp != previous_B) & (previous_B >= 0))[:, None]
     offset_BxD = crossfade * (offset_BxD + jnp.where(switched, mean_of(previous_B) - mean_of(comp), 0.0))

@@ -19,6 +19,7 @@ from flax import nnx
 from chorjax.config import MAX_NOISE_ORDER
 from chorjax.controls import Controls, Draw, Pacing
 from chorjax.data.features import joint_pace
+from chorjax.models.heads import frame_numbers
 
 # Frames per iteration of the plain generation loop: an iteration's fixed cost (the loop's bookkeeping, one
 # dispatch per operation) then serves four frames; 6% faster at batch 64 (benchmarks.sampling_ceiling), the
@@ -111,26 +112,88 @@ def _smooth_scan(model, state, key, num_frames: int, draw: Draw):
   With a governor (``draw.pace``, ``draw.pacing``) the dancer is held to the training pace ``pacing.ref``:
   how far it moves over ``pace_lag`` frames (:func:`_moved`; its own pace a running mean over about ten
   lags); off pace, the scale temperature rises or falls and the component is let go sooner (:func:`_governed`)."""
+  step = frame_step(model, draw)
+  b, d = state[1].shape
+
+  def body(c, k):
+    return step(c, *frame_numbers(k, b, model.num_mixtures, d))
+
+  state, xs_NxBxD = jax.lax.scan(body, state, jax.random.split(key, num_frames))
+  return state, jnp.swapaxes(xs_NxBxD, 0, 1)
+
+
+def frame_step(model, draw: Draw):
+  """One frame of :func:`_smooth_scan` as a function of its random numbers: ``step(state, gumbel [B, K],
+  normal [B, D]) -> (state, frame [B, D])`` (``heads.frame_numbers``: the scan draws them from each frame's
+  key). What every frame of a smoothed dance runs, and what ``chorjax export`` writes as a graph."""
   pacing = draw.pacing if draw.pace else None
   lag = draw.pace_lag if pacing is not None else 1
   keep = 1.0 - 1.0 / (10 * lag)  # the running pace forgets over about ten lags (5 s)
   controls = draw.head_args()
 
-  def body(c, k):
+  def step(c, gumbel_BxK, normal_BxD):
     carry, previous, filters, drawn, (recent, at, own) = c
     carry, out = model.step(carry, previous)
-    k_comp, k_noise = jax.random.split(k)
-    filters, eps_BxD = smooth_noise(filters, k_noise, draw.noise_smoothing, draw.noise_order)
+    filters, eps_BxD = smooth(filters, normal_BxD, draw.noise_smoothing, draw.noise_order)
     governed = _governed(controls, own, pacing.ref, draw.pace) if pacing is not None else controls
-    x, drawn = model.draw(out, k_comp, eps_BxD, drawn, **governed)
+    x, drawn = model.draw(out, gumbel_BxK, eps_BxD, drawn, **governed)
     x = x if draw.bounds is None else draw.bounds.clip(x, previous)
     if pacing is not None:
       own = keep * own + (1 - keep) * _moved(x, recent, at, pacing)
       recent, at = recent.at[at].set(x), (at + 1) % lag
     return (carry, x, filters, drawn, (recent, at, own)), x
 
-  state, xs_NxBxD = jax.lax.scan(body, state, jax.random.split(key, num_frames))
-  return state, jnp.swapaxes(xs_NxBxD, 0, 1)
+  return step
+
+
+def frame_program(graphdef, params, draw: Draw, batch: int):
+  """:func:`frame_step` as a function of arrays for ``chorjax export`` (``Family.frame_program``):
+  ``program(weights [B, M], start [B], gumbel [B, K], normal [B, D], *state) -> (frame [B, D], *state)``, where
+  the dancers ``start`` marks begin from the weights' initial state (:func:`_smooth_start`), with example
+  inputs (the state zeros) and the names of the inputs and outputs (``state.carry.0.1``, ``state.filters`` ...)."""
+  model = nnx.merge(graphdef, params)
+  step = frame_step(model, draw)
+  b, d = batch, model.dim
+  fresh = lambda weights: _smooth_start(model.initial_carry(weights), jnp.zeros((b, d), jnp.float32), draw)
+  template = jax.eval_shape(fresh, jax.ShapeDtypeStruct((b, model.num_motions), jnp.float32))
+  paths, treedef = jax.tree_util.tree_flatten_with_path(template)
+  names = [f"state.{_leaf_name(path)}" for path, _ in paths]
+
+  def program(weights, start, gumbel, normal, *leaves):
+    state = _restart(jax.tree.unflatten(treedef, leaves), fresh(weights), start > 0.5)
+    state, x = step(state, gumbel, normal)
+    return (x, *jax.tree.leaves(state))
+
+  shapes = [(b, model.num_motions), (b,), (b, model.num_mixtures), (b, d)]
+  args = [np.zeros(s, np.float32) for s in shapes] + [np.zeros(leaf.shape, leaf.dtype) for _, leaf in paths]
+  args[1][:] = 1.0
+  return program, args, ["weights", "start", "gumbel", "normal", *names], ["frame", *[f"{n}.next" for n in names]]
+
+
+def _leaf_name(path) -> str:
+  """A state leaf's name from its place in the draw's state (``carry.0.1``, ``filters``, ``governor.2`` ...)."""
+  top = ("carry", "previous", "filters", "drawn", "governor")
+  keys = [str(getattr(p, "idx", getattr(p, "key", p))) for p in path]
+  return ".".join([top[int(keys[0])], *keys[1:]])
+
+
+def _restart(state, fresh, start_B):
+  """``state`` with the dancers that ``start_B`` marks replaced by ``fresh`` (the governor's ring position,
+  one for all dancers, is kept: a restarted dancer's ring holds one frame throughout)."""
+
+  def pick(axis):
+    return lambda f, s: jnp.where(jnp.reshape(start_B, [-1 if i == axis else 1 for i in range(f.ndim)]), f, s)
+
+  carry, previous, filters, drawn, (recent, at, own) = state
+  f_carry, f_previous, f_filters, f_drawn, (f_recent, _, f_own) = fresh
+  first, second = pick(0), pick(1)
+  return (
+    jax.tree.map(first, f_carry, carry),
+    first(f_previous, previous),
+    second(f_filters, filters),
+    jax.tree.map(first, f_drawn, drawn),
+    (second(f_recent, recent), at, first(f_own, own)),
+  )
 
 
 def _governed(controls: dict, own_B, ref, gain) -> dict:
@@ -168,7 +231,12 @@ def smooth_noise(filters_KxBxD, key, rho: float, order: int = 2):
   four at 0.8 have a third of two at 0.9's second difference, and half its correlation over a second).
   ``filters_KxBxD`` holds the filters' states (``K >= order``; the first ``order`` are used); returns
   ``(filters, noise [B, D])``."""
-  x = jax.random.normal(key, filters_KxBxD.shape[1:], filters_KxBxD.dtype)
+  return smooth(filters_KxBxD, jax.random.normal(key, filters_KxBxD.shape[1:], filters_KxBxD.dtype), rho, order)
+
+
+def smooth(filters_KxBxD, white_BxD, rho: float, order: int = 2):
+  """:func:`smooth_noise` of the given white noise ``white_BxD``: ``(filters, noise [B, D])``."""
+  x = white_BxD
   states = []
   for k in range(order):
     x = rho * filters_KxBxD[k] + x

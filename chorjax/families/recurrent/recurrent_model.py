@@ -72,9 +72,14 @@ class ChorModel(nnx.Module):
   def sample(self, out_BxP, key, pi_temperature=1.0, sigma_temperature=1.0, greedy=False):
     return self.head.sample(out_BxP, key, pi_temperature, sigma_temperature, greedy)
 
-  def draw(self, out_BxP, key, noise_BxD, state, **controls):
-    """A frame drawn with given noise and the sampler's state: ``(frame, state)`` (``heads``)."""
-    return self.head.draw(out_BxP, key, noise_BxD, state, **controls)
+  def draw(self, out_BxP, gumbel_BxK, noise_BxD, state, **controls):
+    """A frame drawn with given random numbers and the sampler's state: ``(frame, state)`` (``heads``)."""
+    return self.head.draw(out_BxP, gumbel_BxK, noise_BxD, state, **controls)
+
+  @property
+  def num_mixtures(self) -> int:
+    """The components a frame is drawn from (1 for the MSE head: nothing to pick)."""
+    return getattr(self.head, "num_mixtures", 1)
 
   def mean(self, out_xP):
     """The expected next frame (the MDN's mixture mean; the MSE head's output)."""
