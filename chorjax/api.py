@@ -47,6 +47,7 @@ from chorjax.errors import (
 )
 from chorjax.evaluate import evaluate_to  # noqa: F401
 from chorjax.experiments import compare_to, run_sweep, train_command  # noqa: F401
+from chorjax.export import write_onnx  # noqa: F401
 from chorjax.live import run_live  # noqa: F401
 from chorjax.render.files import plot_file, render  # noqa: F401
 from chorjax.reports import METRIC_KEYS, check_report, metric_lines, takes_table  # noqa: F401
@@ -167,6 +168,14 @@ class Run(_Run):
       for k, p in enumerate(pos)
     ]
     return out[0] if num == 1 else out
+
+  def export(self, path, *, batch: int = 1, force: bool = False, **controls) -> list[Path]:
+    """The dancer as an ONNX model at ``path`` (``.onnx``) with its JSON sidecar, as ``chorjax export``:
+    ``batch`` dancers a call, ``controls`` the sampling controls (unset: the run's own). Returns the paths
+    written (:class:`chorjax.export.OnnxDancer` runs it)."""
+    from chorjax.export import export_onnx
+
+    return export_onnx(self, path, batch=batch, controls=controls, force=force)
 
 
 def load_run(workdir, checkpoint: str | int = "kept") -> Run:

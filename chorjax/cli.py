@@ -105,6 +105,14 @@ def _sample(args) -> int:
   return 0
 
 
+def _export(args) -> int:
+  written = api.write_onnx(
+    args.workdir, args.output, batch=args.batch, controls=_controls(args), checkpoint=args.checkpoint, force=args.force
+  )
+  print("wrote " + ", ".join(map(str, written)))
+  return 0
+
+
 def _inbetween(args) -> int:
   _counts(args, num=1)
   kw = {"start": args.from_, "to": args.to, "frames": args.frames, "seed": args.seed, "num": args.num}
@@ -229,8 +237,8 @@ def _key_flag(key: str, whose: str) -> str:
   return f"{api.key_help(key)} (default: {whose} {key})"
 
 
-def _add_sampling_args(p) -> None:
-  """Sampling controls shared by `sample` and `eval`; unset ones come from the run's calibration.json
+def _add_sampling_args(p, seed: bool = True) -> None:
+  """Sampling controls shared by `sample`, `eval` and `export`; unset ones come from the run's calibration.json
   (`chorjax calibrate`), else its [sample] config."""
   for name, metavar in SAMPLING_FLAGS:
     kind = int if name == "noise_order" else float
@@ -240,7 +248,8 @@ def _add_sampling_args(p) -> None:
     if name != "greedy":
       flag = name.replace("_", "-")
       p.add_argument(f"--{flag}", action=argparse.BooleanOptionalAction, help=_control_help(name))
-  p.add_argument("--seed", type=int, default=0, help="sampling seed: the same seed draws the same dance (default 0)")
+  if seed:
+    p.add_argument("--seed", type=int, default=0, help="sampling seed: the same seed draws the same dance (default 0)")
   _add_checkpoint_args(p)
 
 
@@ -392,6 +401,24 @@ def _add_run_commands(sub) -> None:
   _add_inbetween_command(sub)
   _add_render_command(sub)
   _add_live_command(sub)
+  _add_export_command(sub)
+
+
+def _add_export_command(sub) -> None:
+  """`chorjax export`."""
+  p = sub.add_parser(
+    "export",
+    help="a trained dancer as an ONNX model (one frame a call) with a JSON sidecar",
+    description="Writes the run's one-frame draw as an ONNX graph (onnxruntime, Unity, the browser) and DANCER.json"
+    " beside it: skeleton, fps, features, controls, the graph's inputs and outputs (docs/guides/export.md).",
+  )
+  p.add_argument("workdir", metavar="WORKDIR", help="a run directory with checkpoints")
+  p.add_argument("-o", "--output", required=True, metavar="DANCER.onnx", help="the ONNX file (DANCER.json beside it)")
+  p.add_argument(
+    "--batch", type=_in_range(1, 4096), default=1, help="dancers the graph draws a call, each its own (default 1)"
+  )
+  _add_sampling_args(p, seed=False)
+  p.set_defaults(func=_export)
 
 
 def _add_inbetween_command(sub) -> None:

@@ -34,7 +34,7 @@ class Family:
 
   def refusal(self, command: str) -> str | None:
     """Why this family's runs cannot serve ``command`` (``sample``, ``eval``, ``calibrate``, ``live``,
-    ``inbetween``), or None where they can (``Run.serving``)."""
+    ``inbetween``, ``export``), or None where they can (``Run.serving``)."""
     return (
       "not an in-betweening run (train one with model.family = 'inbetween': configs/inbetween.toml)"
       if command == "inbetween"
@@ -111,6 +111,13 @@ class Family:
     ``start_stream(graphdef, params, motion [B, M], draw, prime [B, P, D] or None) -> state`` and
     ``continue_stream(graphdef, params, state, key, draw, *, num_frames) -> (state, frames [B, N, D])``,
     ``draw`` the run's ``Controls.draw`` (its temperatures may change between chunks)."""
+    raise NotImplementedError
+
+  def frame_program(self, graphdef, params, draw, batch: int) -> tuple[Callable, list, list[str], list[str]]:
+    """One frame of the family's draw for ``batch`` dancers as a function of arrays (``chorjax export`` traces
+    it into an ONNX graph): ``(program, example inputs, input names, output names)``; the inputs begin with
+    ``weights [B, M]``, ``start [B]``, ``gumbel [B, K]``, ``normal [B, D]``, then the state; the outputs are
+    ``frame [B, D]`` and the next state (families whose runs serve ``export``)."""
     raise NotImplementedError
 
   def vector_step(self) -> tuple[Callable, Callable] | None:

@@ -23,6 +23,8 @@ class Gan(Family):
       return "a GAN draws whole sequences from noise; there is nothing to calibrate"
     if command == "live":
       return "a GAN run writes whole sequences from noise; live mode streams the rnn family"
+    if command == "export":
+      return "a GAN run writes whole sequences from noise; export writes the rnn family's frame-by-frame draw"
     return super().refusal(command)
 
   def columns(self, config: dict) -> tuple[str, str]:

@@ -59,6 +59,11 @@ class Recurrent(Family):
 
     return start_stream, continue_stream
 
+  def frame_program(self, graphdef, params, draw, batch: int):
+    from chorjax.families.recurrent.generation import frame_program
+
+    return frame_program(graphdef, params, draw, batch)
+
   def vector_step(self):
     from chorjax.families.recurrent.steps import _train_step, eval_step
 

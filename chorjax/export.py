@@ -1,0 +1,207 @@
+"""``chorjax export``: a trained dancer as an ONNX model that any host (onnxruntime in Python, C#, C++ or the
+browser; Unity's Sentis; TouchDesigner) runs frame by frame, with a JSON sidecar that says how.
+
+The graph is one frame of the run's draw (``generation.frame_step``, the code every frame of ``chorjax sample``
+runs): the recurrent state and the previous frame in, the next frame and the new state out, with the
+run's sampling controls inside (temperatures, smoothed noise, persistence, crossfade, the training range,
+the pace governor, the scale ceiling). The host owns the random stream: each frame takes standard Gumbel
+noise ``[B, K]`` (which component is drawn) and standard normal noise ``[B, D]``; given the numbers
+``chorjax sample --seed S`` draws (:func:`sample_numbers`), its frames are ``chorjax sample``'s.
+
+The contract (also in the sidecar's ``inputs``, ``outputs`` and ``state``):
+
+* ``weights [B, M]``: the motion the dancer is conditioned on, one-hot over the run's motions or a blend;
+* ``start [B]``: 1 for a dancer's first frame (its state is then the weights' initial state), else 0;
+* ``gumbel [B, K]``, ``normal [B, D]``: this frame's random numbers;
+* ``state.*``: the state the previous call returned (zeros before the first frame);
+* out ``frame [B, D]``: the next frame's normalized features, and ``state.*`` for the next call.
+
+Frames become joint positions through the run's feature pipeline (the sidecar's ``features``):
+:class:`OnnxDancer` decodes them as ``chorjax sample`` does.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from chorjax.errors import UserError
+
+SIDECAR_FORMAT = "chorjax-onnx-dancer"
+SIDECAR_VERSION = 1
+
+
+def sidecar_path(model_path) -> Path:
+  """Where the sidecar of ``dancer.onnx`` lives: ``dancer.json`` beside it."""
+  return Path(model_path).with_suffix(".json")
+
+
+MAX_BATCH = 4096
+
+
+def write_onnx(
+  workdir, output, *, batch: int = 1, controls: dict | None = None, checkpoint="kept", force: bool = False
+) -> list[Path]:
+  """``chorjax export``: the run in ``workdir`` as an ONNX dancer (:func:`export_onnx`)."""
+  from chorjax.run import load_run
+
+  return export_onnx(load_run(workdir, checkpoint), output, batch=batch, controls=controls, force=force)
+
+
+def export_onnx(run, output, *, batch: int = 1, controls: dict | None = None, force: bool = False) -> list[Path]:
+  """Writes ``run``'s one-frame draw to ``output`` (``.onnx``) and its sidecar beside it, for ``batch``
+  dancers a call, with the sampling ``controls`` given (unset: the run's calibration, then its ``[sample]``).
+  Everything that can be refused is refused before anything is written; an existing file is not replaced
+  unless ``force``. Returns the paths written."""
+  from chorjax.errors import atomic_write, check_output, refuse_existing
+
+  _needs_onnx()
+  out, _ = check_output(output, (".onnx",))
+  if not 1 <= batch <= MAX_BATCH:
+    raise UserError(f"--batch {batch}: must be within 1-{MAX_BATCH}")
+  side = sidecar_path(out)
+  refuse_existing([out, side], force)
+  run = run.serving("export")
+  sampling = run.sampling(**(controls or {}))
+  if sampling.greedy:
+    raise UserError(f"{run.workdir}: sample.greedy is not exported (a host wanting the mean frame passes zero noise)")
+  run = run.ranged(sampling)
+  model, contract = _program(run, sampling, batch)
+  meta = _sidecar(run, sampling, batch, contract)
+  atomic_write(out, lambda tmp: Path(tmp).write_bytes(model.SerializeToString()), overwrite=True)
+  atomic_write(side, lambda tmp: Path(tmp).write_text(json.dumps(meta, indent=1)), overwrite=True)
+  return [out, side]
+
+
+def _needs_onnx() -> None:
+  try:
+    import onnx  # noqa: F401
+  except ImportError:
+    raise UserError("chorjax export needs the export extra: pip install 'chorjax[export]'") from None
+
+
+def _program(run, sampling, batch: int):
+  """``(onnx model, contract)``: the family's frame program traced for ``batch`` dancers and translated."""
+  from chorjax.onnx_graph import Unsupported, to_onnx
+
+  draw = sampling.draw(run.features)
+  program, args, inputs, outputs = run.family.frame_program(run.graphdef, run.params, draw, batch)
+  try:
+    graph = to_onnx(program, args, inputs, outputs, doc=f"chorjax dancer: {run.workdir}")
+  except Unsupported as e:
+    raise UserError(f"{run.workdir}: {e}") from None
+  example = jax_outputs(program, args)
+  state_in = inputs[4:]
+  contract = {
+    "inputs": [_io(n, a) for n, a in zip(inputs, args, strict=True)],
+    "outputs": [_io(n, a) for n, a in zip(outputs, example, strict=True)],
+    "state": [{"input": i, "output": o} for i, o in zip(state_in, outputs[1:], strict=True)],
+  }
+  return graph, contract
+
+
+def jax_outputs(program, args) -> list:
+  """The shapes and dtypes of ``program(*args)``'s outputs (nothing computed)."""
+  import jax
+
+  return list(jax.eval_shape(program, *args))
+
+
+def _io(name: str, value) -> dict:
+  return {"name": name, "shape": list(value.shape), "dtype": str(np.dtype(value.dtype))}
+
+
+def _sidecar(run, sampling, batch: int, contract: dict) -> dict:
+  f = run.features
+  sk = f.skeleton
+  shapes = {io["name"]: io["shape"] for io in contract["inputs"]}
+  k, d = shapes["gumbel"][1], shapes["normal"][1]
+  return {
+    "format": SIDECAR_FORMAT,
+    "version": SIDECAR_VERSION,
+    "run": str(run.workdir),
+    "checkpoint_step": run.step,
+    "fps": run.fps,
+    "batch": batch,
+    "dim": d,
+    "num_mixtures": k,
+    "motions": dict(sorted(run.id_map.items(), key=lambda kv: kv[1])),
+    "skeleton": {
+      "joint_names": list(sk.joint_names),
+      "parents": list(sk.parents),
+      "bone_lengths": None if f.lengths is None else np.asarray(f.lengths).tolist(),
+      "up_axis": f.up_axis,
+    },
+    "controls": sampling.to_dict(),
+    "decoding": sampling.decoding(),
+    "random_numbers": {
+      "gumbel": "standard Gumbel [B, K] each frame: -log(-log(u)), u uniform in (0, 1)",
+      "normal": "standard normal [B, D] each frame",
+      "chorjax": "chorjax sample --seed S draws them from split(key(S), frames)[t] (chorjax.export.sample_numbers)",
+    },
+    **contract,
+    "features": f.to_dict(),
+  }
+
+
+def sample_numbers(seed: int, frames: int, batch: int, num_mixtures: int, dim: int):
+  """``(gumbel [T, B, K], normal [T, B, D])``: the random numbers each frame of ``chorjax sample --seed
+  seed`` is drawn with (``heads.frame_numbers`` of each frame's key)."""
+  import jax
+
+  from chorjax.models.heads import frame_numbers
+
+  keys = jax.random.split(jax.random.key(seed), frames)
+  gumbel, normal = jax.vmap(lambda k: frame_numbers(k, batch, num_mixtures, dim))(keys)
+  return np.asarray(gumbel), np.asarray(normal)
+
+
+class OnnxDancer:
+  """The reference host of an exported dancer: onnxruntime in Python, following the sidecar's contract as any
+  other host would. ``dance`` draws frames from given random numbers; ``positions`` decodes them into joint
+  positions as ``chorjax sample`` does."""
+
+  def __init__(self, path):
+    try:
+      import onnxruntime as ort
+    except ImportError:
+      raise UserError("OnnxDancer needs onnxruntime (the export extra): pip install 'chorjax[export]'") from None
+
+    self.path = Path(path)
+    self.meta = json.loads(sidecar_path(self.path).read_text())
+    if self.meta.get("format") != SIDECAR_FORMAT:
+      raise UserError(f"{sidecar_path(self.path)}: not a chorjax dancer's sidecar")
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = 1  # one frame of a small network: threads cost more than they give
+    self.session = ort.InferenceSession(str(self.path), options, providers=["CPUExecutionProvider"])
+    self.state: dict = {}
+
+  def start(self, weights_BxM) -> None:
+    """The next frame starts over from ``weights`` (a dancer's first frame)."""
+    self.weights = np.asarray(weights_BxM, np.float32)
+    self.state = {io["name"]: np.zeros(io["shape"], io["dtype"]) for io in self.meta["inputs"][4:]}
+    self.starting = np.ones((self.weights.shape[0],), np.float32)
+
+  def step(self, gumbel_BxK, normal_BxD) -> np.ndarray:
+    """One frame: normalized features ``[B, D]``."""
+    feed = {"weights": self.weights, "start": self.starting, "gumbel": gumbel_BxK, "normal": normal_BxD, **self.state}
+    names = [io["name"] for io in self.meta["outputs"]]
+    out = dict(zip(names, self.session.run(names, feed), strict=True))
+    self.state = {s["input"]: out[s["output"]] for s in self.meta["state"]}
+    self.starting = np.zeros_like(self.starting)
+    return np.asarray(out["frame"])
+
+  def dance(self, weights_BxM, gumbel_TxBxK, normal_TxBxD) -> np.ndarray:
+    """``[B, T, D]`` normalized frames from a fresh start, one call per frame."""
+    self.start(weights_BxM)
+    frames = [self.step(g, n) for g, n in zip(gumbel_TxBxK, normal_TxBxD, strict=True)]
+    return np.stack(frames, 1)
+
+  def positions(self, z_BxTxD) -> np.ndarray:
+    """Joint positions ``[B, T, J, 3]`` in data space: the frames decoded as ``chorjax sample`` decodes."""
+    from chorjax.data.features import Features
+
+    features = Features.from_dict(self.meta["features"])
+    return np.asarray(features.decode(np.asarray(z_BxTxD), **self.meta["decoding"]))

@@ -1,0 +1,147 @@
+"""`chorjax export`: the dancer as an ONNX graph that onnxruntime runs frame by frame, drawing what `chorjax
+sample` draws given the same random numbers."""
+
+import json
+from pathlib import Path
+
+import jax
+import numpy as np
+import onnx
+import pytest
+from helpers import TINY
+
+from chorjax import cli
+from chorjax.api import load_run
+from chorjax.config import load_config
+from chorjax.export import OnnxDancer, sample_numbers
+from chorjax.models import motion_weight_vector
+from chorjax.sample import sample_dancers
+from chorjax.training import train_and_evaluate
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def trained(where: Path, *overrides: str, config: Path | None = None) -> Path:
+  cfg = load_config(config, [*TINY, "train.calibrate=false", "log.tensorboard=false", *overrides])
+  train_and_evaluate(cfg, where)
+  return where
+
+
+@pytest.fixture(scope="module")
+def quickstart(tmp_path_factory):
+  """A tiny run of the shipped quick-start recipe (its sampling: smoothed noise of order 4, persistence,
+  crossfade, the training range and steps, the pace governor, the scale ceiling, rigid bones, ground, foot lock)."""
+  where = tmp_path_factory.mktemp("export") / "run"
+  return trained(where, "train.num_steps=4", config=ROOT / "configs" / "quickstart.toml")
+
+
+def body_size(pos) -> float:
+  return float(np.ptp(pos.reshape(-1, 3), axis=0).max())
+
+
+def test_the_onnx_dancer_draws_what_chorjax_sample_draws(quickstart, tmp_path):
+  """600 frames from onnxruntime, fed the random numbers `chorjax sample --seed 3` draws, are its frames within
+  1e-4 of the body size on every joint of every frame."""
+  dancer_path = tmp_path / "dancer.onnx"
+  assert cli.main(["export", str(quickstart), "-o", str(dancer_path)]) == 0
+  run = load_run(quickstart)
+  dancer = OnnxDancer(dancer_path)
+  meta = dancer.meta
+  assert (meta["num_mixtures"], meta["dim"], meta["batch"]) == (3, run.features.dim, 1)
+  assert meta["controls"]["noise_order"] == 4 and meta["controls"]["pace"] == 2.0  # what it was exported with
+
+  frames, seed = 600, 3
+  gumbel, normal = sample_numbers(seed, frames, 1, meta["num_mixtures"], meta["dim"])
+  z = dancer.dance(motion_weight_vector(run.num_motions, 2)[None], gumbel, normal)
+  expected, _ = sample_dancers(run, frames, 1, seed, motion=2)
+  got = dancer.positions(z)
+  assert got.shape == expected.shape == (1, frames, run.features.skeleton.num_joints, 3)
+  assert np.abs(got - expected).max() <= 1e-4 * body_size(expected)
+  assert np.abs(np.diff(got, axis=1)).max() > 0  # it dances
+
+
+def test_the_graph_and_sidecar_state_the_contract(quickstart, tmp_path):
+  assert cli.main(["export", str(quickstart), "-o", str(tmp_path / "d.onnx"), "--batch", "3"]) == 0
+  model = onnx.load(tmp_path / "d.onnx")
+  onnx.checker.check_model(model, full_check=True)
+  meta = json.loads((tmp_path / "d.json").read_text())
+  names = [i.name for i in model.graph.input]
+  assert names == [io["name"] for io in meta["inputs"]]
+  assert names[:4] == ["weights", "start", "gumbel", "normal"]
+  assert [o.name for o in model.graph.output] == [io["name"] for io in meta["outputs"]]
+  assert all(s["input"] in names for s in meta["state"]) and len(meta["state"]) == len(names) - 4
+  for io in meta["inputs"]:  # every dancer its own, but the governor's ring position (one number)
+    axis = 1 if io["name"] in ("state.filters", "state.governor.0") else 0
+    assert io["shape"][axis] == 3 if io["name"] != "state.governor.1" else io["shape"] == []
+  run = load_run(quickstart)
+  sk = run.features.skeleton
+  assert meta["skeleton"]["joint_names"] == list(sk.joint_names) and meta["skeleton"]["parents"] == list(sk.parents)
+  assert len(meta["skeleton"]["bone_lengths"]) == sk.num_joints and meta["fps"] == run.fps
+  assert meta["motions"] == run.id_map and meta["features"]["mean"] == np.asarray(run.features.mean).tolist()
+
+
+def test_a_batch_of_dancers_each_on_its_own_motion_and_a_restart_mid_dance(quickstart, tmp_path):
+  """Two dancers a call, one on a take and one on a blend, are the frame-by-frame draw of both at once; a
+  dancer started over mid-dance (start = 1) dances as a fresh one from there, the other one going on."""
+  run = load_run(quickstart)
+  run.export(tmp_path / "two.onnx", batch=2)
+  dancer = OnnxDancer(tmp_path / "two.onnx")
+  k, d, m = dancer.meta["num_mixtures"], dancer.meta["dim"], run.num_motions
+  weights = np.stack([motion_weight_vector(m, 1), motion_weight_vector(m, mix="0:0.5,3:0.5")])
+  frames = 200
+  gumbel, normal = sample_numbers(5, frames, 2, k, d)
+  z = dancer.dance(weights, gumbel, normal)
+  sampling = run.sampling()
+  ranged = run.ranged(sampling)
+  key = jax.random.key(5)
+  expected = ranged.family.dance(ranged.graphdef, ranged.params, ranged.features, weights, key, frames, sampling)
+  got = dancer.positions(z)
+  assert np.abs(got - expected).max() <= 1e-4 * body_size(expected)
+
+  half = 80
+  dancer.start(weights)
+  for t in range(half):
+    dancer.step(gumbel[t], normal[t])
+  dancer.starting = np.array([0.0, 1.0], np.float32)  # the second dancer starts over
+  rest = np.stack([dancer.step(g, n) for g, n in zip(gumbel[half:], normal[half:], strict=True)], 1)
+  fresh = dancer.dance(weights, gumbel[half:], normal[half:])
+  np.testing.assert_allclose(rest[0], z[0, half:], atol=1e-6)  # the first dancer went on
+  np.testing.assert_allclose(rest[1], fresh[1], atol=1e-6)  # the second danced anew
+
+
+@pytest.mark.parametrize("cell,head", [("lnlstm", "mdn"), ("gru", "mse")])
+def test_other_cells_and_heads_export_with_the_same_draw(cell, head, tmp_path):
+  """The LN-LSTM and the GRU, the MSE head, and the plain draw (white noise, nothing held)."""
+  run_dir = trained(tmp_path / "run", f"model.cell={cell}", f"model.head={head}")
+  assert cli.main(["export", str(run_dir), "-o", str(tmp_path / "d.onnx"), "--noise-smoothing", "0.5"]) == 0
+  dancer = OnnxDancer(tmp_path / "d.onnx")
+  run = load_run(run_dir)
+  frames = 120
+  gumbel, normal = sample_numbers(1, frames, 1, dancer.meta["num_mixtures"], dancer.meta["dim"])
+  got = dancer.positions(dancer.dance(motion_weight_vector(run.num_motions)[None], gumbel, normal))
+  expected, _ = sample_dancers(run, frames, 1, 1, controls={"noise_smoothing": 0.5})
+  assert np.abs(got - expected).max() <= 1e-4 * body_size(expected)
+
+
+def exit_code(args) -> int:
+  try:
+    return cli.main(args)
+  except SystemExit as e:  # argparse's refusals
+    return int(e.code or 0)
+
+
+def test_what_cannot_be_exported_is_refused_in_one_line_and_nothing_is_written(quickstart, tmp_path, capsys):
+  out = ["-o", str(tmp_path / "d.onnx")]
+  for flags, said in [
+    ([*out, "--greedy"], "greedy"),
+    (["-o", str(tmp_path / "d.glb")], "must end in .onnx"),
+    ([*out, "--batch", "0"], "--batch"),
+  ]:
+    assert exit_code(["export", str(quickstart), *flags]) == 2
+    err = capsys.readouterr().err
+    assert said in err and "Traceback" not in err, err
+  assert list(tmp_path.iterdir()) == []
+  (tmp_path / "d.json").write_text("mine")  # a sidecar the user has is not replaced either
+  assert cli.main(["export", str(quickstart), *out]) == 2
+  assert "d.json: already exists" in capsys.readouterr().err and (tmp_path / "d.json").read_text() == "mine"
+  assert not (tmp_path / "d.onnx").exists()
