@@ -53,6 +53,7 @@ LONGEST_FIRST = (
   "test_vectorized.py",  # 44
   "test_guides.py",  # 44
   "test_metrics.py",  # 43
+  "test_export.py",  # 40
   "test_bad_inputs.py",  # 36
   "test_transforms.py",  # 34
   "test_dataset.py",  # 32
