@@ -5,7 +5,7 @@
     dance = run.sample(frames=600, seed=0)                # the draw `chorjax sample` makes
     dance.show(chorjax.read_motion("take.bvh"))           # the HTML player, inline in Jupyter
     chorjax.score(dance, "cmu94")                         # the keys of `chorjax metrics`
-    dance.write("dance.bvh")                              # CSV, NPZ, BVH (onto a character too), HTML
+    dance.write("dance.bvh")                              # CSV, NPZ, BVH (onto a character too), glTF, HTML
 
 The command line is a thin layer over these functions: the same checks, the same files on disk, and the
 same one-line messages, raised here as :class:`chorjax.UserError`.
@@ -71,7 +71,8 @@ class Motion(_motion.Motion):
 
   def write(self, path, skeleton=None, *, force: bool = False) -> Path:
     """Writes the motion as ``path``'s suffix says: ``.csv``, ``.npz``, ``.bvh`` (with ``skeleton``, a
-    character BVH: the dance on its hierarchy, as ``chorjax sample --skeleton``) or ``.html`` (the player).
+    character BVH: the dance on its hierarchy, as ``chorjax sample --skeleton``), ``.glb`` (binary glTF: the
+    skeleton's nodes and their animation) or ``.html`` (the player).
     An existing file is not replaced unless ``force``."""
     from chorjax.errors import check_output, refuse_existing
     from chorjax.output import write_motions, written_paths

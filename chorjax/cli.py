@@ -380,8 +380,8 @@ def _add_run_commands(sub) -> None:
     "--output",
     required=True,
     metavar="OUT",
-    help="OUT.csv (data layout; K>1 writes OUT_k.csv), OUT.bvh (for Blender; K>1: OUT_k.bvh), "
-    "OUT.npz (all dancers + settings) or OUT.html",
+    help="OUT.csv (data layout; K>1 writes OUT_k.csv), OUT.bvh (for Blender; K>1: OUT_k.bvh), OUT.glb "
+    "(glTF), OUT.npz (all dancers + settings) or OUT.html",
   )
   sample.add_argument("--frames", type=int, default=1000, help="frames to generate (default 1000)")
   sample.add_argument("--num", type=int, default=1, help="dancers generated in parallel (default 1)")

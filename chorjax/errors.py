@@ -233,7 +233,7 @@ def check_array(values, where: str) -> None:
     raise UserError(f"{where}: {kind} value {a[idx]!r} at index {list(idx)} ({int(bad.sum())} such values)")
 
 
-WRITES = (".csv", ".npz", ".bvh", ".html")  # what a dance may be written as
+WRITES = (".csv", ".npz", ".bvh", ".glb", ".html")  # what a dance may be written as
 
 
 def as_path(value, what: str = "path") -> Path:

@@ -1,5 +1,5 @@
 """Writing motions: one function writes a dance, a set of transitions or takes in every format chorjax
-writes (CSV, NPZ, BVH, BVH onto a character, the HTML player), for the command line, the Python API, the
+writes (CSV, NPZ, BVH, BVH onto a character, binary glTF, the HTML player), for the command line, the Python API, the
 end of training and evaluation alike; and the checks that come before any long work (the output's kind,
 files that already exist, the character to retarget onto)."""
 
@@ -43,7 +43,7 @@ def load_character(path, out: Path):
 
 def write_motions(out: Path, motions, *, settings=None, character=None, title=None) -> list:
   """Writes ``motions`` (of one skeleton and rate) as ``out``'s suffix says: one ``.npz`` with all of them and
-  ``settings``, one ``.html`` player (``title``), or a ``.csv`` / ``.bvh`` per motion (``output_paths``;
+  ``settings``, one ``.html`` player (``title``), or a ``.csv`` / ``.bvh`` / ``.glb`` per motion (``output_paths``;
   ``character``: a BVH onto that character's hierarchy). Returns the paths written."""
   import numpy as np
 
@@ -75,6 +75,10 @@ def write_motions(out: Path, motions, *, settings=None, character=None, title=No
     if character is not None:
       return [write_retargeted(to_mpii16(m), character, path) for m, path in zip(motions, paths)]
     return [write_bvh(m, path) for m, path in zip(motions, paths)]
+  if suffix == ".glb":
+    from chorjax.data.gltf import write_glb
+
+    return [write_glb(m, path) for m, path in zip(motions, paths)]
   return [write_csv(m, path) for m, path in zip(motions, paths)]
 
 

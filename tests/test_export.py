@@ -13,6 +13,7 @@ from helpers import TINY
 from chorjax import cli
 from chorjax.api import load_run
 from chorjax.config import load_config
+from chorjax.data.csv import read_csv
 from chorjax.export import OnnxDancer, sample_numbers
 from chorjax.models import motion_weight_vector
 from chorjax.sample import sample_dancers
@@ -145,3 +146,57 @@ def test_what_cannot_be_exported_is_refused_in_one_line_and_nothing_is_written(q
   assert cli.main(["export", str(quickstart), *out]) == 2
   assert "d.json: already exists" in capsys.readouterr().err and (tmp_path / "d.json").read_text() == "mine"
   assert not (tmp_path / "d.onnx").exists()
+
+
+NODE_MODULES = ROOT / ".venv" / "node"  # .ci/run: npm install --prefix .venv/node gltf-validator
+
+
+def khronos_validator(path: Path) -> dict:
+  """The Khronos glTF validator's report of ``path``: ``{"errors", "warnings", "messages"}``."""
+  import shutil
+  import subprocess
+
+  if shutil.which("node") is None or not (NODE_MODULES / "node_modules" / "gltf-validator").is_dir():
+    pytest.fail(f"the Khronos glTF validator is missing: .ci/run installs it (npm install --prefix {NODE_MODULES} ...)")
+  script = Path(__file__).with_name("validate_gltf.js")
+  command = ["node", str(script), str(NODE_MODULES), str(path)]
+  done = subprocess.run(command, capture_output=True, text=True, timeout=120)
+  assert done.returncode == 0, done.stderr
+  return json.loads(done.stdout)
+
+
+def test_a_sample_written_as_gltf_is_valid_and_animates_the_joints_where_chorjax_put_them(quickstart, tmp_path):
+  from chorjax.data.gltf import gltf_positions, read_glb_positions
+  from chorjax.data.npz import read_npz
+
+  draw = ["--frames", "90", "--num", "2", "--seed", "4"]
+  assert cli.main(["sample", str(quickstart), "-o", str(tmp_path / "dance.glb"), *draw]) == 0
+  assert cli.main(["sample", str(quickstart), "-o", str(tmp_path / "dance.npz"), *draw]) == 0
+  dancers = read_npz(tmp_path / "dance.npz")
+  for k, motion in enumerate(dancers):
+    glb = tmp_path / f"dance_{k}.glb"
+    report = khronos_validator(glb)
+    assert report["errors"] == 0 and report["warnings"] == 0, report
+    want, _ = gltf_positions(motion)
+    got = read_glb_positions(glb)
+    assert got.shape == want.shape == (90, motion.skeleton.num_joints, 3)
+    assert np.abs(got - want).max() <= 1e-4 * body_size(want)
+
+
+def test_a_take_in_millimetres_with_z_up_becomes_y_up_metres(tmp_path):
+  """glTF is y-up in metres: a z-up take in millimetres is turned and scaled (and says so in its extras)."""
+  import pygltflib
+
+  from chorjax.api import Motion
+  from chorjax.data.dataset import bundled_path
+  from chorjax.data.gltf import read_glb_positions
+  from chorjax.data.transforms import to_y_up
+
+  take = Motion.of(read_csv(bundled_path("cmu94") / "94_05_skeleton_3d.csv"))
+  y_up = np.asarray(to_y_up(take.positions[:60].astype(np.float64), take.up_axis))
+  z_up = np.stack([y_up[..., 0], -y_up[..., 2], y_up[..., 1]], -1) * 1000.0  # y up -> z up, metres -> mm
+  take.replace(positions=z_up, up_axis="z", units="mm").write(tmp_path / "take.glb")
+  assert khronos_validator(tmp_path / "take.glb")["errors"] == 0
+  np.testing.assert_allclose(read_glb_positions(tmp_path / "take.glb"), y_up, atol=1e-4 * body_size(y_up))
+  extras = pygltflib.GLTF2().load_binary(str(tmp_path / "take.glb")).asset.extras
+  assert extras["source_units"] == "mm" and extras["metres_per_unit"] == 0.001 and extras["fps"] == take.fps

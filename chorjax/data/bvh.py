@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from chorjax.data.motion import Motion, Skeleton
-from chorjax.data.rotations import best_fit_rotation, euler_to_matrix, matrix_to_euler, swing
+from chorjax.data.rotations import euler_to_matrix, matrix_to_euler, pose_rotations
 from chorjax.errors import UserError, atomic_write, check_rate, parse_numbers, read_text, whole_number
 
 _ROT = {"xrotation": "x", "yrotation": "y", "zrotation": "z"}
@@ -283,20 +283,7 @@ def write_bvh(motion: Motion, path, *, exact: bool = True, order: str = "zyx", o
   children = {k: [c for c in range(j) if sk.parents[c] == k] for k in range(j)}
   rest = pos[0]
   lengths = np.linalg.norm(pos - pos[:, np.maximum(np.array(sk.parents), 0)], axis=-1).mean(0)
-  glob = np.zeros((t, j, 3, 3))
-  for k in sk.topological_order:
-    parent = sk.parents[k]
-    parent_r = np.broadcast_to(np.eye(3), (t, 3, 3)) if parent < 0 else glob[:, parent]
-    kids = children[k]
-    if not kids:
-      glob[:, k] = parent_r
-    elif len(kids) == 1:
-      rest_dir = np.einsum("tij,j->ti", parent_r, rest[kids[0]] - rest[k])
-      glob[:, k] = swing(rest_dir, pos[:, kids[0]] - pos[:, k]) @ parent_r
-    else:
-      rest_dirs = np.stack([rest[c] - rest[k] for c in kids])
-      obs = np.stack([pos[:, c] - pos[:, k] for c in kids], axis=1)
-      glob[:, k] = best_fit_rotation(np.broadcast_to(rest_dirs, obs.shape), obs)
+  glob = pose_rotations(pos, sk.parents, sk.topological_order)
   axes = {"x": "X", "y": "Y", "z": "Z"}
   rot_names = " ".join(f"{axes[a]}rotation" for a in order)
   lines = ["HIERARCHY"]

@@ -68,3 +68,87 @@ def best_fit_rotation(rest_NxKx3, obs_NxKx3) -> np.ndarray:
   fix = np.broadcast_to(np.eye(3), h.shape).copy()
   fix[..., 2, 2] = d
   return np.swapaxes(vt, -1, -2) @ fix @ np.swapaxes(u, -1, -2)
+
+
+def matrix_to_quaternion(m_Nx3x3) -> np.ndarray:
+  """Unit quaternions ``[..., 4]`` as ``(x, y, z, w)`` (glTF's order) of rotation matrices, ``w >= 0``."""
+  m = np.asarray(m_Nx3x3, np.float64)
+  trace = m[..., 0, 0] + m[..., 1, 1] + m[..., 2, 2]
+  # each of the four candidates is computed from its largest term (Shepperd): stable for every rotation
+  cands = np.stack(
+    [
+      np.stack([m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1], 1 + trace], -1),
+      np.stack(
+        [
+          1 + 2 * m[..., 0, 0] - trace,
+          m[..., 0, 1] + m[..., 1, 0],
+          m[..., 0, 2] + m[..., 2, 0],
+          m[..., 2, 1] - m[..., 1, 2],
+        ],
+        -1,
+      ),
+      np.stack(
+        [
+          m[..., 0, 1] + m[..., 1, 0],
+          1 + 2 * m[..., 1, 1] - trace,
+          m[..., 1, 2] + m[..., 2, 1],
+          m[..., 0, 2] - m[..., 2, 0],
+        ],
+        -1,
+      ),
+      np.stack(
+        [
+          m[..., 0, 2] + m[..., 2, 0],
+          m[..., 1, 2] + m[..., 2, 1],
+          1 + 2 * m[..., 2, 2] - trace,
+          m[..., 1, 0] - m[..., 0, 1],
+        ],
+        -1,
+      ),
+    ],
+    -2,
+  )
+  best = np.argmax(np.stack([trace, m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]], -1), -1)
+  q = np.take_along_axis(cands, best[..., None, None], axis=-2)[..., 0, :]
+  q /= np.linalg.norm(q, axis=-1, keepdims=True)
+  return np.where(q[..., 3:] < 0, -q, q)
+
+
+def pose_rotations(pos_TxJx3, parents, order) -> np.ndarray:
+  """Every joint's global rotation ``[T, J, 3, 3]`` from the first frame (the rest pose) to each frame, by
+  inverse kinematics of the positions: a joint with one child turns by the smallest rotation (swing) that
+  takes its rest bone to the observed one, relative to its parent's frame (a bone never twists about
+  itself); one with several children by the best-fit rotation of all their directions (Kabsch); a leaf
+  turns with its parent. ``order``: the joints, parents first."""
+  pos = np.asarray(pos_TxJx3, np.float64)
+  t, j = pos.shape[:2]
+  children = {k: [c for c in range(j) if parents[c] == k] for k in range(j)}
+  rest = pos[0]
+  glob = np.zeros((t, j, 3, 3))
+  for k in order:
+    parent = parents[k]
+    parent_r = np.broadcast_to(np.eye(3), (t, 3, 3)) if parent < 0 else glob[:, parent]
+    kids = children[k]
+    if not kids:
+      glob[:, k] = parent_r
+    elif len(kids) == 1:
+      rest_dir = np.einsum("tij,j->ti", parent_r, rest[kids[0]] - rest[k])
+      glob[:, k] = swing(rest_dir, pos[:, kids[0]] - pos[:, k]) @ parent_r
+    else:
+      rest_dirs = np.stack([rest[c] - rest[k] for c in kids])
+      obs = np.stack([pos[:, c] - pos[:, k] for c in kids], axis=1)
+      glob[:, k] = best_fit_rotation(np.broadcast_to(rest_dirs, obs.shape), obs)
+  return glob
+
+
+def local_transforms(pos_TxJx3, parents, glob_TxJx3x3) -> tuple[np.ndarray, np.ndarray]:
+  """``(translation [T, J, 3], rotation [T, J, 3, 3])`` of each joint in its parent's frame (the root's in
+  the world's) that put every joint exactly at ``pos`` with the global rotations ``glob``."""
+  pos = np.asarray(pos_TxJx3, np.float64)
+  p = np.asarray(parents)
+  has = p >= 0
+  parent_r = np.where(has[None, :, None, None], glob_TxJx3x3[:, np.maximum(p, 0)], np.eye(3))
+  parent_t = np.where(has[None, :, None], pos[:, np.maximum(p, 0)], 0.0)
+  translation = np.einsum("tkji,tkj->tki", parent_r, pos - parent_t)
+  rotation = np.swapaxes(parent_r, -1, -2) @ glob_TxJx3x3
+  return translation, rotation
