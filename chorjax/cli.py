@@ -106,10 +106,15 @@ def _sample(args) -> int:
 
 
 def _export(args) -> int:
-  written = api.write_onnx(
-    args.workdir, args.output, batch=args.batch, controls=_controls(args), checkpoint=args.checkpoint, force=args.force
-  )
-  print("wrote " + ", ".join(map(str, written)))
+  common = {"controls": _controls(args), "checkpoint": args.checkpoint, "force": args.force}
+  if args.web is not None:
+    if args.output is not None or args.batch != 1:
+      raise api.UserError("--web writes a folder with one dancer: no -o or --batch with it")
+    print(f"wrote {api.write_web(args.workdir, args.web, ort_web=args.ort_web, **common)} (open index.html)")
+    return 0
+  if args.output is None:
+    raise api.UserError("export: give -o DANCER.onnx or --web DIR")
+  print("wrote " + ", ".join(map(str, api.write_onnx(args.workdir, args.output, batch=args.batch, **common))))
   return 0
 
 
@@ -413,9 +418,17 @@ def _add_export_command(sub) -> None:
     " beside it: skeleton, fps, features, controls, the graph's inputs and outputs (docs/guides/export.md).",
   )
   p.add_argument("workdir", metavar="WORKDIR", help="a run directory with checkpoints")
-  p.add_argument("-o", "--output", required=True, metavar="DANCER.onnx", help="the ONNX file (DANCER.json beside it)")
+  p.add_argument("-o", "--output", metavar="DANCER.onnx", help="the ONNX file (DANCER.json beside it)")
   p.add_argument(
     "--batch", type=_in_range(1, 4096), default=1, help="dancers the graph draws a call, each its own (default 1)"
+  )
+  p.add_argument(
+    "--web", metavar="DIR", help="instead: a static folder (index.html, the dancer, onnxruntime-web) to serve"
+  )
+  p.add_argument(
+    "--ort-web",
+    metavar="PATH",
+    help="onnxruntime-web's dist folder (default: node_modules/onnxruntime-web/dist here, or under .venv/node)",
   )
   _add_sampling_args(p, seed=False)
   p.set_defaults(func=_export)

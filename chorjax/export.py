@@ -75,6 +75,75 @@ def export_onnx(run, output, *, batch: int = 1, controls: dict | None = None, fo
   return [out, side]
 
 
+# onnxruntime-web's files the page loads (its wasm build, single-threaded), from the npm package's dist/
+ORT_WEB_FILES = ("ort.wasm.min.js", "ort-wasm-simd-threaded.wasm", "ort-wasm-simd-threaded.mjs")
+ORT_WEB_PLACES = ("node_modules/onnxruntime-web/dist", ".venv/node/node_modules/onnxruntime-web/dist")
+
+
+def find_ort_web(given=None) -> Path:
+  """The folder of onnxruntime-web's files: ``given``, else ``node_modules/onnxruntime-web/dist`` here (``npm
+  install onnxruntime-web``), else the same under ``.venv/node``."""
+  places = [Path(given)] if given else [Path(p) for p in ORT_WEB_PLACES]
+  for place in places:
+    if all((place / f).is_file() for f in ORT_WEB_FILES):
+      return place
+  where = f"{given} does not hold {', '.join(ORT_WEB_FILES)}" if given else "npm install onnxruntime-web here"
+  raise UserError(f"--web needs onnxruntime-web's files ({where}; or --ort-web PATH/onnxruntime-web/dist)")
+
+
+def write_web(workdir, folder, *, ort_web=None, controls=None, checkpoint="kept", force: bool = False) -> Path:
+  """``chorjax export --web``: a static folder in which the run's dancer dances live in the page, offline:
+  ``index.html``, the dancer (``dancer.onnx`` and its sidecar) and onnxruntime-web's files (``ort/``, with its
+  licence). Any static file server serves it. The page decodes canonical runs (the quick start's), with
+  rigid bones; it does not ground or lock the feet. Returns the folder."""
+  import shutil
+  import tempfile
+  from importlib.resources import files
+
+  from chorjax.errors import as_path
+  from chorjax.run import load_run
+
+  _needs_onnx()
+  out = as_path(folder, "--web")
+  if out.exists() and (not out.is_dir() or any(out.iterdir())) and not force:
+    raise UserError(f"{out}: already exists and is not an empty folder (use --force to replace it)")
+  ort = find_ort_web(ort_web)
+  run = load_run(workdir, checkpoint)
+  if run.features.representation != "canonical":
+    raise UserError(
+      f"{workdir}: the page decodes canonical runs (data.representation = canonical); this run's is "
+      f"{run.features.representation} (export it with -o and decode in your own host)"
+    )
+  out.parent.mkdir(parents=True, exist_ok=True)
+  staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+  try:
+    export_onnx(run, staging / "dancer.onnx", controls=controls)
+    (staging / "ort").mkdir()
+    for name in ORT_WEB_FILES:
+      shutil.copyfile(ort / name, staging / "ort" / name)
+    render = files("chorjax.render")
+    version = _package_version(ort.parent / "package.json")
+    licence = render.joinpath("onnxruntime_web_license.txt").read_text(encoding="utf-8")
+    (staging / "ort" / "LICENSE").write_text(licence.replace("{version}", version), encoding="utf-8")
+    (staging / "index.html").write_text(
+      render.joinpath("web_dancer.html").read_text(encoding="utf-8"), encoding="utf-8"
+    )
+    staging.chmod(0o755)  # a folder to serve (mkdtemp makes it private)
+    if out.exists():
+      shutil.rmtree(out)
+    staging.rename(out)
+  finally:
+    shutil.rmtree(staging, ignore_errors=True)
+  return out
+
+
+def _package_version(package_json: Path) -> str:
+  try:
+    return str(json.loads(package_json.read_text())["version"])
+  except (OSError, ValueError, KeyError, TypeError):
+    return "(version not recorded)"
+
+
 def _needs_onnx() -> None:
   try:
     import onnx  # noqa: F401
@@ -156,6 +225,33 @@ def sample_numbers(seed: int, frames: int, batch: int, num_mixtures: int, dim: i
   keys = jax.random.split(jax.random.key(seed), frames)
   gumbel, normal = jax.vmap(lambda k: frame_numbers(k, batch, num_mixtures, dim))(keys)
   return np.asarray(gumbel), np.asarray(normal)
+
+
+def page_numbers(seed: int, frames: int, batch: int, num_mixtures: int, dim: int):
+  """``(gumbel [T, B, K], normal [T, B, D])``: the random numbers the exported web page draws with ``seed``
+  (its mulberry32 stream; Gumbel as ``-log(-log(u))``, normal by Box-Muller's cosine, one pair of uniforms
+  each), so that onnxruntime in Python can draw what the page draws."""
+  state = seed & 0xFFFFFFFF
+  mask = 0xFFFFFFFF
+
+  def imul(a: int, b: int) -> int:
+    return (a * b) & mask
+
+  def uniform() -> float:
+    nonlocal state
+    state = (state + 0x6D2B79F5) & mask
+    t = state
+    t = imul(t ^ (t >> 15), t | 1)
+    t ^= (t + imul(t ^ (t >> 7), t | 61)) & mask
+    return (((t ^ (t >> 14)) & mask) + 0.5) / 4294967296
+
+  gumbel = np.zeros((frames, batch, num_mixtures), np.float32)
+  normal = np.zeros((frames, batch, dim), np.float32)
+  for f in range(frames):
+    gumbel[f] = np.array([-np.log(-np.log(uniform())) for _ in range(batch * num_mixtures)]).reshape(batch, -1)
+    pairs = [(uniform(), uniform()) for _ in range(batch * dim)]
+    normal[f] = np.array([np.sqrt(-2 * np.log(u1)) * np.cos(2 * np.pi * u2) for u1, u2 in pairs]).reshape(batch, -1)
+  return gumbel, normal
 
 
 class OnnxDancer:

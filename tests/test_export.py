@@ -20,6 +20,7 @@ from chorjax.sample import sample_dancers
 from chorjax.training import train_and_evaluate
 
 ROOT = Path(__file__).resolve().parents[1]
+NODE_MODULES = ROOT / ".venv" / "node"  # .ci/run: npm install --prefix .venv/node gltf-validator onnxruntime-web
 
 
 def trained(where: Path, *overrides: str, config: Path | None = None) -> Path:
@@ -122,6 +123,9 @@ def test_other_cells_and_heads_export_with_the_same_draw(cell, head, tmp_path):
   got = dancer.positions(dancer.dance(motion_weight_vector(run.num_motions)[None], gumbel, normal))
   expected, _ = sample_dancers(run, frames, 1, 1, controls={"noise_smoothing": 0.5})
   assert np.abs(got - expected).max() <= 1e-4 * body_size(expected)
+  ort_web = NODE_MODULES / "node_modules" / "onnxruntime-web" / "dist"
+  web = ["export", str(run_dir), "--web", str(tmp_path / "site"), "--ort-web", str(ort_web)]
+  assert exit_code(web) == 2 and not (tmp_path / "site").exists()  # the page decodes canonical runs only
 
 
 def exit_code(args) -> int:
@@ -141,14 +145,20 @@ def test_what_cannot_be_exported_is_refused_in_one_line_and_nothing_is_written(q
     assert exit_code(["export", str(quickstart), *flags]) == 2
     err = capsys.readouterr().err
     assert said in err and "Traceback" not in err, err
+  web = ["--web", str(tmp_path / "site")]
+  for flags, said in [
+    ([*web, *out], "no -o or --batch"),
+    ([*web, "--ort-web", str(tmp_path)], "onnxruntime-web's files"),
+    ([], "give -o DANCER.onnx or --web DIR"),
+  ]:
+    assert exit_code(["export", str(quickstart), *flags]) == 2
+    err = capsys.readouterr().err
+    assert said in err and "Traceback" not in err, err
   assert list(tmp_path.iterdir()) == []
   (tmp_path / "d.json").write_text("mine")  # a sidecar the user has is not replaced either
   assert cli.main(["export", str(quickstart), *out]) == 2
   assert "d.json: already exists" in capsys.readouterr().err and (tmp_path / "d.json").read_text() == "mine"
   assert not (tmp_path / "d.onnx").exists()
-
-
-NODE_MODULES = ROOT / ".venv" / "node"  # .ci/run: npm install --prefix .venv/node gltf-validator
 
 
 def khronos_validator(path: Path) -> dict:
@@ -200,3 +210,45 @@ def test_a_take_in_millimetres_with_z_up_becomes_y_up_metres(tmp_path):
   np.testing.assert_allclose(read_glb_positions(tmp_path / "take.glb"), y_up, atol=1e-4 * body_size(y_up))
   extras = pygltflib.GLTF2().load_binary(str(tmp_path / "take.glb")).asset.extras
   assert extras["source_units"] == "mm" and extras["metres_per_unit"] == 0.001 and extras["fps"] == take.fps
+
+
+def test_the_web_page_dances_offline_and_draws_what_onnxruntime_draws(quickstart, tmp_path):
+  """`chorjax export --web`: served by a plain static server, with every other host unreachable, the page in
+  headless Chromium dances for 10 s (the figure moves, no NaN, no console error), and its first 100 frames of
+  seed 0 are onnxruntime-python's, drawn with the page's random numbers."""
+  import functools
+  import html
+  import re
+  import threading
+  from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
+
+  from helpers import headless
+
+  from chorjax.export import page_numbers
+
+  ort_web = NODE_MODULES / "node_modules" / "onnxruntime-web" / "dist"
+  if not ort_web.is_dir():
+    pytest.fail(f"onnxruntime-web is missing: .ci/run installs it (npm install --prefix {NODE_MODULES} ...)")
+  site = tmp_path / "site"
+  assert cli.main(["export", str(quickstart), "--web", str(site), "--ort-web", str(ort_web)]) == 0
+  assert sorted(p.name for p in site.iterdir()) == ["dancer.json", "dancer.onnx", "index.html", "ort"]
+  assert "MIT License" in (site / "ort" / "LICENSE").read_text()
+
+  quiet = type("Quiet", (SimpleHTTPRequestHandler,), {"log_message": lambda *a: None})
+  server = ThreadingHTTPServer(("127.0.0.1", 0), functools.partial(quiet, directory=str(site)))
+  threading.Thread(target=server.serve_forever, daemon=True).start()
+  try:
+    url = f"http://127.0.0.1:{server.server_address[1]}/index.html#selftest"
+    offline = "--host-resolver-rules=MAP * ~NOTFOUND , EXCLUDE 127.0.0.1"
+    dom = headless(tmp_path / "profile", url, offline, "--virtual-time-budget=20000", "--dump-dom").stdout
+  finally:
+    server.shutdown()
+  assert "<title>chorjax dancer: done</title>" in dom, dom[:2000]
+  report = json.loads(html.unescape(re.search(r'<pre id="selftest">(.*?)</pre>', dom, re.S).group(1)))
+  assert report["errors"] == [] and not report["nan"], report["errors"]
+  assert report["seconds"] >= 10 and report["shown"] >= 250 and report["moved"] > 0
+
+  dancer = OnnxDancer(site / "dancer.onnx")
+  gumbel, normal = page_numbers(0, 100, 1, dancer.meta["num_mixtures"], dancer.meta["dim"])
+  weights = np.eye(len(dancer.meta["motions"]), dtype=np.float32)[:1]
+  np.testing.assert_allclose(np.asarray(report["frames"]), dancer.dance(weights, gumbel, normal)[0], atol=1e-4)
