@@ -53,7 +53,7 @@ def main(argv=None) -> dict:
     run.export(path)
     dancer = OnnxDancer(path)
     k, d = dancer.meta["num_mixtures"], dancer.meta["dim"]
-    gumbel, normal = sample_numbers(0, n, 1, k, d)
+    gumbel, normal = sample_numbers(run, 0, n)
     weights = motion_weight_vector(run.num_motions)[None]
     onnx_fps = median_rate(n, lambda: dancer.dance(weights, gumbel, normal))
 

@@ -1,18 +1,20 @@
 """``chorjax export``: a trained dancer as an ONNX model that any host (onnxruntime in Python, C#, C++ or the
 browser; Unity's Sentis; TouchDesigner) runs frame by frame, with a JSON sidecar that says how.
 
-The graph is one frame of the run's draw (``generation.frame_step``, the code every frame of ``chorjax sample``
-runs): the recurrent state and the previous frame in, the next frame and the new state out, with the
-run's sampling controls inside (temperatures, smoothed noise, persistence, crossfade, the training range,
-the pace governor, the scale ceiling). The host owns the random stream: each frame takes standard Gumbel
-noise ``[B, K]`` (which component is drawn) and standard normal noise ``[B, D]``; given the numbers
-``chorjax sample --seed S`` draws (:func:`sample_numbers`), its frames are ``chorjax sample``'s.
+The graph is one frame of the run's draw (its family's ``frame_program``; for the recurrent family
+``generation.frame_step``, the code every frame of ``chorjax sample`` runs): the state in, the next frame
+and the new state out, with the run's sampling controls inside (temperatures, smoothed noise,
+persistence, crossfade, the training range, the pace governor, the scale ceiling). The host owns the
+random stream: each frame takes standard Gumbel noise ``[B, K]`` (which component is drawn) and standard
+normal noise ``[B, N]``; given the numbers ``chorjax sample --seed S`` draws (:func:`sample_numbers`), its
+frames are ``chorjax sample``'s. A GAN's generator runs the same way, its noise vector in ``normal`` on a
+dancer's first frame.
 
 The contract (also in the sidecar's ``inputs``, ``outputs`` and ``state``):
 
 * ``weights [B, M]``: the motion the dancer is conditioned on, one-hot over the run's motions or a blend;
 * ``start [B]``: 1 for a dancer's first frame (its state is then the weights' initial state), else 0;
-* ``gumbel [B, K]``, ``normal [B, D]``: this frame's random numbers;
+* ``gumbel [B, K]``, ``normal [B, N]``: this frame's random numbers;
 * ``state.*``: the state the previous call returned (zeros before the first frame);
 * out ``frame [B, D]``: the next frame's normalized features, and ``state.*`` for the next call.
 
@@ -156,7 +158,10 @@ def _program(run, sampling, batch: int):
   from chorjax.onnx_graph import Unsupported, to_onnx
 
   draw = sampling.draw(run.features)
-  program, args, inputs, outputs = run.family.frame_program(run.graphdef, run.params, draw, batch)
+  family = run.family
+  program, args, inputs, outputs = family.frame_program(
+    run.graphdef, run.params, run.features, draw, batch, run.num_motions
+  )
   try:
     graph = to_onnx(program, args, inputs, outputs, doc=f"chorjax dancer: {run.workdir}")
   except Unsupported as e:
@@ -185,8 +190,8 @@ def _io(name: str, value) -> dict:
 def _sidecar(run, sampling, batch: int, contract: dict) -> dict:
   f = run.features
   sk = f.skeleton
-  shapes = {io["name"]: io["shape"] for io in contract["inputs"]}
-  k, d = shapes["gumbel"][1], shapes["normal"][1]
+  shapes = {io["name"]: io["shape"] for io in [*contract["inputs"], *contract["outputs"]]}
+  k, n, d = shapes["gumbel"][1], shapes["normal"][1], shapes["frame"][1]
   return {
     "format": SIDECAR_FORMAT,
     "version": SIDECAR_VERSION,
@@ -194,8 +199,10 @@ def _sidecar(run, sampling, batch: int, contract: dict) -> dict:
     "checkpoint_step": run.step,
     "fps": run.fps,
     "batch": batch,
+    "family": run.config.model.family,
     "dim": d,
     "num_mixtures": k,
+    "normal_size": n,
     "motions": dict(sorted(run.id_map.items(), key=lambda kv: kv[1])),
     "skeleton": {
       "joint_names": list(sk.joint_names),
@@ -208,26 +215,23 @@ def _sidecar(run, sampling, batch: int, contract: dict) -> dict:
     "random_numbers": {
       "gumbel": "standard Gumbel [B, K] each frame: -log(-log(u)), u uniform in (0, 1)",
       "normal": "standard normal [B, D] each frame",
-      "chorjax": "chorjax sample --seed S draws them from split(key(S), frames)[t] (chorjax.export.sample_numbers)",
+      "chorjax": "chorjax sample --seed S draws the numbers chorjax.export.sample_numbers(run, S, frames) gives",
     },
     **contract,
     "features": f.to_dict(),
   }
 
 
-def sample_numbers(seed: int, frames: int, batch: int, num_mixtures: int, dim: int):
-  """``(gumbel [T, B, K], normal [T, B, D])``: the random numbers each frame of ``chorjax sample --seed
-  seed`` is drawn with (``heads.frame_numbers`` of each frame's key)."""
+def sample_numbers(run, seed: int, frames: int, batch: int = 1):
+  """``(gumbel [T, B, K], normal [T, B, N])``: the random numbers each frame of ``chorjax sample --seed seed``
+  (``batch`` dancers) is drawn with, as the run's exported graph takes them (``Family.frame_numbers``)."""
   import jax
 
-  from chorjax.models.heads import frame_numbers
-
-  keys = jax.random.split(jax.random.key(seed), frames)
-  gumbel, normal = jax.vmap(lambda k: frame_numbers(k, batch, num_mixtures, dim))(keys)
-  return np.asarray(gumbel), np.asarray(normal)
+  gumbel, normal = run.family.frame_numbers(run.graphdef, run.params, jax.random.key(seed), frames, batch)
+  return np.asarray(gumbel, np.float32), np.asarray(normal, np.float32)
 
 
-def page_numbers(seed: int, frames: int, batch: int, num_mixtures: int, dim: int):
+def page_numbers(seed: int, frames: int, batch: int, num_gumbel: int, num_normal: int):
   """``(gumbel [T, B, K], normal [T, B, D])``: the random numbers the exported web page draws with ``seed``
   (its mulberry32 stream; Gumbel as ``-log(-log(u))``, normal by Box-Muller's cosine, one pair of uniforms
   each), so that onnxruntime in Python can draw what the page draws."""
@@ -245,11 +249,11 @@ def page_numbers(seed: int, frames: int, batch: int, num_mixtures: int, dim: int
     t ^= (t + imul(t ^ (t >> 7), t | 61)) & mask
     return (((t ^ (t >> 14)) & mask) + 0.5) / 4294967296
 
-  gumbel = np.zeros((frames, batch, num_mixtures), np.float32)
-  normal = np.zeros((frames, batch, dim), np.float32)
+  gumbel = np.zeros((frames, batch, num_gumbel), np.float32)
+  normal = np.zeros((frames, batch, num_normal), np.float32)
   for f in range(frames):
-    gumbel[f] = np.array([-np.log(-np.log(uniform())) for _ in range(batch * num_mixtures)]).reshape(batch, -1)
-    pairs = [(uniform(), uniform()) for _ in range(batch * dim)]
+    gumbel[f] = np.array([-np.log(-np.log(uniform())) for _ in range(batch * num_gumbel)]).reshape(batch, -1)
+    pairs = [(uniform(), uniform()) for _ in range(batch * num_normal)]
     normal[f] = np.array([np.sqrt(-2 * np.log(u1)) * np.cos(2 * np.pi * u2) for u1, u2 in pairs]).reshape(batch, -1)
   return gumbel, normal
 

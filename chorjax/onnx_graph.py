@@ -373,10 +373,15 @@ def _batched_gather(g: _Graph, eqn, ins):
 
 
 def _scatter(g: _Graph, eqn, ins):
-  """The ``scatter`` of ``x.at[i].set(v)`` and ``x.at[a:b].set(v)`` along the first axis (one index)."""
+  """The ``scatter`` of ``x.at[i].set(v)`` and ``x.at[a:b].set(v)`` along the first axis (one index), and of
+  ``x.at[..., idx].set(v)`` along any one axis (:func:`_scatter_along`)."""
   dn = eqn.params["dimension_numbers"]
   operand = eqn.invars[0].aval.shape
   update = eqn.invars[2].aval.shape
+  one_axis = len(dn.scatter_dims_to_operand_dims) == 1 and dn.inserted_window_dims == dn.scatter_dims_to_operand_dims
+  several = eqn.invars[1].aval.size > 1 or tuple(dn.scatter_dims_to_operand_dims) != (0,)
+  if one_axis and several and not dn.operand_batching_dims:
+    return _scatter_along(g, eqn, ins)
   if tuple(dn.scatter_dims_to_operand_dims) != (0,) or dn.operand_batching_dims or eqn.invars[1].aval.size != 1:
     raise Unsupported(f"cannot export: a scatter of the form {dn}")
   rows = 1 if dn.inserted_window_dims == (0,) else update[0]
@@ -385,6 +390,24 @@ def _scatter(g: _Graph, eqn, ins):
   index = g.node("Reshape", [g.node("Add", [start, g.ints(np.arange(rows))]), g.ints([rows, 1])])
   values = g.node("Reshape", [ins[2], g.ints([rows, *operand[1:]])])
   return g.node("ScatterND", [ins[0], index, values])
+
+
+def _scatter_along(g: _Graph, eqn, ins):
+  """``x.at[..., idx, ...].set(v)`` along one axis ``a``: ScatterND on ``x`` with ``a`` moved first."""
+  dn = eqn.params["dimension_numbers"]
+  operand, update = eqn.invars[0].aval.shape, eqn.invars[2].aval.shape
+  (a,) = dn.scatter_dims_to_operand_dims
+  idx_shape = eqn.invars[1].aval.shape
+  if idx_shape[-1] != 1:
+    raise Unsupported(f"cannot export: a scatter with index vectors of {idx_shape[-1]}")
+  first = [a, *[d for d in range(len(operand)) if d != a]]
+  back = [first.index(d) for d in range(len(operand))]
+  data = g.node("Transpose", [ins[0]], perm=first)
+  index = g.node("Cast", [ins[1]], to=_onnx_type(np.int64))
+  window = list(dn.update_window_dims)
+  batch = [d for d in range(len(update)) if d not in window]
+  values = g.node("Transpose", [ins[2]], perm=batch + window)
+  return g.node("Transpose", [g.node("ScatterND", [data, index, values])], perm=back)
 
 
 _HANDLERS.update({"dot_general": _dot_general, "dynamic_slice": _dynamic_slice, "gather": _gather, "scatter": _scatter})

@@ -8,7 +8,7 @@ import jax
 import numpy as np
 import onnx
 import pytest
-from helpers import TINY
+from helpers import GAN_NETWORKS, TINY
 
 from chorjax import cli
 from chorjax.api import load_run
@@ -53,7 +53,7 @@ def test_the_onnx_dancer_draws_what_chorjax_sample_draws(quickstart, tmp_path):
   assert meta["controls"]["noise_order"] == 4 and meta["controls"]["pace"] == 2.0  # what it was exported with
 
   frames, seed = 600, 3
-  gumbel, normal = sample_numbers(seed, frames, 1, meta["num_mixtures"], meta["dim"])
+  gumbel, normal = sample_numbers(run, seed, frames)
   z = dancer.dance(motion_weight_vector(run.num_motions, 2)[None], gumbel, normal)
   expected, _ = sample_dancers(run, frames, 1, seed, motion=2)
   got = dancer.positions(z)
@@ -88,10 +88,10 @@ def test_a_batch_of_dancers_each_on_its_own_motion_and_a_restart_mid_dance(quick
   run = load_run(quickstart)
   run.export(tmp_path / "two.onnx", batch=2)
   dancer = OnnxDancer(tmp_path / "two.onnx")
-  k, d, m = dancer.meta["num_mixtures"], dancer.meta["dim"], run.num_motions
+  m = run.num_motions
   weights = np.stack([motion_weight_vector(m, 1), motion_weight_vector(m, mix="0:0.5,3:0.5")])
   frames = 200
-  gumbel, normal = sample_numbers(5, frames, 2, k, d)
+  gumbel, normal = sample_numbers(run, 5, frames, batch=2)
   z = dancer.dance(weights, gumbel, normal)
   sampling = run.sampling()
   ranged = run.ranged(sampling)
@@ -119,13 +119,28 @@ def test_other_cells_and_heads_export_with_the_same_draw(cell, head, tmp_path):
   dancer = OnnxDancer(tmp_path / "d.onnx")
   run = load_run(run_dir)
   frames = 120
-  gumbel, normal = sample_numbers(1, frames, 1, dancer.meta["num_mixtures"], dancer.meta["dim"])
+  gumbel, normal = sample_numbers(run, 1, frames)
   got = dancer.positions(dancer.dance(motion_weight_vector(run.num_motions)[None], gumbel, normal))
   expected, _ = sample_dancers(run, frames, 1, 1, controls={"noise_smoothing": 0.5})
   assert np.abs(got - expected).max() <= 1e-4 * body_size(expected)
   ort_web = NODE_MODULES / "node_modules" / "onnxruntime-web" / "dist"
   web = ["export", str(run_dir), "--web", str(tmp_path / "site"), "--ort-web", str(ort_web)]
   assert exit_code(web) == 2 and not (tmp_path / "site").exists()  # the page decodes canonical runs only
+
+
+def test_a_gan_run_exports_its_generator_one_frame_a_call(tmp_path):
+  """A tiny LSTM-GAN (bone directions, per-frame noise): 600 frames of two dancers from onnxruntime are `chorjax
+  sample`'s, the noise vector read on each dancer's first frame and the frame noise every frame."""
+  run_dir = trained(tmp_path / "gan", *GAN_NETWORKS, "gan.frame_noise=2")
+  assert cli.main(["export", str(run_dir), "-o", str(tmp_path / "gan.onnx"), "--batch", "2"]) == 0
+  run, dancer = load_run(run_dir), OnnxDancer(tmp_path / "gan.onnx")
+  assert dancer.meta["family"] == "gan" and dancer.meta["normal_size"] == 8 + 2  # gan.latent_size + frame noise
+  frames = 600
+  gumbel, normal = sample_numbers(run, 7, frames, batch=2)
+  weights = np.full((2, run.num_motions), 1.0 / run.num_motions, np.float32)  # a GAN reads no motion
+  got = dancer.positions(dancer.dance(weights, gumbel, normal))
+  expected, _ = sample_dancers(run, frames, 2, 7)
+  assert got.shape == expected.shape and np.abs(got - expected).max() <= 1e-4 * body_size(expected)
 
 
 def exit_code(args) -> int:
@@ -249,6 +264,6 @@ def test_the_web_page_dances_offline_and_draws_what_onnxruntime_draws(quickstart
   assert report["seconds"] >= 10 and report["shown"] >= 250 and report["moved"] > 0
 
   dancer = OnnxDancer(site / "dancer.onnx")
-  gumbel, normal = page_numbers(0, 100, 1, dancer.meta["num_mixtures"], dancer.meta["dim"])
+  gumbel, normal = page_numbers(0, 100, 1, dancer.meta["num_mixtures"], dancer.meta["normal_size"])
   weights = np.eye(len(dancer.meta["motions"]), dtype=np.float32)[:1]
   np.testing.assert_allclose(np.asarray(report["frames"]), dancer.dance(weights, gumbel, normal)[0], atol=1e-4)

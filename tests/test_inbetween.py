@@ -212,6 +212,8 @@ def test_bad_inbetween_input_is_refused(trained, tmp_path, capsys):
   assert not out.exists()
   assert cli.main(["sample", str(workdir), "-o", str(out)]) == 2
   assert "use `chorjax inbetween`" in capsys.readouterr().err
+  assert cli.main(["export", str(workdir), "-o", str(tmp_path / "d.onnx")]) == 2  # no dance of its own to export
+  assert "use `chorjax inbetween`" in capsys.readouterr().err and not list(tmp_path.glob("d.*"))
   bad = tmp_path / "bad.toml"
   bad.write_text('[model]\nfamily = "inbetween"\n[inbetween]\nmin_frames = 40\nmax_frames = 30\n')
   assert cli.main(["train", str(bad), "--workdir", str(tmp_path / "never")]) == 2

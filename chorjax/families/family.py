@@ -113,11 +113,18 @@ class Family:
     ``draw`` the run's ``Controls.draw`` (its temperatures may change between chunks)."""
     raise NotImplementedError
 
-  def frame_program(self, graphdef, params, draw, batch: int) -> tuple[Callable, list, list[str], list[str]]:
+  def frame_program(
+    self, graphdef, params, features, draw, batch: int, num_motions: int
+  ) -> tuple[Callable, list, list[str], list[str]]:
     """One frame of the family's draw for ``batch`` dancers as a function of arrays (``chorjax export`` traces
     it into an ONNX graph): ``(program, example inputs, input names, output names)``; the inputs begin with
-    ``weights [B, M]``, ``start [B]``, ``gumbel [B, K]``, ``normal [B, D]``, then the state; the outputs are
-    ``frame [B, D]`` and the next state (families whose runs serve ``export``)."""
+    ``weights [B, M]``, ``start [B]``, ``gumbel [B, K]``, ``normal [B, N]``, then the state; the outputs are
+    ``frame [B, D]`` and the next state (families whose runs serve ``export``); ``M = num_motions``."""
+    raise NotImplementedError
+
+  def frame_numbers(self, graphdef, params, key, frames: int, batch: int) -> tuple:
+    """``(gumbel [T, B, K], normal [T, B, N])``: the random numbers each frame of :meth:`dance` with ``key``
+    is drawn with, as :meth:`frame_program` takes them (``chorjax.export.sample_numbers``)."""
     raise NotImplementedError
 
   def vector_step(self) -> tuple[Callable, Callable] | None:

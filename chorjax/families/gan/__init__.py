@@ -23,8 +23,6 @@ class Gan(Family):
       return "a GAN draws whole sequences from noise; there is nothing to calibrate"
     if command == "live":
       return "a GAN run writes whole sequences from noise; live mode streams the rnn family"
-    if command == "export":
-      return "a GAN run writes whole sequences from noise; export writes the rnn family's frame-by-frame draw"
     return super().refusal(command)
 
   def columns(self, config: dict) -> tuple[str, str]:
@@ -59,6 +57,16 @@ class Gan(Family):
     from chorjax.families.gan.networks import gan_controls
 
     return gan_controls(controls)
+
+  def frame_program(self, graphdef, params, features, draw, batch: int, num_motions: int):
+    from chorjax.families.gan.networks import frame_program
+
+    return frame_program(graphdef, params, features, draw, batch, num_motions)
+
+  def frame_numbers(self, graphdef, params, key, frames: int, batch: int):
+    from chorjax.families.gan.networks import frame_numbers
+
+    return frame_numbers(graphdef, params, key, frames, batch)
 
   def dance(self, graphdef, params, features, motion, key, num_frames, controls, prime=None):
     """Each dancer one sequence from noise (``motion`` only counts them; no prime)."""

@@ -220,6 +220,59 @@ def generate_sequences(graphdef, params, key, *, num: int, num_frames: int, proj
   return x if bounds is None else jnp.clip(x, *bounds)
 
 
+def frame_numbers(graphdef, params, key, frames: int, batch: int):
+  """``(gumbel [T, B, 1], normal [T, B, Z + F])``: the numbers :func:`fake_sequences` draws with ``key``, frame
+  by frame as :func:`frame_program` takes them: every frame's normal row holds the noise vector (read on a
+  dancer's first frame) and that frame's ``gan.frame_noise`` channels; no component to pick."""
+  gen = nnx.merge(graphdef, params).generator
+  k_z, k_frames = jax.random.split(key)
+  z = jax.random.normal(k_z, (batch, gen.latent_size))
+  noise = jax.random.normal(k_frames, (batch, frames, gen.frame_noise))
+  normal = jnp.concatenate([jnp.broadcast_to(z[:, None], (batch, frames, gen.latent_size)), noise], -1)
+  return jnp.zeros((frames, batch, 1), jnp.float32), jnp.swapaxes(normal, 0, 1)
+
+
+def frame_program(graphdef, params, features, draw, batch: int, num_motions: int):
+  """The generator one frame a call (``Family.frame_program``): on a dancer's first frame (``start``) the
+  noise vector (the first ``Z`` of ``normal``) goes through the dense layers and the recurrent state starts
+  at zero; each frame its ``gan.frame_noise`` channels (the rest of ``normal``) join that vector, one
+  recurrent step and the output layer give the frame, through the pose layer and the training range
+  (``sample.clamp``) as :func:`generate_sequences` does. ``weights`` and ``gumbel`` are not read."""
+  model = nnx.merge(graphdef, params)
+  gen = model.generator
+  projection = pose_layer(features, model.pose)
+  bounds = draw.bounds
+  z_size, f_size = gen.latent_size, gen.frame_noise
+
+  def fresh(normal):
+    h = normal[:, :z_size]
+    for layer in gen.dense:
+      h = nnx.relu(layer(h))
+    return gen.core.initial_carry(jnp.zeros((batch, 1), h.dtype)), h
+
+  def program(weights, start, gumbel, normal, *leaves):
+    del weights, gumbel
+    restart = start > 0.5
+    f_carry, f_h = fresh(normal)
+    carry, h = jax.tree.unflatten(treedef, leaves)
+    pick = lambda f, s: jnp.where(restart[:, None], f, s)
+    carry, h = jax.tree.map(pick, f_carry, carry), pick(f_h, h)
+    x_in = jnp.concatenate([h, normal[:, z_size : z_size + f_size]], -1) if f_size else h
+    carry, y = gen.core.step(carry, x_in)
+    x = gen.out(y)
+    x = x if projection is None else projection(x[:, None])[:, 0]
+    x = x if bounds is None else jnp.clip(x, bounds.low, bounds.high)
+    return (x, *jax.tree.leaves((carry, h)))
+
+  template = jax.eval_shape(fresh, jax.ShapeDtypeStruct((batch, z_size + f_size), jnp.float32))
+  paths, treedef = jax.tree_util.tree_flatten_with_path(template)
+  names = ["state." + ".".join(str(getattr(p, "idx", p)) for p in path) for path, _ in paths]
+  shapes = [(batch, num_motions), (batch,), (batch, 1), (batch, z_size + f_size)]
+  args = [np.zeros(s, np.float32) for s in shapes] + [np.zeros(leaf.shape, leaf.dtype) for _, leaf in paths]
+  args[1][:] = 1.0
+  return program, args, ["weights", "start", "gumbel", "normal", *names], ["frame", *[f"{n}.next" for n in names]]
+
+
 def gan_controls(controls):
   """Sampling ``controls`` (``SampleConfig.controls``) as a GAN applies them: the frame-by-frame MDN draw
   controls at their neutral values (temperatures 1, the rest off); ``clamp``, ``rigid_bones`` and

@@ -59,10 +59,20 @@ class Recurrent(Family):
 
     return start_stream, continue_stream
 
-  def frame_program(self, graphdef, params, draw, batch: int):
+  def frame_program(self, graphdef, params, features, draw, batch: int, num_motions: int):
     from chorjax.families.recurrent.generation import frame_program
 
     return frame_program(graphdef, params, draw, batch)
+
+  def frame_numbers(self, graphdef, params, key, frames: int, batch: int):
+    import jax
+    from flax import nnx
+
+    from chorjax.models.heads import frame_numbers
+
+    model = nnx.merge(graphdef, params)
+    k, d = model.num_mixtures, model.dim
+    return jax.vmap(lambda f: frame_numbers(f, batch, k, d))(jax.random.split(key, frames))
 
   def vector_step(self):
     from chorjax.families.recurrent.steps import _train_step, eval_step
