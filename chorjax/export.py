@@ -61,8 +61,8 @@ def export_onnx(run, output, *, batch: int = 1, controls: dict | None = None, fo
 
   _needs_onnx()
   out, _ = check_output(output, (".onnx",))
-  if not 1 <= batch <= MAX_BATCH:
-    raise UserError(f"--batch {batch}: must be within 1-{MAX_BATCH}")
+  if isinstance(batch, bool) or not isinstance(batch, int | np.integer) or not 1 <= batch <= MAX_BATCH:
+    raise UserError(f"--batch {batch!r}: must be a whole number within 1-{MAX_BATCH}")
   side = sidecar_path(out)
   refuse_existing([out, side], force)
   run = run.serving("export")

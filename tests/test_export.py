@@ -14,6 +14,7 @@ from chorjax import cli
 from chorjax.api import load_run
 from chorjax.config import load_config
 from chorjax.data.csv import read_csv
+from chorjax.errors import UserError
 from chorjax.export import OnnxDancer, sample_numbers
 from chorjax.models import motion_weight_vector
 from chorjax.sample import sample_dancers
@@ -86,6 +87,9 @@ def test_a_batch_of_dancers_each_on_its_own_motion_and_a_restart_mid_dance(quick
   """Two dancers a call, one on a take and one on a blend, are the frame-by-frame draw of both at once; a
   dancer started over mid-dance (start = 1) dances as a fresh one from there, the other one going on."""
   run = load_run(quickstart)
+  for bad in (0, 2.5, True):
+    with pytest.raises(UserError, match="--batch"):
+      run.export(tmp_path / "two.onnx", batch=bad)
   run.export(tmp_path / "two.onnx", batch=2)
   dancer = OnnxDancer(tmp_path / "two.onnx")
   m = run.num_motions
