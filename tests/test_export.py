@@ -271,3 +271,32 @@ def test_the_web_page_dances_offline_and_draws_what_onnxruntime_draws(quickstart
   gumbel, normal = page_numbers(0, 100, 1, dancer.meta["num_mixtures"], dancer.meta["normal_size"])
   weights = np.eye(len(dancer.meta["motions"]), dtype=np.float32)[:1]
   np.testing.assert_allclose(np.asarray(report["frames"]), dancer.dance(weights, gumbel, normal)[0], atol=1e-4)
+
+
+BLENDER_PYTHON = ROOT / ".venv" / "blender" / "bin" / "python"  # .ci/run: a venv with the bpy package
+
+
+def test_blenders_gltf_importer_puts_the_joints_where_chorjax_put_them(tmp_path):
+  """Blender's own glTF importer (bpy, headless) reads a written take's nodes and animation: at every frame
+  each joint is where chorjax's positions are (glTF's y-up turned into Blender's z-up)."""
+  import subprocess
+
+  from chorjax.api import Motion
+  from chorjax.data.dataset import bundled_path
+  from chorjax.data.gltf import gltf_positions
+
+  if not BLENDER_PYTHON.exists():
+    pytest.fail(f"Blender's Python is missing: .ci/run installs the bpy package into {BLENDER_PYTHON.parents[1]}")
+  take = Motion.of(read_csv(bundled_path("cmu94") / "94_05_skeleton_3d.csv"))
+  take = take.replace(positions=take.positions[:90])
+  take.write(tmp_path / "take.glb")
+  names = list(take.skeleton.joint_names)
+  script = Path(__file__).with_name("blender_positions.py")
+  args = [str(BLENDER_PYTHON), str(script), str(tmp_path / "take.glb"), str(int(take.fps)), "90", json.dumps(names)]
+  done = subprocess.run(args, capture_output=True, text=True, timeout=300)
+  assert done.returncode == 0, done.stderr[-2000:]
+  (line,) = [line for line in done.stdout.splitlines() if line.startswith("POSITIONS")]
+  z_up = np.asarray(json.loads(line.removeprefix("POSITIONS")))
+  got = np.stack([z_up[..., 0], z_up[..., 2], -z_up[..., 1]], -1)  # Blender's (x, y, z) is glTF's (x, -z, y)
+  want, _ = gltf_positions(take)
+  assert got.shape == want.shape and np.abs(got - want).max() <= 1e-4 * body_size(want)
