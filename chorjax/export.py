@@ -214,7 +214,7 @@ def _sidecar(run, sampling, batch: int, contract: dict) -> dict:
     "decoding": sampling.decoding(),
     "random_numbers": {
       "gumbel": "standard Gumbel [B, K] each frame: -log(-log(u)), u uniform in (0, 1)",
-      "normal": "standard normal [B, D] each frame",
+      "normal": "standard normal [B, N] each frame (N: normal_size)",
       "chorjax": "chorjax sample --seed S draws the numbers chorjax.export.sample_numbers(run, S, frames) gives",
     },
     **contract,
@@ -232,7 +232,7 @@ def sample_numbers(run, seed: int, frames: int, batch: int = 1):
 
 
 def page_numbers(seed: int, frames: int, batch: int, num_gumbel: int, num_normal: int):
-  """``(gumbel [T, B, K], normal [T, B, D])``: the random numbers the exported web page draws with ``seed``
+  """``(gumbel [T, B, K], normal [T, B, N])``: the random numbers the exported web page draws with ``seed``
   (its mulberry32 stream; Gumbel as ``-log(-log(u))``, normal by Box-Muller's cosine, one pair of uniforms
   each), so that onnxruntime in Python can draw what the page draws."""
   state = seed & 0xFFFFFFFF

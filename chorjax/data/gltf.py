@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from chorjax.data.motion import Motion
-from chorjax.data.rotations import local_transforms, matrix_to_quaternion, pose_rotations
+from chorjax.data.motion import Motion, topological_order
+from chorjax.data.rotations import local_transforms, matrix_to_quaternion, pose_rotations, quaternion_to_matrix
 from chorjax.errors import UserError, atomic_write
 
 # metres per unit of the units a Motion may name (others are written as they are)
@@ -120,24 +120,10 @@ def read_glb_positions(path) -> np.ndarray:
   for k, node in enumerate(doc.nodes):
     for c in node.children:
       parent[c] = k
-  order, seen = [], set()
-  while len(order) < j:
-    for k in range(j):
-      if k not in seen and (parent[k] < 0 or parent[k] in seen):
-        order.append(k)
-        seen.add(k)
   t = len(next(iter(tracks.values())))
   world_r, world_t = np.zeros((t, j, 3, 3)), np.zeros((t, j, 3))
-  for k in order:
-    x, y, z, w = tracks[(k, "rotation")].astype(np.float64).T
-    r = np.stack(
-      [
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
-      ],
-      -2,
-    )
+  for k in topological_order(parent):
+    r = quaternion_to_matrix(tracks[(k, "rotation")])
     local_t = tracks[(k, "translation")].astype(np.float64)
     if parent[k] < 0:
       world_r[:, k], world_t[:, k] = r, local_t

@@ -114,6 +114,18 @@ def matrix_to_quaternion(m_Nx3x3) -> np.ndarray:
   return np.where(q[..., 3:] < 0, -q, q)
 
 
+def quaternion_to_matrix(q_Nx4) -> np.ndarray:
+  """Rotation matrices ``[..., 3, 3]`` of unit quaternions ``(x, y, z, w)`` (the inverse of
+  :func:`matrix_to_quaternion`)."""
+  x, y, z, w = np.moveaxis(np.asarray(q_Nx4, np.float64), -1, 0)
+  rows = [
+    [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+    [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+    [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+  ]
+  return np.stack([np.stack(row, -1) for row in rows], -2)
+
+
 def pose_rotations(pos_TxJx3, parents, order) -> np.ndarray:
   """Every joint's global rotation ``[T, J, 3, 3]`` from the first frame (the rest pose) to each frame, by
   inverse kinematics of the positions: a joint with one child turns by the smallest rotation (swing) that

@@ -201,12 +201,19 @@ def pose_layer(features, pose: str):
   return {"directions": Projection, "rotations": Kinematics}[pose].of(features) if pose != "features" else None
 
 
+def generator_noise(generator: Generator, key, num: int, frames: int):
+  """``(z [num, Z], frame noise [num, frames, F])``: the standard-normal noise a draw with ``key`` feeds the
+  generator (:func:`fake_sequences`; :func:`frame_numbers` hands the same numbers to an exported graph)."""
+  k_z, k_frames = jax.random.split(key)
+  z = jax.random.normal(k_z, (num, generator.latent_size))
+  return z, jax.random.normal(k_frames, (num, frames, generator.frame_noise))
+
+
 def fake_sequences(generator: Generator, key, num: int, frames: int, projection=None):
   """``num`` generated sequences of ``frames`` frames ``[num, frames, D]`` from standard-normal noise, through
   ``projection`` (:func:`pose_layer`) where given."""
-  k_z, k_frames = jax.random.split(key)
-  z = jax.random.normal(k_z, (num, generator.latent_size))
-  x = generator(z, frames, jax.random.normal(k_frames, (num, frames, generator.frame_noise)))
+  z, noise = generator_noise(generator, key, num, frames)
+  x = generator(z, frames, noise)
   return x if projection is None else projection(x)
 
 
@@ -225,9 +232,7 @@ def frame_numbers(graphdef, params, key, frames: int, batch: int):
   by frame as :func:`frame_program` takes them: every frame's normal row holds the noise vector (read on a
   dancer's first frame) and that frame's ``gan.frame_noise`` channels; no component to pick."""
   gen = nnx.merge(graphdef, params).generator
-  k_z, k_frames = jax.random.split(key)
-  z = jax.random.normal(k_z, (batch, gen.latent_size))
-  noise = jax.random.normal(k_frames, (batch, frames, gen.frame_noise))
+  z, noise = generator_noise(gen, key, batch, frames)
   normal = jnp.concatenate([jnp.broadcast_to(z[:, None], (batch, frames, gen.latent_size)), noise], -1)
   return jnp.zeros((frames, batch, 1), jnp.float32), jnp.swapaxes(normal, 0, 1)
 
