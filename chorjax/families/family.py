@@ -133,3 +133,24 @@ class Family:
     scale and the input noise traced, and ``loss(params, windows, graphdef)`` on ``data.dataset`` windows; or
     None where the family trains its points apart."""
     return None
+
+
+def frame_io(template, top: tuple[str, ...], batch: int, num_motions: int, num_gumbel: int, num_normal: int):
+  """What :meth:`Family.frame_program` returns beside its program, from the shapes of its state ``template``
+  (a tuple of ``top`` parts): ``(treedef, example inputs, input names, output names)``: ``weights``,
+  ``start`` (ones: every dancer starts), ``gumbel``, ``normal``, then each state leaf zeros, named by its
+  place (``state.carry.0.1``); the outputs ``frame`` and each leaf's ``.next``."""
+  import jax
+  import numpy as np
+
+  paths, treedef = jax.tree_util.tree_flatten_with_path(template)
+
+  def name(path) -> str:
+    keys = [str(getattr(p, "idx", getattr(p, "key", p))) for p in path]
+    return ".".join(["state", top[int(keys[0])], *keys[1:]])
+
+  names = [name(path) for path, _ in paths]
+  shapes = [(batch, num_motions), (batch,), (batch, num_gumbel), (batch, num_normal)]
+  args = [np.zeros(s, np.float32) for s in shapes] + [np.zeros(leaf.shape, leaf.dtype) for _, leaf in paths]
+  args[1][:] = 1.0
+  return treedef, args, ["weights", "start", "gumbel", "normal", *names], ["frame", *[f"{n}.next" for n in names]]

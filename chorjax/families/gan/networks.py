@@ -27,6 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 from flax import nnx
 
+from chorjax.families.family import frame_io
 from chorjax.models.rnn import RecurrentCore
 
 
@@ -270,12 +271,8 @@ def frame_program(graphdef, params, features, draw, batch: int, num_motions: int
     return (x, *jax.tree.leaves((carry, h)))
 
   template = jax.eval_shape(fresh, jax.ShapeDtypeStruct((batch, z_size + f_size), jnp.float32))
-  paths, treedef = jax.tree_util.tree_flatten_with_path(template)
-  names = ["state." + ".".join(str(getattr(p, "idx", p)) for p in path) for path, _ in paths]
-  shapes = [(batch, num_motions), (batch,), (batch, 1), (batch, z_size + f_size)]
-  args = [np.zeros(s, np.float32) for s in shapes] + [np.zeros(leaf.shape, leaf.dtype) for _, leaf in paths]
-  args[1][:] = 1.0
-  return program, args, ["weights", "start", "gumbel", "normal", *names], ["frame", *[f"{n}.next" for n in names]]
+  treedef, args, inputs, outputs = frame_io(template, ("carry", "vector"), batch, num_motions, 1, z_size + f_size)
+  return program, args, inputs, outputs
 
 
 def gan_controls(controls):

@@ -19,6 +19,7 @@ from flax import nnx
 from chorjax.config import MAX_NOISE_ORDER
 from chorjax.controls import Controls, Draw, Pacing
 from chorjax.data.features import joint_pace
+from chorjax.families.family import frame_io
 from chorjax.models.heads import frame_numbers
 
 # Frames per iteration of the plain generation loop: an iteration's fixed cost (the loop's bookkeeping, one
@@ -156,25 +157,15 @@ def frame_program(graphdef, params, draw: Draw, batch: int):
   b, d = batch, model.dim
   fresh = lambda weights: _smooth_start(model.initial_carry(weights), jnp.zeros((b, d), jnp.float32), draw)
   template = jax.eval_shape(fresh, jax.ShapeDtypeStruct((b, model.num_motions), jnp.float32))
-  paths, treedef = jax.tree_util.tree_flatten_with_path(template)
-  names = [f"state.{_leaf_name(path)}" for path, _ in paths]
+  top = ("carry", "previous", "filters", "drawn", "governor")
+  treedef, args, inputs, outputs = frame_io(template, top, b, model.num_motions, model.num_mixtures, d)
 
   def program(weights, start, gumbel, normal, *leaves):
     state = _restart(jax.tree.unflatten(treedef, leaves), fresh(weights), start > 0.5)
     state, x = step(state, gumbel, normal)
     return (x, *jax.tree.leaves(state))
 
-  shapes = [(b, model.num_motions), (b,), (b, model.num_mixtures), (b, d)]
-  args = [np.zeros(s, np.float32) for s in shapes] + [np.zeros(leaf.shape, leaf.dtype) for _, leaf in paths]
-  args[1][:] = 1.0
-  return program, args, ["weights", "start", "gumbel", "normal", *names], ["frame", *[f"{n}.next" for n in names]]
-
-
-def _leaf_name(path) -> str:
-  """A state leaf's name from its place in the draw's state (``carry.0.1``, ``filters``, ``governor.2`` ...)."""
-  top = ("carry", "previous", "filters", "drawn", "governor")
-  keys = [str(getattr(p, "idx", getattr(p, "key", p))) for p in path]
-  return ".".join([top[int(keys[0])], *keys[1:]])
+  return program, args, inputs, outputs
 
 
 def _restart(state, fresh, start_B):
