@@ -47,7 +47,7 @@ from chorjax.errors import (
 )
 from chorjax.evaluate import evaluate_to  # noqa: F401
 from chorjax.experiments import compare_to, run_sweep, train_command  # noqa: F401
-from chorjax.export import write_onnx, write_web  # noqa: F401
+from chorjax.export import write_blender_addon, write_onnx, write_web  # noqa: F401
 from chorjax.live import run_live  # noqa: F401
 from chorjax.render.files import plot_file, render  # noqa: F401
 from chorjax.reports import METRIC_KEYS, check_report, metric_lines, takes_table  # noqa: F401

@@ -118,6 +118,11 @@ def _export(args) -> int:
   return 0
 
 
+def _blender_addon(args) -> int:
+  print(f"wrote {api.write_blender_addon(args.output, force=args.force)} (Blender: Preferences > Add-ons > Install)")
+  return 0
+
+
 def _inbetween(args) -> int:
   _counts(args, num=1)
   kw = {"start": args.from_, "to": args.to, "frames": args.frames, "seed": args.seed, "num": args.num}
@@ -407,6 +412,7 @@ def _add_run_commands(sub) -> None:
   _add_render_command(sub)
   _add_live_command(sub)
   _add_export_command(sub)
+  _add_blender_addon_command(sub)
 
 
 def _add_export_command(sub) -> None:
@@ -432,6 +438,19 @@ def _add_export_command(sub) -> None:
   )
   _add_sampling_args(p, seed=False)
   p.set_defaults(func=_export)
+
+
+def _add_blender_addon_command(sub) -> None:
+  """`chorjax blender-addon`."""
+  p = sub.add_parser(
+    "blender-addon",
+    help="the Blender add-on: a dance file or chorjax live onto the selected armature",
+    description="Writes the Blender add-on as a zip to install in Blender: it imports a chorjax .npz/.csv onto the"
+    " selected armature as an action, and poses it live from chorjax live (docs/guides/export.md).",
+  )
+  p.add_argument("-o", "--output", metavar="ZIP", default="chorjax_blender.zip", help="default chorjax_blender.zip")
+  p.add_argument("--force", action="store_true", help="overwrite an existing zip")
+  p.set_defaults(func=_blender_addon)
 
 
 def _add_inbetween_command(sub) -> None:

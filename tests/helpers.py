@@ -5,6 +5,9 @@ from pathlib import Path
 
 from chorjax.config import load_config
 
+ROOT = Path(__file__).resolve().parents[1]
+BLENDER_PYTHON = ROOT / ".venv" / "blender" / "bin" / "python"  # .ci/run: a venv with the bpy package
+
 TINY = [
   "model.hidden_size=16",
   "model.num_layers=2",

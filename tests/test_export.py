@@ -8,7 +8,7 @@ import jax
 import numpy as np
 import onnx
 import pytest
-from helpers import GAN_NETWORKS, TINY
+from helpers import BLENDER_PYTHON, GAN_NETWORKS, TINY
 
 from chorjax import cli
 from chorjax.api import load_run
@@ -271,9 +271,6 @@ def test_the_web_page_dances_offline_and_draws_what_onnxruntime_draws(quickstart
   gumbel, normal = page_numbers(0, 100, 1, dancer.meta["num_mixtures"], dancer.meta["normal_size"])
   weights = np.eye(len(dancer.meta["motions"]), dtype=np.float32)[:1]
   np.testing.assert_allclose(np.asarray(report["frames"]), dancer.dance(weights, gumbel, normal)[0], atol=1e-4)
-
-
-BLENDER_PYTHON = ROOT / ".venv" / "blender" / "bin" / "python"  # .ci/run: a venv with the bpy package
 
 
 def test_blenders_gltf_importer_puts_the_joints_where_chorjax_put_them(tmp_path):

@@ -13,11 +13,12 @@ import sys
 import threading
 import time
 import urllib.request
+from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
 import pytest
-from helpers import QUICKSTART_SAMPLING, tiny_config
+from helpers import BLENDER_PYTHON, QUICKSTART_SAMPLING, tiny_config
 from test_sample_render import chromium
 
 from chorjax.data.csv import read_csv
@@ -548,3 +549,90 @@ def test_a_server_on_every_interface_refuses_forged_hosts_and_a_flooding_client_
     out, err = proc.communicate(timeout=30)
   assert proc.returncode == 0 and "Traceback" not in err, err[-2000:]
   assert "refused a malformed request: 1 Host and 2 Origin headers" in out  # one log line, no traceback
+
+
+# (bone whose head is the first joint, bone whose head is the second, the dance's joints): a driven bone of
+# the Mixamo-like armature in tests/blender_addon.py; "HeadTop" is the head bone's tail
+ADDON_BONES = ["Hips", "LeftUpLeg", "LeftLeg", "LeftFoot", "RightUpLeg", "RightLeg", "RightFoot", "Neck", "Head"]
+ADDON_BONES += ["LeftArm", "LeftForeArm", "LeftHand", "RightArm", "RightForeArm", "RightHand", "HeadTop"]
+ADDON_AIMS = [(f"{s}UpLeg", f"{s}Leg", f"{j}_hip", f"{j}_knee") for s, j in (("Left", "left"), ("Right", "right"))]
+ADDON_AIMS += [(f"{s}Leg", f"{s}Foot", f"{j}_knee", f"{j}_foot") for s, j in (("Left", "left"), ("Right", "right"))]
+ADDON_AIMS += [
+  (f"{s}Arm", f"{s}ForeArm", f"{j}_shoulder", f"{j}_elbow") for s, j in (("Left", "left"), ("Right", "right"))
+]
+ADDON_AIMS += [
+  (f"{s}ForeArm", f"{s}Hand", f"{j}_elbow", f"{j}_hand") for s, j in (("Left", "left"), ("Right", "right"))
+]
+ADDON_AIMS += [
+  ("Neck", "Head", "thorax", "neck"),
+  ("Head", "HeadTop", "neck", "head_top"),
+  ("RightUpLeg", "LeftUpLeg", "right_hip", "left_hip"),
+]
+
+
+def _worst_aim_degrees(heads_TxBx3, dance_TxJx3, joint_names) -> float:
+  """The largest angle between a driven bone (head to the next bone's head) and the dance's bone there."""
+  b, j = {n: k for k, n in enumerate(ADDON_BONES)}, {n: k for k, n in enumerate(joint_names)}
+  worst = 0.0
+  for bone_a, bone_b, joint_a, joint_b in ADDON_AIMS:
+    got, want = (
+      heads_TxBx3[:, b[bone_b]] - heads_TxBx3[:, b[bone_a]],
+      dance_TxJx3[:, j[joint_b]] - dance_TxJx3[:, j[joint_a]],
+    )
+    cos = (got * want).sum(-1) / np.linalg.norm(got, axis=-1) / np.linalg.norm(want, axis=-1)
+    worst = max(worst, float(np.degrees(np.arccos(np.clip(cos, -1, 1))).max()))
+  return worst
+
+
+@pytest.mark.slow
+def test_the_blender_addon_puts_a_sample_and_the_live_stream_onto_a_mixamo_like_armature(live_run, tmp_path):
+  """`chorjax blender-addon`'s zip, installed in headless Blender (bpy): a sample of the run imported onto a
+  Mixamo-like armature (other proportions, turned and scaled as an FBX import leaves it) points every driven
+  bone where the dance's bone points, every frame, its hips on the dance's path; then live mode follows a
+  running `chorjax live` for 100 frames and stops."""
+  from chorjax.cli import main
+  from chorjax.data.transforms import to_y_up
+  from chorjax.sample import write_sample
+
+  if not BLENDER_PYTHON.exists():
+    pytest.fail(f"Blender's Python is missing: .ci/run installs the bpy package into {BLENDER_PYTHON.parents[1]}")
+  addon, dance = tmp_path / "chorjax_blender.zip", tmp_path / "dance.npz"
+  assert main(["blender-addon", "-o", str(addon)]) == 0
+  write_sample(live_run, dance, frames=90)
+  proc, url = _start_live(live_run, "--fps", "200")
+  try:
+    script = [str(BLENDER_PYTHON), str(Path(__file__).with_name("blender_addon.py")), str(addon), str(dance)]
+    env = {**os.environ, "BLENDER_USER_SCRIPTS": str(tmp_path / "blender")}  # the add-on installs there
+    done = subprocess.run(
+      [*script, url.replace("http", "ws") + "/ws", "100"], capture_output=True, text=True, timeout=300, env=env
+    )
+  finally:
+    proc.send_signal(signal.SIGINT)
+    proc.wait(timeout=10)
+  assert done.returncode == 0, done.stderr[-3000:]
+  (line,) = [line for line in done.stdout.splitlines() if line.startswith("ADDON")]
+  report = json.loads(line.removeprefix("ADDON"))
+
+  motion = read_npz(dance)[0]
+  y_up = np.asarray(to_y_up(np.asarray(motion.positions, np.float64), motion.up_axis))
+  blender = np.stack([y_up[..., 0], -y_up[..., 2], y_up[..., 1]], -1)  # Blender's axes: z up, -y forward
+  imported = np.asarray(report["imported"])
+  assert report["refused"] == {
+    "not humanoid": "Error: Stick: no bone found for left_hip, left_knee, left_foot, left_shoulder, left_elbow, "
+    "left_hand, right_hip, right_knee, right_foot, right_shoulder, right_elbow, right_hand, neck, head "
+    "(a humanoid's bone names)",
+    "not a dance": "Error: chorjax_blender.zip: chorjax's .npz or .csv (the 16-joint layout) expected",
+    "no such dancer": "Error: dance.npz: dancer 7 asked for; it holds 1 (0-0)",
+  }
+  assert report["import"] == ["FINISHED"] and report["fps"] == motion.fps and imported.shape == (90, 16, 3)
+  names = motion.skeleton.joint_names
+  assert _worst_aim_degrees(imported, blender, names) < 0.1  # 0.03 seen (Blender computes in float32)
+  hips, pelvis = imported[:, 0], blender[:, names.index("pelvis")]
+  scale = (hips * pelvis).sum() / (pelvis * pelvis).sum()  # the dance scaled onto the armature's legs
+  assert scale > 0 and np.abs(hips - scale * pelvis).max() < 1e-4 * np.ptp(imported[..., 2])
+  assert np.abs(imported - np.asarray(report["rest"])).max() > 0.05 * np.ptp(imported[..., 2])  # it moved
+
+  live = report["live"]
+  assert live["error"] is None and live["received"] >= 100 and live["shown"] >= 100 and live["stopped"]
+  frame, heads = np.asarray(live["frame"])[None], np.asarray(live["heads"])[None]
+  assert _worst_aim_degrees(heads, frame, list(names)) < 0.1

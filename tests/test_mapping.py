@@ -7,7 +7,8 @@ import pytest
 
 from chorjax.data.amc import read_amc
 from chorjax.data.bvh import read_bvh
-from chorjax.data.mapping import find_mapping, map_takes, split_name, to_mpii16
+from chorjax.data.joint_names import split_name
+from chorjax.data.mapping import find_mapping, map_takes, to_mpii16
 from chorjax.data.skeletons import MPII16
 from chorjax.errors import UserError
 
