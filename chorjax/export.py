@@ -16,10 +16,13 @@ The contract (also in the sidecar's ``inputs``, ``outputs`` and ``state``):
 * ``start [B]``: 1 for a dancer's first frame (its state is then the weights' initial state), else 0;
 * ``gumbel [B, K]``, ``normal [B, N]``: this frame's random numbers;
 * ``state.*``: the state the previous call returned (zeros before the first frame);
-* out ``frame [B, D]``: the next frame's normalized features, and ``state.*`` for the next call.
+* out ``frame [B, D]``: the next frame's normalized features; ``positions [B, J, 3]``: its joints in data space,
+  decoded in the graph (``Features.decode_frame``: rigid bones where the run decodes so; grounding and foot
+  lock look at every frame and are left to the host); ``state.*`` for the next call (``state.place``: where
+  the dancer stands and faces).
 
-Frames become joint positions through the run's feature pipeline (the sidecar's ``features``):
-:class:`OnnxDancer` decodes them as ``chorjax sample`` does.
+:class:`OnnxDancer` also decodes frames as ``chorjax sample`` does, grounded and locked feet included, from the
+run's feature pipeline (the sidecar's ``features``).
 """
 
 from __future__ import annotations
@@ -96,8 +99,8 @@ def find_ort_web(given=None) -> Path:
 def write_web(workdir, folder, *, ort_web=None, controls=None, checkpoint="kept", force: bool = False) -> Path:
   """``chorjax export --web``: a static folder in which the run's dancer dances live in the page, offline:
   ``index.html``, the dancer (``dancer.onnx`` and its sidecar) and onnxruntime-web's files (``ort/``, with its
-  licence). Any static file server serves it. The page decodes canonical runs (the quick start's), with
-  rigid bones; it does not ground or lock the feet. Returns the folder."""
+  licence). Any static file server serves it. The page draws the joints the graph decodes (rigid bones; the
+  feet neither grounded nor locked). Returns the folder."""
   import shutil
   import tempfile
   from importlib.resources import files
@@ -111,11 +114,6 @@ def write_web(workdir, folder, *, ort_web=None, controls=None, checkpoint="kept"
     raise UserError(f"{out}: already exists and is not an empty folder (use --force to replace it)")
   ort = find_ort_web(ort_web)
   run = load_run(workdir, checkpoint)
-  if run.features.representation != "canonical":
-    raise UserError(
-      f"{workdir}: the page decodes canonical runs (data.representation = canonical); this run's is "
-      f"{run.features.representation} (export it with -o and decode in your own host)"
-    )
   out.parent.mkdir(parents=True, exist_ok=True)
   staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
   try:
@@ -207,6 +205,7 @@ def _program(run, sampling, batch: int):
   program, args, inputs, outputs = family.frame_program(
     run.graphdef, run.params, run.features, draw, batch, run.num_motions
   )
+  program, args, inputs, outputs = _with_positions(program, args, inputs, outputs, run.features, sampling)
   try:
     graph = to_onnx(program, args, inputs, outputs, doc=f"chorjax dancer: {run.workdir}")
   except Unsupported as e:
@@ -216,9 +215,26 @@ def _program(run, sampling, batch: int):
   contract = {
     "inputs": [_io(n, a) for n, a in zip(inputs, args, strict=True)],
     "outputs": [_io(n, a) for n, a in zip(outputs, example, strict=True)],
-    "state": [{"input": i, "output": o} for i, o in zip(state_in, outputs[1:], strict=True)],
+    "state": [{"input": i, "output": o} for i, o in zip(state_in, outputs[2:], strict=True)],
   }
   return graph, contract
+
+
+def _with_positions(program, args, inputs, outputs, features, sampling):
+  """The frame program with the frame's joint positions decoded in it (``Features.decode_frame``): a
+  ``positions [B, J, 3]`` output after ``frame`` and the place it carries as one more state,
+  ``state.place`` (zeros at a dancer's first frame)."""
+  rigid = sampling.decoding()["rigid"]
+  batch = args[0].shape[0]
+
+  def decoded(*values):
+    *given, place = values
+    out = list(program(*given))
+    positions, place = features.decode_frame(out[0], place * (1.0 - given[1])[:, None], rigid)
+    return [out[0], positions, *out[1:], place]
+
+  args = [*args, np.zeros((batch, 3), np.float32)]
+  return decoded, args, [*inputs, "state.place"], [outputs[0], "positions", *outputs[1:], "state.place.next"]
 
 
 def jax_outputs(program, args) -> list:
@@ -233,6 +249,8 @@ def _io(name: str, value) -> dict:
 
 
 def _sidecar(run, sampling, batch: int, contract: dict) -> dict:
+  from chorjax.data.transforms import up_axis_matrix
+
   f = run.features
   sk = f.skeleton
   shapes = {io["name"]: io["shape"] for io in [*contract["inputs"], *contract["outputs"]]}
@@ -254,7 +272,10 @@ def _sidecar(run, sampling, batch: int, contract: dict) -> dict:
       "parents": list(sk.parents),
       "bone_lengths": None if f.lengths is None else np.asarray(f.lengths).tolist(),
       "up_axis": f.up_axis,
+      "to_y_up": np.asarray(up_axis_matrix(f.up_axis)).tolist(),  # positions @ to_y_up.T: y up
     },
+    "positions": "data-space joints [B, J, 3] decoded in the graph with the decoding's rigid bones; grounding and"
+    " foot lock (decoding.ground, decoding.lock_feet) look at every frame and are left to the host",
     "controls": sampling.to_dict(),
     "decoding": sampling.decoding(),
     "random_numbers": {
@@ -305,8 +326,8 @@ def page_numbers(seed: int, frames: int, batch: int, num_gumbel: int, num_normal
 
 class OnnxDancer:
   """The reference host of an exported dancer: onnxruntime in Python, following the sidecar's contract as any
-  other host would. ``dance`` draws frames from given random numbers; ``positions`` decodes them into joint
-  positions as ``chorjax sample`` does."""
+  other host would. ``dance`` draws frames from given random numbers, and the graph's joint positions with
+  them; ``positions`` decodes frames as ``chorjax sample`` does, grounding and foot lock included."""
 
   def __init__(self, path):
     try:
@@ -330,19 +351,24 @@ class OnnxDancer:
     self.starting = np.ones((self.weights.shape[0],), np.float32)
 
   def step(self, gumbel_BxK, normal_BxD) -> np.ndarray:
-    """One frame: normalized features ``[B, D]``."""
+    """One frame: normalized features ``[B, D]`` (its joint positions ``[B, J, 3]`` in ``self.joints``)."""
     feed = {"weights": self.weights, "start": self.starting, "gumbel": gumbel_BxK, "normal": normal_BxD, **self.state}
     names = [io["name"] for io in self.meta["outputs"]]
     out = dict(zip(names, self.session.run(names, feed), strict=True))
     self.state = {s["input"]: out[s["output"]] for s in self.meta["state"]}
     self.starting = np.zeros_like(self.starting)
+    self.joints = np.asarray(out["positions"])
     return np.asarray(out["frame"])
 
-  def dance(self, weights_BxM, gumbel_TxBxK, normal_TxBxD) -> np.ndarray:
-    """``[B, T, D]`` normalized frames from a fresh start, one call per frame."""
+  def dance(self, weights_BxM, gumbel_TxBxK, normal_TxBxD, joints: bool = False):
+    """``[B, T, D]`` normalized frames from a fresh start, one call per frame (``joints``: and the graph's
+    joint positions ``[B, T, J, 3]``)."""
     self.start(weights_BxM)
-    frames = [self.step(g, n) for g, n in zip(gumbel_TxBxK, normal_TxBxD, strict=True)]
-    return np.stack(frames, 1)
+    frames, positions = [], []
+    for g, n in zip(gumbel_TxBxK, normal_TxBxD, strict=True):
+      frames.append(self.step(g, n))
+      positions.append(self.joints)
+    return (np.stack(frames, 1), np.stack(positions, 1)) if joints else np.stack(frames, 1)
 
   def positions(self, z_BxTxD) -> np.ndarray:
     """Joint positions ``[B, T, J, 3]`` in data space: the frames decoded as ``chorjax sample`` decodes."""

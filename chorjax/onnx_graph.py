@@ -266,6 +266,9 @@ _HANDLERS = {
   "expand_dims": lambda g, e, ins: g.node("Reshape", [ins[0], g.ints(e.outvars[0].aval.shape)]),
   "transpose": lambda g, e, ins: g.node("Transpose", ins, perm=list(e.params["permutation"])),
   "concatenate": lambda g, e, ins: g.node("Concat", ins, axis=int(e.params["dimension"])),
+  "cumsum": lambda g, e, ins: g.node(
+    "CumSum", [ins[0], g.ints(int(e.params["axis"]))], reverse=int(e.params["reverse"])
+  ),
   "integer_pow": _integer_pow,
   "select_n": _select_n,
   "iota": _iota,

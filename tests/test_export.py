@@ -14,6 +14,7 @@ from chorjax import cli
 from chorjax.api import load_run
 from chorjax.config import load_config
 from chorjax.data.csv import read_csv
+from chorjax.data.features import Features
 from chorjax.errors import UserError
 from chorjax.export import OnnxDancer, sample_numbers
 from chorjax.models import motion_weight_vector
@@ -55,12 +56,16 @@ def test_the_onnx_dancer_draws_what_chorjax_sample_draws(quickstart, tmp_path):
 
   frames, seed = 600, 3
   gumbel, normal = sample_numbers(run, seed, frames)
-  z = dancer.dance(motion_weight_vector(run.num_motions, 2)[None], gumbel, normal)
+  z, joints = dancer.dance(motion_weight_vector(run.num_motions, 2)[None], gumbel, normal, joints=True)
   expected, _ = sample_dancers(run, frames, 1, seed, motion=2)
   got = dancer.positions(z)
   assert got.shape == expected.shape == (1, frames, run.features.skeleton.num_joints, 3)
   assert np.abs(got - expected).max() <= 1e-4 * body_size(expected)
   assert np.abs(np.diff(got, axis=1)).max() > 0  # it dances
+  # the graph's own joints: the same frames decoded with rigid bones, not grounded or locked (that is the host's)
+  assert meta["decoding"] == {"rigid": True, "lock_feet": True, "ground": True}
+  rigid = Features.from_dict(meta["features"]).decode(z, rigid=True)
+  assert joints.shape == got.shape and np.abs(joints - rigid).max() <= 1e-4 * body_size(rigid)
 
 
 def test_the_graph_and_sidecar_state_the_contract(quickstart, tmp_path):
@@ -109,10 +114,15 @@ def test_a_batch_of_dancers_each_on_its_own_motion_and_a_restart_mid_dance(quick
   for t in range(half):
     dancer.step(gumbel[t], normal[t])
   dancer.starting = np.array([0.0, 1.0], np.float32)  # the second dancer starts over
-  rest = np.stack([dancer.step(g, n) for g, n in zip(gumbel[half:], normal[half:], strict=True)], 1)
-  fresh = dancer.dance(weights, gumbel[half:], normal[half:])
+  rest, rest_joints = [], []
+  for g, n in zip(gumbel[half:], normal[half:], strict=True):
+    rest.append(dancer.step(g, n))
+    rest_joints.append(dancer.joints)
+  rest, rest_joints = np.stack(rest, 1), np.stack(rest_joints, 1)
+  fresh, fresh_joints = dancer.dance(weights, gumbel[half:], normal[half:], joints=True)
   np.testing.assert_allclose(rest[0], z[0, half:], atol=1e-6)  # the first dancer went on
-  np.testing.assert_allclose(rest[1], fresh[1], atol=1e-6)  # the second danced anew
+  np.testing.assert_allclose(rest[1], fresh[1], atol=1e-6)  # the second danced anew, from the origin
+  np.testing.assert_allclose(rest_joints[1], fresh_joints[1], atol=1e-4 * body_size(fresh_joints))
 
 
 @pytest.mark.parametrize("cell,head", [("lnlstm", "mdn"), ("gru", "mse")])
@@ -124,12 +134,11 @@ def test_other_cells_and_heads_export_with_the_same_draw(cell, head, tmp_path):
   run = load_run(run_dir)
   frames = 120
   gumbel, normal = sample_numbers(run, 1, frames)
-  got = dancer.positions(dancer.dance(motion_weight_vector(run.num_motions)[None], gumbel, normal))
+  z, joints = dancer.dance(motion_weight_vector(run.num_motions)[None], gumbel, normal, joints=True)
   expected, _ = sample_dancers(run, frames, 1, 1, controls={"noise_smoothing": 0.5})
-  assert np.abs(got - expected).max() <= 1e-4 * body_size(expected)
-  ort_web = NODE_MODULES / "node_modules" / "onnxruntime-web" / "dist"
-  web = ["export", str(run_dir), "--web", str(tmp_path / "site"), "--ort-web", str(ort_web)]
-  assert exit_code(web) == 2 and not (tmp_path / "site").exists()  # the page decodes canonical runs only
+  assert np.abs(dancer.positions(z) - expected).max() <= 1e-4 * body_size(expected)
+  assert not dancer.meta["decoding"]["ground"] and not dancer.meta["decoding"]["lock_feet"]
+  assert np.abs(joints - expected).max() <= 1e-4 * body_size(expected)  # the graph's joints are the sample's
 
 
 def test_a_gan_run_exports_its_generator_one_frame_a_call(tmp_path):
@@ -142,9 +151,11 @@ def test_a_gan_run_exports_its_generator_one_frame_a_call(tmp_path):
   frames = 600
   gumbel, normal = sample_numbers(run, 7, frames, batch=2)
   weights = np.full((2, run.num_motions), 1.0 / run.num_motions, np.float32)  # a GAN reads no motion
-  got = dancer.positions(dancer.dance(weights, gumbel, normal))
+  z, joints = dancer.dance(weights, gumbel, normal, joints=True)
   expected, _ = sample_dancers(run, frames, 2, 7)
+  got = dancer.positions(z)
   assert got.shape == expected.shape and np.abs(got - expected).max() <= 1e-4 * body_size(expected)
+  assert np.abs(joints - expected).max() <= 1e-4 * body_size(expected)  # bone directions, integrated in the graph
 
 
 def exit_code(args) -> int:
@@ -234,7 +245,7 @@ def test_a_take_in_millimetres_with_z_up_becomes_y_up_metres(tmp_path):
 def test_the_web_page_dances_offline_and_draws_what_onnxruntime_draws(quickstart, tmp_path):
   """`chorjax export --web`: served by a plain static server, with every other host unreachable, the page in
   headless Chromium dances for 10 s (the figure moves, no NaN, no console error), and its first 100 frames of
-  seed 0 are onnxruntime-python's, drawn with the page's random numbers."""
+  seed 0 and their joints are onnxruntime-python's, drawn with the page's random numbers."""
   import functools
   import html
   import re
@@ -270,7 +281,10 @@ def test_the_web_page_dances_offline_and_draws_what_onnxruntime_draws(quickstart
   dancer = OnnxDancer(site / "dancer.onnx")
   gumbel, normal = page_numbers(0, 100, 1, dancer.meta["num_mixtures"], dancer.meta["normal_size"])
   weights = np.eye(len(dancer.meta["motions"]), dtype=np.float32)[:1]
-  np.testing.assert_allclose(np.asarray(report["frames"]), dancer.dance(weights, gumbel, normal)[0], atol=1e-4)
+  frames, joints = dancer.dance(weights, gumbel, normal, joints=True)
+  np.testing.assert_allclose(np.asarray(report["frames"]), frames[0], atol=1e-4)
+  y_up = joints[0] @ np.asarray(dancer.meta["skeleton"]["to_y_up"]).T  # the page draws y-up
+  np.testing.assert_allclose(np.asarray(report["joints"]), y_up, atol=1e-4 * body_size(y_up))
 
 
 def test_blenders_gltf_importer_puts_the_joints_where_chorjax_put_them(tmp_path):

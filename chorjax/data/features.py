@@ -185,6 +185,26 @@ class Features:
       pos = transforms.lock_feet(pos, contacts, feet, max_step=0.05 * leg)  # foot_contacts' speed
     return self.uncanonical(pos)
 
+  def decode_frame(self, z_BxD, place_Bx3, rigid: bool = False):
+    """One frame of each of B dancers -> ``(positions [B, J, 3] in data space, the next frame's place [B, 3])``:
+    :meth:`decode` one frame at a time, the place (heading, x, z of the root on the floor: see
+    ``transforms.from_canonical``; zeros at a dancer's first frame) carried from call to call. Frame by frame
+    these are the positions :meth:`decode` gives the whole sequence with ``rigid`` (its feet neither grounded nor
+    locked: those look at every frame). Traceable: the exported dancer decodes in its graph."""
+    rep = transforms.denormalize(z_BxD, self.mean, self.std)[:, None, :]
+    root = self.skeleton.root
+    canon = _unrepresent(rep, self, place_Bx3)[:, 0]
+    if self.representation == "canonical":
+      turned = place_Bx3[:, 0] + rep[:, 0, 0]
+    else:
+      turned = place_Bx3[:, 0]
+    place = jnp.stack([turned, canon[:, root, 0], canon[:, root, 2]], -1)
+    if self.representation not in ("canonical", "directions"):
+      place = place_Bx3
+    if rigid:
+      canon = transforms.rigid_bones(canon, self.skeleton.parents, self.lengths)
+    return self.uncanonical(canon), place
+
   def decode_after(
     self, z_TxD, last_z_D, last_pos_Jx3, rigid: bool = False, lock_feet: bool = False, ground: bool = False
   ):
@@ -338,7 +358,7 @@ def _unrepresent(rep, features: Features, place=None):
   if representation == "canonical":
     return transforms.from_canonical(rep, skeleton.root, skeleton.num_joints, place)
   if representation == "directions":
-    start = (0.0, 0.0) if place is None else (place[1], place[2])
+    start = (0.0, 0.0) if place is None else jnp.asarray(place)[..., 1:3]
     return transforms.from_directions(rep, skeleton.parents, features.lengths, start)
   rep = rep.reshape(rep.shape[:-1] + (skeleton.num_joints, 3))
   if representation == "absolute":

@@ -251,14 +251,15 @@ def to_canonical(pos_TxJx3, root: int, left: int, right: int, feet: Sequence[int
 
 def from_canonical(feat_xTxF, root: int, num_joints: int, place=None):
   """Positions ``[..., T, J, 3]`` from :func:`to_canonical` features, by integrating the heading and
-  the root's steps from ``place = (heading, x, z)`` of frame 0 (default: facing +z at the origin).
-  Joint velocities and foot contacts are not used."""
+  the root's steps from ``place = (heading, x, z)`` of frame 0 (default: facing +z at the origin; ``[..., 3]``:
+  one place per sequence). Joint velocities and foot contacts are not used."""
   place = jnp.zeros(3) if place is None else jnp.asarray(place)
   d_theta, step_xz, height = feat_xTxF[..., 0], feat_xTxF[..., 1:3], feat_xTxF[..., 3]
-  theta = place[0] + jnp.cumsum(d_theta, -1)
-  prev_theta = jnp.concatenate([jnp.broadcast_to(place[0], theta[..., :1].shape), theta[..., :-1]], -1)
+  theta = place[..., 0:1] + jnp.cumsum(d_theta, -1)
+  prev_theta = jnp.concatenate([jnp.broadcast_to(place[..., 0:1], theta[..., :1].shape), theta[..., :-1]], -1)
   step = jnp.stack([step_xz[..., 0], jnp.zeros_like(height), step_xz[..., 1]], -1)
-  floor_point = jnp.cumsum(rotate_y(step, prev_theta), -2) + jnp.stack([place[1], 0.0, place[2]])
+  start = jnp.stack([place[..., 1], jnp.zeros_like(place[..., 1]), place[..., 2]], -1)[..., None, :]
+  floor_point = jnp.cumsum(rotate_y(step, prev_theta), -2) + start
   others = feat_xTxF[..., 4 : 4 + 3 * (num_joints - 1)].reshape(feat_xTxF.shape[:-1] + (num_joints - 1, 3))
   root_local = jnp.stack([jnp.zeros_like(height), height, jnp.zeros_like(height)], -1)[..., None, :]
   local = jnp.concatenate([others[..., :root, :], root_local, others[..., root:, :]], -2)
@@ -279,14 +280,18 @@ def to_directions(pos_TxJx3, parents: Sequence[int]):
 
 
 def from_directions(feat_xTxF, parents: Sequence[int], lengths_J, start_xz=(0.0, 0.0)):
-  """Positions from :func:`to_directions` features: the root integrated from ``start_xz`` (its height as
-  given), each joint its parent plus ``lengths[j]`` times its (renormalized) direction. Bones cannot stretch."""
+  """Positions from :func:`to_directions` features: the root integrated from ``start_xz`` (``[..., 2]``: one
+  start per sequence; its height as given), each joint its parent plus ``lengths[j]`` times its (renormalized)
+  direction. Bones cannot stretch."""
   num_joints = len(parents)
   root = int(np.flatnonzero(np.asarray(parents) < 0)[0])
   step = feat_xTxF[..., :3]
   dirs = feat_xTxF[..., 3:].reshape(feat_xTxF.shape[:-1] + (num_joints, 3))
   height = dirs[..., root, 1]
-  root_xz = jnp.cumsum(step, -2) + jnp.array([start_xz[0], 0.0, start_xz[1]])
+  start = jnp.asarray(start_xz, step.dtype)
+  root_xz = (
+    jnp.cumsum(step, -2) + jnp.stack([start[..., 0], jnp.zeros_like(start[..., 0]), start[..., 1]], -1)[..., None, :]
+  )
   root_pos = root_xz * jnp.array([1.0, 0.0, 1.0]) + jnp.stack(
     [jnp.zeros_like(height), height, jnp.zeros_like(height)], -1
   )
