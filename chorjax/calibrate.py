@@ -213,8 +213,7 @@ def calibrate(
   run.check_drawn(frames * num, f"--frames {frames} x --num {num}")
   reference, train = read_reference(run, list(data) if data else None)
   f = run.features
-  ids = [run.id_map[m.name] for m in train] or [0]
-  motion = np.array([ids[k % len(ids)] for k in range(num)])
+  motion = run.dancer_conditions(train, num)
   key = jax.random.key(seed)
   if grid is None:
     grid = default_grid(run.config, noise_order, pace)

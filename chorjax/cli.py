@@ -206,10 +206,28 @@ def _controls(args) -> dict:
 def _add_motion_args(p) -> None:
   """``--motion`` or ``--mix``: what conditions the dance (sample, live)."""
   ids = p.add_mutually_exclusive_group()
-  ids.add_argument("--motion", type=int, help="motion id that conditions the dance (default 0)")
   ids.add_argument(
-    "--mix", metavar="ID:W,ID:W", help="blend motion ids, e.g. 4:0.5,5:0.5 (weights >= 0, normalized to sum 1)"
+    "--motion",
+    type=_motion,
+    metavar="ID|LABELS",
+    help="motion id that conditions the dance (default 0); a labelled run's labels: action=walk,style=elderly",
   )
+  ids.add_argument(
+    "--mix",
+    metavar="ID:W,ID:W",
+    help="blend motion ids, e.g. 4:0.5,5:0.5 (weights >= 0, normalized to sum 1); labels:"
+    " style=elderly:0.5,style=active:0.5",
+  )
+
+
+def _motion(text: str):
+  """``--motion``: a take id (a whole number), else a labelled run's ``FIELD=VALUE,...``."""
+  try:
+    return int(text)
+  except ValueError:
+    if "=" not in text:
+      raise argparse.ArgumentTypeError(f"{text!r} is neither a motion id nor FIELD=VALUE labels") from None
+    return text
 
 
 def _add_checkpoint_args(p) -> None:

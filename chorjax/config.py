@@ -101,6 +101,15 @@ class DataConfig:
   )
   seq_length: int = _field(100, "frames per training window (inputs; targets are shifted by one)", minimum=1)
   val_takes: tuple = _field(("auto",), "held-out take names; 'auto' = the last take by name; [] = none")
+  labels: str = _field(
+    "",
+    "condition on named labels, not take ids: a pattern with named groups over take names, or a take,FIELD CSV",
+    more=(
+      "A TOML literal string keeps the backslashes: `labels = '_(?P<action>[^_]+)_(?P<style>[^_]+)_\\d+$'`. "
+      "Each group is a field (its own embedding); `--motion action=walk,style=elderly` and `--mix "
+      "style=elderly:0.5,style=active:0.5` pick them. Empty: one id per take."
+    ),
+  )
   keep_rest_frames: bool = _field(
     False,
     "keep a take's leading rest pose (by default training drops it and says so)",

@@ -92,8 +92,7 @@ def evaluate(
 
 def generate_positions(run: Run, train, num: int, frames: int, seed: int, sampling: Controls) -> np.ndarray:
   """``[num, frames, J, 3]`` data-space positions; dancer k is conditioned on the k-th training take."""
-  ids = [run.id_map[m.name] for m in train] or [0]
-  motion = np.array([ids[k % len(ids)] for k in range(num)])
+  motion = run.dancer_conditions(train, num)
   return run.family.dance(run.graphdef, run.params, run.features, motion, jax.random.key(seed), frames, sampling)
 
 
@@ -108,7 +107,7 @@ def held_out(real, train_takes) -> tuple[list, str]:
 
 def heldout_loss(run: Run, takes) -> float:
   """The model's loss on windows of ``takes`` (teacher forced; NaN if no take is long enough)."""
-  enc = [(run.id_map.get(m.name, 0), np.asarray(run.features.encode(m.positions))) for m in takes]
+  enc = [(run.take_condition(m.name), np.asarray(run.features.encode(m.positions))) for m in takes]
   win = eval_windows(enc, run.config.data.seq_length, max_windows=256)
   return run.family.window_loss(run.graphdef, run.params, win) if win else float("nan")
 

@@ -15,8 +15,9 @@ Protocol (WebSocket at ``/ws``; every message is one JSON object):
   continues from its last frame, as ``chorjax sample --prime`` does), ``{"prime_file": {"name":
   "phrase.bvh", "text": "..."}}`` (a CSV/BVH/NPZ... file's text, read as training reads takes: the live
   page's "prime from file"), ``{"set": {"pi_temperature": t, "sigma_temperature": s, "mix":
-  "4:0.5,5:0.5"}}`` (any of the three) and ``{"pause": true | false}``. Each gets ``{"ok": KIND}`` or
-  ``{"error": "..."}`` back; the stream goes on either way.
+  "4:0.5,5:0.5"}}`` (any of the three; a labelled run's mix: ``"style=elderly:0.5,style=active:0.5"``) and
+  ``{"pause": true | false}``. Each gets ``{"ok": KIND}`` or ``{"error": "..."}`` back; the stream goes on
+  either way.
 
 OSC (UDP): with ``--osc HOST:PORT`` every frame is also sent as ``/chorjax/frame`` with J*3 floats
 (x, y, z per joint). With ``--osc-in HOST:PORT`` chorjax listens for ``/chorjax/input`` (J*3 floats: one
@@ -62,7 +63,7 @@ class Stream:
   Args:
     run: a loaded run (``chorjax.run.load_run``, ranged for the sampling).
     sampling: the sampling controls (``Run.sampling``).
-    weights_M: the motion-id weights that condition the dance (``models.motion_weight_vector``).
+    weights_M: the weights that condition the dance (``Run.motion_weights``).
     seed: the sampling seed.
     chunk: frames per generated chunk.
   """
@@ -145,11 +146,10 @@ class Stream:
     """New temperatures (from the next chunk) and/or a new motion mix (``"4:0.5,5:0.5"``): the model is
     conditioned on it and re-primed with the frames it just danced, so the dance changes without a jump."""
     from chorjax.config import check_sample_control
-    from chorjax.models import parse_mix
 
     given = {"pi_temperature": pi_temperature, "sigma_temperature": sigma_temperature}
     checked = {k: check_sample_control(k, v, f"set {k}") for k, v in given.items() if v is not None}
-    weights = None if mix is None else parse_mix(str(mix), self.run.num_motions)
+    weights = None if mix is None else self.run.motion_weights(mix=str(mix), source="mix")
     self.draw = self.draw.replace(**checked)
     if weights is not None:
       self.weights = weights
@@ -554,7 +554,6 @@ def run_live(
   """``chorjax live``: loads the run, serves until Ctrl-C, writes the recording (``record``, an ``.npz`` not
   replaced unless ``force``); returns 0."""
   from chorjax.data.motion import Motion
-  from chorjax.models import motion_weight_vector
   from chorjax.output import write_motions
   from chorjax.run import load_run
   from chorjax.sample import read_phrase
@@ -567,7 +566,7 @@ def run_live(
   run = load_run(workdir, checkpoint).serving("live")
   sampling = run.sampling(**(controls or {}))
   run = run.ranged(sampling)
-  weights = motion_weight_vector(run.num_motions, motion, mix)  # --motion ID or --mix ID:W,...; default 0
+  weights = run.motion_weights(motion, mix)  # --motion ID or --mix ID:W,... (or labels); default 0
   rate = fps or run.fps
   source = Phrase(read_phrase(input_spec, run.features, run.config.data, "--input")) if input_spec else None
   source = source or (OscInput() if listen else None)

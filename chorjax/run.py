@@ -25,6 +25,7 @@ from chorjax.calibration_file import read_calibration
 from chorjax.config import Config, config_from_dict
 from chorjax.controls import Controls, with_ceiling
 from chorjax.data.features import Features
+from chorjax.data.labels import Labels, take_condition
 from chorjax.errors import UserError, check_draw, load_json
 from chorjax.families import family_of
 
@@ -53,6 +54,7 @@ def run_meta(cfg: Config, features: Features, step: int, ds) -> dict:
     "sampler": {"seed": cfg.train.seed, "position": step},
     "step": step,
     "joint_maps": {name: m.to_dict() for name, m in ds.mappings.items()},
+    "labels": None if ds.labels is None else ds.labels.to_dict(),
   }
 
 
@@ -64,12 +66,13 @@ class Run:
     workdir: the run directory.
     config: the run's resolved config.
     features: the fitted feature pipeline (data space <-> model features).
-    id_map: take name -> motion id.
+    id_map: what conditions the model -> its index: take names, or ``field=value`` with ``labels``.
     train_takes, val_takes: the split it was trained on.
     graphdef, params: the model (``nnx.merge(graphdef, params)``).
     step: the checkpoint's step.
     val_loss: the validation loss saved with that checkpoint (None without held-out takes).
     joint_maps: take name -> how it was mapped onto the 16-joint layout (``Mapping.to_dict()``).
+    labels: the named labels the run is conditioned on (``data.labels``), or None (one id per take).
   """
 
   workdir: Path
@@ -84,10 +87,38 @@ class Run:
   val_loss: float | None
   joint_maps: dict = dataclasses.field(default_factory=dict)
   frame_rate: float | None = None
+  labels: Labels | None = None
 
   @property
   def num_motions(self) -> int:
     return len(self.id_map)
+
+  def motion_weights(self, motion=None, mix=None, source: str = "--motion") -> np.ndarray:
+    """The weights ``[M]`` that condition a dance: a take id or ``ID:W,...`` blend, or with labels
+    ``FIELD=VALUE,...`` or ``FIELD=VALUE:W,...`` (nothing given: take 0, or each label's first value)."""
+    from chorjax.models import motion_weight_vector
+
+    if self.labels is not None:
+      return self.labels.parse(motion, mix, source)
+    if isinstance(motion, str):
+      try:
+        motion = int(motion)
+      except ValueError:
+        raise UserError(
+          f"{source} {motion!r}: this run is conditioned on take ids (0..{self.num_motions - 1})"
+        ) from None
+    return motion_weight_vector(self.num_motions, motion, mix, source)
+
+  def take_condition(self, name: str, default: int | None = 0):
+    """What conditions the model on the take ``name`` (``labels.take_condition``): its id (``default`` for a
+    take the run never read), or with labels the weights of its labels."""
+    return take_condition(self.labels, self.id_map, name, default)
+
+  def dancer_conditions(self, takes, num: int) -> np.ndarray:
+    """``[num]`` ids or ``[num, M]`` weights: dancer k conditioned on the k-th of ``takes`` (cycled; none:
+    take 0, or each label's first value)."""
+    conds = [self.take_condition(m.name) for m in takes] or [self.motion_weights() if self.labels else 0]
+    return np.array([conds[k % len(conds)] for k in range(num)])
 
   @property
   def fps(self) -> float:
@@ -201,6 +232,7 @@ def load_run(workdir, which: str | int = "kept") -> Run:
     val_loss=meta.get("val_loss"),
     joint_maps=dict(meta.get("joint_maps", {})),
     frame_rate=meta.get("fps"),
+    labels=Labels.from_dict(meta["labels"]) if meta.get("labels") else None,
   )
 
 

@@ -71,14 +71,12 @@ def sample_dancers(run, frames: int, num: int, seed: int, prime=None, motion=Non
   """``(positions [num, frames (+ prime), J, 3] in data space, settings)``: what ``chorjax sample`` and
   ``Run.sample`` draw. ``run``: a loaded run; ``prime``: ``FILE[:START:LEN]``; ``motion`` / ``mix``: the take
   id or blend that conditions the dance; ``controls``: sampling controls (unset: the run's own)."""
-  from chorjax.models import motion_weight_vector
-
   check_counts(frames=frames, num=num, seed=seed)
   run = run.serving("sample")
   run.check_drawn(frames * num, f"frames {frames} x num {num}")
   sampling = run.sampling(**(controls or {}))
   run = run.ranged(sampling)
-  motion_BxM = np.tile(motion_weight_vector(run.num_motions, motion, mix)[None], (num, 1))
+  motion_BxM = np.tile(run.motion_weights(motion, mix)[None], (num, 1))
   primed = None
   if prime:
     primed = np.tile(read_prime(prime, run.features, run.config.data)[None], (num, 1, 1))

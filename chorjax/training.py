@@ -461,7 +461,7 @@ def _locked_train(cfg: Config, workdir: Path, force: bool, parallel, is_main: bo
       for line in dataset_notes(ds):
         print(line, file=sys.stderr if line.startswith("warning") else sys.stdout, flush=True)
     if cfg.sample.frames > 0:  # fail now, not after hours of training, if the end sample cannot be drawn
-      motion_weight_vector(ds.num_motions, cfg.sample.motion, source="sample.motion =")
+      motion_weight_vector(len(ds.motions), cfg.sample.motion, source="sample.motion =")
     manager = ckpt.create_manager(workdir, keep=cfg.train.keep_checkpoints)
     with contextlib.ExitStack() as cleanup:
       cleanup.callback(ckpt.close_quietly, manager)

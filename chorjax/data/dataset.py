@@ -17,6 +17,7 @@ import numpy as np
 from chorjax.data import transforms
 from chorjax.data.csv import read_csv
 from chorjax.data.features import Features, feature_dim, floor_height, takes_joint_pace
+from chorjax.data.labels import Labels, read_labels, take_condition
 from chorjax.data.motion import Motion, bone_lengths
 from chorjax.data.skeletons import get_skeleton
 from chorjax.errors import UserError
@@ -158,15 +159,18 @@ class Dataset:
   """The takes of a run, split and encoded.
 
   Attributes:
-    id_map: take name -> integer id (sorted names; saved with every run).
+    id_map: what conditions the model -> its index: each take's name (sorted names), or with ``data.labels``
+      each ``field=value`` (saved with every run).
     motions: the raw takes, in id order.
     train_names, val_names: the split.
     features: the feature pipeline fitted on the training split.
-    train: ``(motion_id, features [T, D])`` per training sequence, augmentations included.
+    train: ``(condition, features [T, D])`` per training sequence, augmentations included (condition: the
+      take's id, or with labels its weights ``[M]``).
     val: the same for the held-out takes (no augmentation).
     mappings: take name -> the ``Mapping`` that put it on the 16-joint layout (mapped takes only).
     fps: the frame rate every take was brought to (``one_rate``).
     notes: what the user should know about the takes (resampling, short windows).
+    labels: the named labels that condition the run (``data.labels``), or None (one id per take).
   """
 
   id_map: dict
@@ -179,10 +183,15 @@ class Dataset:
   mappings: dict = dataclasses.field(default_factory=dict)
   fps: float = 30.0
   notes: tuple = ()
+  labels: Labels | None = None
 
   @property
   def num_motions(self) -> int:
     return len(self.id_map)
+
+  def condition(self, take: int):
+    """What conditions the model on take number ``take`` (in reading order): its id, or its labels' weights."""
+    return take_condition(self.labels, self.id_map, self.motions[take].name)
 
 
 def _val_names(names: list[str], val_takes: Sequence) -> list[str]:
@@ -223,7 +232,9 @@ def _load_dataset(data_cfg) -> Dataset:
   motions, fps, notes = one_rate(motions, data_cfg.seq_length)
   notes = rest_notes + notes + _usable(motions, data_cfg)
   names = [m.name for m in motions]
-  id_map = {n: i for i, n in enumerate(names)}
+  labels = read_labels(data_cfg.labels, names) if data_cfg.labels else None
+  id_map = {n: i for i, n in enumerate(labels.names if labels else names)}
+  condition = lambda n: take_condition(labels, id_map, n)
   val_names = _val_names(names, data_cfg.val_takes)
   train_names = [n for n in names if n not in val_names]
   by_name = dict(zip(names, motions))
@@ -253,8 +264,8 @@ def _load_dataset(data_cfg) -> Dataset:
       out += [np.asarray(transforms.reverse_time(c)) for c in out]
     return out
 
-  train_raw = [(id_map[n], np.asarray(proto.represent(c))) for n in train_names for c in canon_versions(by_name[n])]
-  val_raw = [(id_map[n], np.asarray(proto.represent(proto.canonical(by_name[n].positions)))) for n in val_names]
+  train_raw = [(condition(n), np.asarray(proto.represent(c))) for n in train_names for c in canon_versions(by_name[n])]
+  val_raw = [(condition(n), np.asarray(proto.represent(proto.canonical(by_name[n].positions)))) for n in val_names]
   stats = transforms.merged_stats([x for _, x in train_raw])
   # Root-motion representations hold features that are constant by construction (the hips' depth in
   # the facing frame, the root's direction slot): a floor keeps float noise in them from being blown up.
@@ -275,6 +286,7 @@ def _load_dataset(data_cfg) -> Dataset:
     mappings,
     fps,
     tuple(notes),
+    labels,
   )
 
 
@@ -310,6 +322,11 @@ def dataset_notes(ds: Dataset) -> list[str]:
     takes = names[0] if len(names) == 1 else f"{names[0]} and {len(names) - 1} more"
     out.append(f"joints of {takes} mapped {how}")
   out += ds.notes
+  if ds.labels is not None:
+    fields = "; ".join(
+      f"{f} ({len(v)}): {', '.join(v[:8])}{' ...' if len(v) > 8 else ''}" for f, v in ds.labels.fields.items()
+    )
+    out.append(f"conditioned on labels (data.labels), not take ids: {fields}")
   trained = set(ds.train_names)
   minutes = sum(len(m.positions) for m in ds.motions if m.name in trained) / ds.fps / 60
   if minutes < SMALL_DATA_MINUTES:
@@ -321,7 +338,7 @@ def dataset_notes(ds: Dataset) -> list[str]:
       "takes help most (README: How well the quickstart dances)"
     )
   if not ds.val_names:
-    why = "a single take" if len(ds.id_map) == 1 else "data.val_takes = []"
+    why = "a single take" if len(ds.motions) == 1 else "data.val_takes = []"
     out.append(
       f"warning: no validation split ({why}): val_loss is not measured and cannot show overfitting; "
       "add a take or name one in data.val_takes"
@@ -363,11 +380,13 @@ class WindowSampler:
   and resuming at step s reproduces the uninterrupted run exactly.
   """
 
-  def __init__(self, sequences: Sequence[tuple[int, np.ndarray]], seq_length: int, batch_size: int, seed: int):
+  def __init__(
+    self, sequences: Sequence[tuple[int | np.ndarray, np.ndarray]], seq_length: int, batch_size: int, seed: int
+  ):
     if not sequences:
       raise UserError("no training sequences")
     self.seq_length, self.batch_size, self.seed = seq_length, batch_size, seed
-    self.ids = np.array([i for i, _ in sequences], np.int32)
+    self.ids = conditions([i for i, _ in sequences])
     lengths = np.array([x.shape[0] for _, x in sequences])
     self.data = np.concatenate([x for _, x in sequences]).astype(np.float32)
     self.offsets = np.concatenate([[0], np.cumsum(lengths)[:-1]])
@@ -389,7 +408,7 @@ class WindowSampler:
     return {"inputs": frames[:, :-1], "targets": frames[:, 1:], "motion_ids": self.ids[seq]}
 
 
-def eval_windows(sequences: Sequence[tuple[int, np.ndarray]], seq_length: int, max_windows: int) -> dict:
+def eval_windows(sequences: Sequence[tuple[int | np.ndarray, np.ndarray]], seq_length: int, max_windows: int) -> dict:
   """Fixed validation windows: non-overlapping, in order, at most ``max_windows``."""
   frames, ids = [], []
   for i, x in sequences:
@@ -401,4 +420,11 @@ def eval_windows(sequences: Sequence[tuple[int, np.ndarray]], seq_length: int, m
   # Spread the kept windows evenly over all takes instead of taking the first ones.
   keep = np.unique(np.linspace(0, len(frames) - 1, min(max_windows, len(frames))).astype(int))
   frames = np.stack([frames[k] for k in keep])
-  return {"inputs": frames[:, :-1], "targets": frames[:, 1:], "motion_ids": np.array([ids[k] for k in keep], np.int32)}
+  return {"inputs": frames[:, :-1], "targets": frames[:, 1:], "motion_ids": conditions([ids[k] for k in keep])}
+
+
+def conditions(items: Sequence) -> np.ndarray:
+  """Take ids ``[N]`` (int32), or label weights ``[N, M]`` (float32): what the model reads as ``motion``."""
+  if items and isinstance(items[0], np.ndarray):
+    return np.stack(items).astype(np.float32)
+  return np.array(items, np.int32)

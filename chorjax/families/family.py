@@ -90,9 +90,10 @@ class Family:
     s = cfg.sample
     features = with_ceiling(ds.features, graphdef, params, ds.train, cfg.data.seq_length, controls)
     key = jax.random.key(s.seed)
-    pos = self.dance(graphdef, params, features, np.full((s.num,), s.motion), key, s.frames, controls)
-    name = {v: k for k, v in ds.id_map.items()}[s.motion]
+    motion = np.array([ds.condition(s.motion)] * s.num)
+    pos = self.dance(graphdef, params, features, motion, key, s.frames, controls)
     sk, real = ds.features.skeleton, ds.motions[s.motion]
+    name = real.name
     motions = [real.replace(positions=real.positions[: s.frames], name=f"original: {name}")]
     motions += [
       Motion(p, real.fps, sk, real.up_axis, real.units, name=f"generated #{i} (motion {s.motion})")

@@ -332,7 +332,7 @@ def end_sample(graphdef, params, ds, cfg: Config) -> tuple:
   ``min(max_frames, 30) + 1`` frames up to ``sample.frames`` (at least one), the model writing every frame
   between."""
   ib, s = cfg.inbetween, cfg.sample
-  name = ds.val_names[0] if ds.val_names else {v: k for k, v in ds.id_map.items()}[s.motion]
+  name = ds.val_names[0] if ds.val_names else ds.motions[s.motion].name
   take = next(m for m in ds.motions if m.name == name)
   seg = min(ib.max_frames, 30)
   upto = min(take.num_frames, ib.context + max(s.frames, seg + 1))  # at least one transition

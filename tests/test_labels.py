@@ -1,0 +1,113 @@
+"""Named labels (``data.labels``) on a handful of Bandai Namco takes (``dataset-2_{action}_{style}_{trial}``, read
+from ``../shared/data``): the run is conditioned on action and style instead of take ids, and is asked for
+them from the command line, the API and live."""
+
+import json
+import tarfile
+
+import numpy as np
+import pytest
+from helpers import tiny_config
+
+from chorjax import cli
+from chorjax.api import load_run
+from chorjax.data.dataset import WindowSampler, dataset_notes, load_dataset
+from chorjax.data.labels import read_labels
+from chorjax.errors import UserError
+from chorjax.live import Stream
+from chorjax.training import train_and_evaluate
+
+ARCHIVE = "bandai-motion.tar.xz"
+TAKES = [f"dataset-2_{a}_{s}_{t:03d}" for a in ("walk", "run") for s in ("elderly", "active") for t in (1, 2)]
+PATTERN = r"_(?P<action>[^_]+)_(?P<style>[^_]+)_\d+$"
+
+
+@pytest.fixture(scope="module")
+def takes(tmp_path_factory, shared_data):
+  """Eight takes of the library: walk and run, elderly and active, two trials each."""
+  where = tmp_path_factory.mktemp("bandai")
+  wanted = {f"bandai-motion/{t}.bvh" for t in TAKES}
+  with tarfile.open(shared_data / ARCHIVE) as tar:
+    members = [m for m in tar if m.name in wanted]
+    tar.extractall(where, members=members, filter="data")
+  assert len(members) == len(TAKES)
+  return where / "bandai-motion"
+
+
+@pytest.fixture(scope="module")
+def labelled_run(takes, tmp_path_factory):
+  run_dir = tmp_path_factory.mktemp("labelled") / "run"
+  cfg = tiny_config(f"data.dataset={takes}", f"data.labels={PATTERN}", "train.num_steps=3", "log.tensorboard=false")
+  train_and_evaluate(cfg, run_dir)
+  return run_dir
+
+
+def test_labels_from_names_or_a_csv_make_one_weight_per_value_and_each_take_one_per_field(takes, tmp_path):
+  ds = load_dataset(tiny_config(f"data.dataset={takes}", f"data.labels={PATTERN}").data)
+  assert ds.labels.fields == {"action": ("run", "walk"), "style": ("active", "elderly")}
+  assert list(ds.id_map) == ["action=run", "action=walk", "style=active", "style=elderly"]
+  assert "conditioned on labels (data.labels), not take ids: action (2): run, walk; style (2): active, elderly" in (
+    dataset_notes(ds)
+  )
+  for name, (cond, _) in zip(ds.train_names, ds.train, strict=True):  # no augmentation in the tiny config
+    action, style = name.split("_")[1:3]
+    np.testing.assert_array_equal(cond, [action == "run", action == "walk", style == "active", style == "elderly"])
+  batch = WindowSampler(ds.train, 12, 4, 0).batch(0)
+  assert batch["motion_ids"].shape == (4, 4) and (batch["motion_ids"].sum(1) == 2).all()
+
+  table = tmp_path / "labels.csv"
+  table.write_text("take,action,style\n" + "".join(f"{t},{t.split('_')[1]},{t.split('_')[2]}\n" for t in TAKES))
+  from_csv = read_labels(str(table), sorted(TAKES))
+  assert from_csv.fields == ds.labels.fields and from_csv.pattern is None
+
+  with pytest.raises(UserError, match=r"take 'dataset-2_walk' does not match the labels pattern"):
+    read_labels(PATTERN, ["dataset-2_walk"])
+  with pytest.raises(UserError, match=r"name the labels with groups"):
+    read_labels(r"_\d+$", TAKES)
+  (tmp_path / "short.csv").write_text("take,action\n" + TAKES[0] + "\n")
+  with pytest.raises(UserError, match=r"short.csv:2: expected 2 non-empty cells, got 1"):
+    read_labels(str(tmp_path / "short.csv"), TAKES)
+
+
+def test_a_labelled_run_dances_the_labels_asked_for_from_the_cli_api_and_live(labelled_run, tmp_path, capsys):
+  run = load_run(labelled_run)
+  assert run.labels is not None and run.num_motions == 4
+  np.testing.assert_array_equal(run.motion_weights("action=walk,style=elderly"), [0, 1, 0, 1])
+  np.testing.assert_allclose(run.motion_weights(mix="style=elderly:0.5,style=active:0.5"), [0.5, 0.5, 0.5, 0.5])
+  np.testing.assert_allclose(run.motion_weights("style=active"), [0.5, 0.5, 1, 0])  # an action not given: even
+
+  out = tmp_path / "walk.npz"
+  assert (
+    cli.main(["sample", str(labelled_run), "-o", str(out), "--frames", "30", "--motion", "action=walk,style=elderly"])
+    == 0
+  )
+  mixed = tmp_path / "mixed.csv"
+  assert (
+    cli.main(
+      ["sample", str(labelled_run), "-o", str(mixed), "--frames", "30", "--mix", "style=elderly:0.5,style=active:0.5"]
+    )
+    == 0
+  )
+  walk = run.sample(frames=30, motion="action=walk,style=elderly")
+  assert np.abs(walk.positions - np.load(out)["positions"][0]).max() < 1e-4  # the API draws what the CLI draws
+  running = run.sample(frames=30, motion="action=run,style=active")
+  assert np.abs(walk.positions - running.positions).max() > 0  # other labels, another dance
+  assert json.loads(str(np.load(out)["meta"]))["settings"]["motion"] == "action=walk,style=elderly"
+
+  stream = Stream(run.ranged(run.sampling()), run.sampling(), run.motion_weights("action=run,style=active"), 0, 4)
+  stream.next_chunk()
+  stream.set(mix="action=walk:1,style=elderly:1")
+  np.testing.assert_array_equal(stream.weights, [0, 1, 0, 1])
+  with pytest.raises(UserError, match=r"style='sleepy' is not a value this run knows; style: active, elderly"):
+    stream.set(mix="style=sleepy:1")
+
+  capsys.readouterr()
+  refusals = {
+    "action=swim": "--motion: action='swim' is not a value this run knows; action: run, walk",
+    "mood=calm": "--motion: no label 'mood'; this run's labels: action, style",
+    "3": "--motion 3: this run is conditioned on labels, not take ids: e.g. action=run,style=active",
+  }
+  for motion, line in refusals.items():
+    assert cli.main(["sample", str(labelled_run), "-o", str(tmp_path / "x.csv"), "--motion", motion]) == 2
+    assert capsys.readouterr().err.strip() == f"chorjax: error: {line}"
+    assert not (tmp_path / "x.csv").exists()
