@@ -101,6 +101,16 @@ class DataConfig:
   )
   seq_length: int = _field(100, "frames per training window (inputs; targets are shifted by one)", minimum=1)
   val_takes: tuple = _field(("auto",), "held-out take names; 'auto' = the last take by name; [] = none")
+  cache: str = _field(
+    "auto",
+    "where read and encoded takes are kept, so a library is read once: auto (~/.cache/chorjax), off, or a folder",
+    resumable=True,
+    more=(
+      "`auto` is `$CHORJAX_CACHE`, else `$XDG_CACHE_HOME/chorjax`, else `~/.cache/chorjax`. An entry is keyed "
+      "by the file's path and bytes and the settings that read and encode it: a changed take is read again, "
+      "alone; a damaged entry is made again, with one line saying so. chorjax never deletes it."
+    ),
+  )
   labels: str = _field(
     "",
     "condition on named labels, not take ids: a pattern with named groups over take names, or a take,FIELD CSV",

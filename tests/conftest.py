@@ -20,6 +20,12 @@ if "JAX_COMPILATION_CACHE_DIR" not in os.environ and "PYTEST_XDIST_WORKER" not i
   _xla_cache = tempfile.mkdtemp(prefix="chorjax-tests-xla-")
   os.environ["JAX_COMPILATION_CACHE_DIR"] = _xla_cache
   atexit.register(shutil.rmtree, _xla_cache, ignore_errors=True)
+# The same for the takes read and encoded (data.cache = "auto" finds $CHORJAX_CACHE): one fresh folder per run,
+# so no test reads what an earlier run left, and nothing is written under the user's ~/.cache.
+if "CHORJAX_CACHE" not in os.environ and "PYTEST_XDIST_WORKER" not in os.environ:
+  _takes_cache = tempfile.mkdtemp(prefix="chorjax-tests-takes-")
+  os.environ["CHORJAX_CACHE"] = _takes_cache
+  atexit.register(shutil.rmtree, _takes_cache, ignore_errors=True)
 os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")
 os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES", "-1")
 # jax writes an entry in place, so a process reading it while another writes it finds it cut short, says

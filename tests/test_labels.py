@@ -111,3 +111,58 @@ def test_a_labelled_run_dances_the_labels_asked_for_from_the_cli_api_and_live(la
     assert cli.main(["sample", str(labelled_run), "-o", str(tmp_path / "x.csv"), "--motion", motion]) == 2
     assert capsys.readouterr().err.strip() == f"chorjax: error: {line}"
     assert not (tmp_path / "x.csv").exists()
+
+
+def _parses(monkeypatch) -> list:
+  """The files parsed from here on (the cache's misses)."""
+  import chorjax.data.dataset as dataset
+
+  parsed, read = [], dataset.read_motions
+  monkeypatch.setattr(dataset, "read_motions", lambda path, **kw: parsed.append(path.name) or read(path, **kw))
+  return parsed
+
+
+def _same(a, b) -> bool:
+  return list(a.id_map) == list(b.id_map) and all(
+    np.array_equal(x, y) and np.array_equal(i, j)
+    for (i, x), (j, y) in zip(a.train + a.val, b.train + b.val, strict=True)
+  )
+
+
+def test_the_cache_reads_a_changed_take_alone_and_makes_a_damaged_entry_again(takes, tmp_path, monkeypatch, capsys):
+  """A library read twice is parsed once; a take whose file changed is the only one read again; an entry
+  damaged on disk is made again with one line saying so; what comes out is what reading without it gives."""
+  import shutil
+
+  library = tmp_path / "library"
+  shutil.copytree(takes, library)
+  config = lambda cache: tiny_config(f"data.dataset={library}", f"data.labels={PATTERN}", f"data.cache={cache}").data
+  parsed = _parses(monkeypatch)
+  first = load_dataset(config(tmp_path / "cache"))
+  assert sorted(parsed) == sorted(f"{t}.bvh" for t in TAKES)
+  parsed.clear()
+  again = load_dataset(config(tmp_path / "cache"))
+  assert parsed == [] and _same(first, again)
+
+  changed = library / f"{TAKES[3]}.bvh"  # one number of its last frame moved by a millimetre
+  lines = changed.read_text().splitlines()
+  numbers = lines[-1].split()
+  numbers[0] = f"{float(numbers[0]) + 0.1:.6f}"
+  changed.write_text("\n".join([*lines[:-1], " ".join(numbers)]) + "\n")
+  third = load_dataset(config(tmp_path / "cache"))
+  assert parsed == [changed.name] and not _same(first, third)
+  assert _same(third, load_dataset(config("off")))
+
+  entries = sorted((tmp_path / "cache").rglob("*.npz"))
+  assert len(entries) == 2 * len(TAKES) + 2  # each file parsed and each take encoded; the changed take twice
+  of = lambda entry: json.loads(str(np.load(entry)["meta"]))[0]["name"]
+  entries = [e for e in (tmp_path / "cache" / "takes").rglob("*.npz") if of(e) == TAKES[0]]
+  entries[0].write_bytes(entries[0].read_bytes()[:100])  # the entry of a parsed file, cut short
+  parsed.clear()
+  capsys.readouterr()
+  fourth = load_dataset(config(tmp_path / "cache"))
+  err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("cache:")]
+  assert len(err) == 1 and f"cache: {entries[0]} was damaged" in err[0] and err[0].endswith("is read again")
+  assert _same(fourth, third) and len(parsed) == 1  # that file alone parsed again
+  load_dataset(config(tmp_path / "cache"))
+  assert not [line for line in capsys.readouterr().err.splitlines() if line.startswith("cache:")]  # made again

@@ -1,0 +1,143 @@
+"""Reading a library once: every take, parsed and encoded, kept on disk and found again by its content.
+
+Two kinds of entries, each one ``.npz`` file under the cache folder (``data.cache``):
+
+- ``takes/``: the motions a file holds, as its reader made them, keyed by the file's path and bytes and the
+  reader's settings (a CSV's skeleton, frame rate and up axis). A changed file has another key: it is read
+  again, and only it.
+- ``features/``: a take's canonical positions and its encoded versions (the augmentations), keyed by the
+  take's positions after mapping and resampling and by the settings that encode them. Whatever changes
+  upstream (a file, the joint mapping, the frame rate, a ``data.*`` key) changes the key.
+
+An entry is written whole (through a temporary file) and checked when read: one that cannot be read or does
+not hold what its key says is damaged, said in one line, and made again; it is never trusted. Entries are
+never removed by chorjax: delete the folder to reclaim its space.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from chorjax.data.motion import Motion, Skeleton
+from chorjax.errors import atomic_write
+
+FORMAT = 1  # bump when what an entry holds changes meaning: old entries are then never found
+
+
+def cache_root(setting: str) -> Path | None:
+  """The cache folder of ``data.cache``: ``auto`` is ``$CHORJAX_CACHE``, else ``$XDG_CACHE_HOME/chorjax``,
+  else ``~/.cache/chorjax``; ``off`` keeps nothing; anything else is the folder."""
+  if setting == "off":
+    return None
+  if setting != "auto":
+    return Path(setting).expanduser()
+  if os.environ.get("CHORJAX_CACHE"):
+    return Path(os.environ["CHORJAX_CACHE"])
+  base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+  return Path(base) / "chorjax"
+
+
+def digest(*parts) -> str:
+  """A key from bytes, arrays and JSON-able settings."""
+  h = hashlib.blake2b(digest_size=20)
+  h.update(str(FORMAT).encode())
+  for part in parts:
+    if isinstance(part, np.ndarray):
+      h.update(str((part.dtype.str, part.shape)).encode())
+      h.update(np.ascontiguousarray(part).tobytes())
+    elif isinstance(part, bytes):
+      h.update(part)
+    else:
+      h.update(json.dumps(part, sort_keys=True, default=str).encode())
+    h.update(b"\0")
+  return h.hexdigest()
+
+
+class Cache:
+  """The entries under one folder (``root`` None: nothing is kept, everything is made each time).
+  ``damaged`` lists the one-line notes of entries made again."""
+
+  def __init__(self, root: Path | None):
+    self.root, self.damaged, self.hits, self.misses = root, [], 0, 0
+
+  def motions(self, path: Path, settings: dict, read: Callable[[], list[Motion]]) -> list[Motion]:
+    """The motions of the file ``path`` (``read()`` parses it), from the cache when its bytes were read before
+    with these reader ``settings``."""
+    if self.root is None:
+      return read()
+    key = digest(str(Path(path).resolve()), Path(path).read_bytes(), settings)  # names come from the path
+    return self._entry("takes", key, read, _save_motions, _load_motions, f"{path}")
+
+  def encoded(self, motion: Motion, settings: dict, make: Callable[[], dict]) -> dict:
+    """``make()``'s arrays for ``motion`` (``{name: array}``), from the cache when the same positions were
+    encoded with these ``settings`` before."""
+    if self.root is None:
+      return make()
+    key = digest(np.asarray(motion.positions, np.float32), motion.skeleton.to_dict(), motion.fps, settings)
+    return self._entry("features", key, make, _save_arrays, _load_arrays, motion.source or motion.name)
+
+  def _entry(self, kind: str, key: str, make, save, load, what: str):
+    assert self.root is not None
+    path = self.root / kind / key[:2] / f"{key}.npz"
+    if path.exists():
+      try:
+        value = load(path, key)
+        self.hits += 1
+        return value
+      except Exception as e:  # anything that cannot be read back is damage: made again, never trusted
+        note = f"cache: {path} was damaged ({type(e).__name__}); {what} is read again"
+        self.damaged.append(note)
+        print(note, file=sys.stderr, flush=True)
+    self.misses += 1
+    value = make()
+    try:
+      atomic_write(path, lambda tmp: save(tmp, key, value))
+    except OSError as e:  # a full or read-only disk costs the cache, not the run
+      print(f"cache: {path} not written ({e}); reading goes on without it", file=sys.stderr, flush=True)
+    return value
+
+
+def _save_arrays(tmp: Path, key: str, arrays: dict) -> None:
+  with open(tmp, "wb") as f:
+    np.savez(f, __key__=np.array(key), **arrays)
+
+
+def _load_arrays(path: Path, key: str) -> dict:
+  with np.load(path, allow_pickle=False) as data:
+    if str(data["__key__"]) != key:
+      raise ValueError("holds another entry")
+    return {k: np.asarray(data[k]) for k in data.files if k != "__key__"}
+
+
+def _save_motions(tmp: Path, key: str, motions: list[Motion]) -> None:
+  meta = [
+    {"fps": m.fps, "skeleton": m.skeleton.to_dict(), "up_axis": m.up_axis, "units": m.units, "name": m.name}
+    | {"source": m.source}
+    for m in motions
+  ]
+  arrays = {f"positions_{k}": np.asarray(m.positions, np.float32) for k, m in enumerate(motions)}
+  _save_arrays(tmp, key, {"meta": np.array(json.dumps(meta)), **arrays})
+
+
+def _load_motions(path: Path, key: str) -> list[Motion]:
+  arrays = _load_arrays(path, key)
+  meta = json.loads(str(arrays["meta"]))
+  return [
+    Motion(
+      arrays[f"positions_{k}"],
+      float(m["fps"]),
+      Skeleton.from_dict(m["skeleton"]),
+      m["up_axis"],
+      m["units"],
+      m["name"],
+      m["source"],
+    )
+    for k, m in enumerate(meta)
+  ]
