@@ -64,12 +64,20 @@ def test_malformed_csv_errors_name_file_and_line(tmp_path, capsys, text, line, f
   assert err.count("\n") == 1 and fragment in err and "Traceback" not in err
 
 
-def test_take_shorter_than_a_window_is_named(tmp_path):
+def test_a_take_shorter_than_a_window_is_left_out_and_named_and_all_of_them_are_refused(tmp_path):
   from chorjax.config import load_config
-  from chorjax.data.dataset import load_dataset
+  from chorjax.data.dataset import dataset_notes, load_dataset
 
-  (tmp_path / "a.csv").write_text("\n".join([GOOD_ROW] * 30))
-  (tmp_path / "b.csv").write_text("\n".join([GOOD_ROW] * 5))
-  cfg = load_config(None, [f"data.dataset={str(tmp_path)!r}", "data.seq_length=10"])
-  with pytest.raises(UserError, match=r"b\.csv: 5 frames, shorter than one window"):
+  moving = lambda t: ",".join(str(float(v) + 0.01 * t) for v in GOOD_ROW.split(","))
+  (tmp_path / "a.csv").write_text("\n".join(moving(t) for t in range(30)))
+  (tmp_path / "b.csv").write_text("\n".join(moving(t) for t in range(5)))
+  cfg = load_config(None, [f"data.dataset={str(tmp_path)!r}", "data.seq_length=10", "data.val_takes=[]"])
+  ds = load_dataset(cfg.data)
+  assert [m.name for m in ds.motions] == ["a"]
+  assert (
+    "warning: 1 of 2 takes are shorter than one window (data.seq_length + 1 = 11 frames) and are left out: b (5); "
+    "a shorter data.seq_length keeps them" in dataset_notes(ds)
+  )
+  cfg = load_config(None, [f"data.dataset={str(tmp_path)!r}", "data.seq_length=40"])
+  with pytest.raises(UserError, match=r"a\.csv: 30 frames, shorter than one window"):
     load_dataset(cfg.data)

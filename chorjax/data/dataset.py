@@ -224,7 +224,8 @@ def load_dataset(data_cfg) -> Dataset:
   """Reads, splits, fits normalization on the training split, and encodes every take.
 
   Raises:
-    UserError: for unreadable files, an empty selection, or a take shorter than one window.
+    UserError: for unreadable files, an empty selection, or no take as long as one window (shorter takes
+      are left out, and ``notes`` says which).
   """
   # Full float32 products: on a GPU, JAX's default multiplies float32 matrices in TF32, and the features of a
   # run trained there differed from the same takes read on a CPU by up to 1e-3 (2% of a feature's std), so
@@ -256,7 +257,8 @@ def _load_dataset(data_cfg) -> Dataset:
   cache = Cache(cache_root(data_cfg.cache))
   motions = conform(read_takes([data_cfg.dataset], data_cfg, cache), data_cfg, mappings, rest_notes)
   motions, fps, notes = one_rate(motions, data_cfg.seq_length)
-  notes = rest_notes + notes + _usable(motions, data_cfg)
+  motions, usable_notes = _usable(motions, data_cfg)
+  notes = rest_notes + notes + usable_notes
   names = [m.name for m in motions]
   labels = read_labels(data_cfg.labels, names) if data_cfg.labels else None
   id_map = {n: i for i, n in enumerate(labels.names if labels else names)}
@@ -308,21 +310,31 @@ def _load_dataset(data_cfg) -> Dataset:
   )
 
 
-def _usable(motions, data_cfg) -> list[str]:
-  """UserError for takes training cannot use (two of one name, shorter than a window, none that moves); a
-  warning per take that does not move."""
+def _usable(motions, data_cfg) -> tuple[list, list[str]]:
+  """The takes training can use and what to say about the others: a UserError for two takes of one name, for
+  no take as long as a window, or none that moves; takes shorter than a window are left out, with a warning
+  naming them (a library's short takes); a warning per take that does not move."""
   names = [m.name for m in motions]
   if len(set(names)) != len(names):
     raise UserError(f"{data_cfg.dataset}: two takes share a name; ids come from file names")
   need = data_cfg.seq_length + 1
-  for m in motions:
-    if m.num_frames < need:
-      raise UserError(f"{m.source}: {m.num_frames} frames, shorter than one window (data.seq_length + 1 = {need})")
-  dataset = data_cfg.dataset
+  short = [m for m in motions if m.num_frames < need]
+  if len(short) == len(motions):
+    m = short[0]
+    raise UserError(f"{m.source}: {m.num_frames} frames, shorter than one window (data.seq_length + 1 = {need})")
+  notes = []
+  if short:
+    which = ", ".join(f"{m.name} ({m.num_frames})" for m in short[:3]) + (" ..." if len(short) > 3 else "")
+    notes.append(
+      f"warning: {len(short)} of {len(motions)} takes are shorter than one window (data.seq_length + 1 = {need} "
+      f"frames) and are left out: {which}; a shorter data.seq_length keeps them"
+    )
+    motions = [m for m in motions if m.num_frames >= need]
   frozen = [m.name for m in motions if not np.ptp(m.positions, axis=0).max() > 0]
   if frozen and len(frozen) == len(motions):
-    raise UserError(f"{dataset}: no take moves (every frame of each is one pose): nothing to learn")
-  return [f"warning: take {n} does not move (every frame is one pose): remove it unless you mean it" for n in frozen]
+    raise UserError(f"{data_cfg.dataset}: no take moves (every frame of each is one pose): nothing to learn")
+  notes += [f"warning: take {n} does not move (every frame is one pose): remove it unless you mean it" for n in frozen]
+  return motions, notes
 
 
 SMALL_DATA_MINUTES = 3.0  # below this much training motion, training says what to expect (experiments/dancers)
