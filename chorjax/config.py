@@ -319,6 +319,23 @@ class TrainConfig:
   checkpoint_every: int = _field(500, "steps between checkpoints", minimum=1)
   keep_checkpoints: int = _field(3, "latest checkpoints kept (the best by val loss is kept too)", minimum=1)
   eval_every: int = _field(250, "steps between validation passes (0 = only at the end)", minimum=0, resumable=True)
+  epochs: float = _field(
+    0.0,
+    "training length in passes over the training frames (windows of data.seq_length); 0 = train.num_steps",
+    minimum=0.0,
+    resumable=True,
+    more=(
+      "Sets `train.num_steps` to epochs x training frames / (batch_size x seq_length), so a run's length "
+      "follows its data: training says how many steps that is."
+    ),
+  )
+  patience: int = _field(
+    0,
+    "end training after this many validation passes without a lower validation loss (0 = train to the end)",
+    minimum=0,
+    resumable=True,
+    more="Needs `train.eval_every` > 0 and held-out takes. The sample and calibration of the end follow as usual.",
+  )
   log_every: int = _field(50, "steps between log lines / metrics.jsonl rows", minimum=1, resumable=True)
   figure_every: int = _field(0, "steps between sample figures in TensorBoard (0 = off)", minimum=0, resumable=True)
   input_noise: float = _field(

@@ -89,6 +89,7 @@ class Loop:
     self.losses: dict[int, float] = {}
     self.compile_s: float | None = None
     self.stop: Callable[[], int | None] = lambda: None  # a signal number once one asks to stop
+    self.ended: str | None = None  # why training ended before ``total`` (a hook's reason), e.g. patience
     self.on_stop: Callable[[Loop], None] = lambda loop: None
 
   def add_hook(self, fn, every: int, at_last: bool = True) -> None:
@@ -123,6 +124,8 @@ class Loop:
       for hook in self.hooks:
         if hook.is_due(self.step, self.total):
           hook.fn(self)
+      if self.ended is not None:
+        break
       signum = self.stop()
       if signum is not None and self.step < self.total:
         self.flush()
@@ -344,6 +347,43 @@ def evaluation_hook(val, loss_fn: Callable):
   return evaluate
 
 
+def patience_hook(patience: int, save: Callable[[Loop], None], say: Callable[[str], None]):
+  """``train.patience``: ends training (``loop.ended``, with a checkpoint of the step) once ``patience``
+  validation passes in a row have not lowered the validation loss."""
+  best, since = [math.inf, 0], [0]
+
+  def check(loop: Loop) -> None:
+    if loop.val_loss is None:
+      return
+    if loop.val_loss < best[0]:
+      best[:], since[0] = [loop.val_loss, loop.step], 0
+      return
+    since[0] += 1
+    if since[0] >= patience:
+      loop.ended = (
+        f"ended at step {loop.step}: {patience} validation passes without a lower loss (train.patience; the "
+        f"lowest, {best[0]:.4g}, at step {best[1]})"
+      )
+      say(loop.ended)
+      save(loop)
+
+  return check
+
+
+def sized_to_data(cfg: Config, ds: Dataset) -> tuple[Config, str | None]:
+  """``train.epochs``: the config with ``train.num_steps`` set from the training frames, and a line saying so."""
+  t = cfg.train
+  if t.epochs <= 0:
+    return cfg, None
+  frames = sum(len(x) for _, x in ds.train)
+  steps = max(1, math.ceil(t.epochs * frames / (t.batch_size * cfg.data.seq_length)))
+  line = (
+    f"train.epochs = {t.epochs:g}: {steps:,} steps ({frames:,} training frames, augmentations included, in "
+    f"windows of {t.batch_size} x {cfg.data.seq_length})"
+  )
+  return dataclasses.replace(cfg, train=dataclasses.replace(t, num_steps=steps)), line
+
+
 def checkpoint_hook(manager, meta_of: Callable[[int], dict]):
   """Saves the state once the step's loss is known to be finite (``meta_of(step)`` is its meta)."""
 
@@ -457,8 +497,9 @@ def _locked_train(cfg: Config, workdir: Path, force: bool, parallel, is_main: bo
   with workdir_lock(workdir) if is_main else contextlib.nullcontext():
     keep_old_config = _check_saved_config(workdir, cfg, force) and is_main
     ds = load_dataset(cfg.data)
+    cfg, budget = sized_to_data(cfg, ds)
     if is_main:
-      for line in dataset_notes(ds):
+      for line in [*dataset_notes(ds), *([budget] if budget else [])]:
         print(line, file=sys.stderr if line.startswith("warning") else sys.stdout, flush=True)
     if cfg.sample.frames > 0:  # fail now, not after hours of training, if the end sample cannot be drawn
       motion_weight_vector(len(ds.motions), cfg.sample.motion, source="sample.motion =")
@@ -539,6 +580,11 @@ def _train(
   loop.add_hook(save, cfg.train.checkpoint_every)
   if cfg.train.keep == "best" and val:  # the best is kept where it happens, not at the next checkpoint_every
     loop.add_hook(best_checkpoint_hook(manager, save), cfg.train.eval_every or total)
+  if cfg.train.patience:
+    if not (val and cfg.train.eval_every):
+      raise UserError("train.patience: needs validation passes (train.eval_every > 0) and held-out takes")
+    say = (lambda line: print(line, flush=True)) if is_main else (lambda line: None)
+    loop.add_hook(patience_hook(cfg.train.patience, lambda loop: save_now(loop), say), cfg.train.eval_every)
   if log is not None and log.writer is not None and cfg.train.figure_every and family.figures:
     loop.add_hook(figure_hook(log.writer, spec.graphdef, host_params, ds, cfg), cfg.train.figure_every, at_last=False)
   loop.end_hooks.append(lambda loop: ckpt.wait(manager))
@@ -553,7 +599,7 @@ def _train(
     loop.stop = stop if parallel is None else agreed_stop(stop)
     loop.run()
   samples: dict = {}
-  if is_main and total > 0 and loop.step >= total:  # finished, not stopped
+  if is_main and total > 0 and (loop.step >= total or loop.ended):  # finished, not stopped
     finished = end_of_run.Finished(workdir, ds, cfg, spec.graphdef, host_params(loop.state["params"]))
     for hook in end_of_run.standard(cfg) if finish is None else finish:
       samples.update(hook(finished))

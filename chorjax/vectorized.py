@@ -48,6 +48,7 @@ from chorjax.training import (
   _truncate_metrics,
   _write_config,
   best_checkpoint_hook,
+  sized_to_data,
   stop_on_signals,
   workdir_lock,
 )
@@ -111,6 +112,8 @@ def train_vectorized(cfgs, workdirs, *, force: bool = False) -> list[dict]:
   """
   cfgs, workdirs = list(cfgs), [Path(w).absolute() for w in workdirs]
   check_group(cfgs)
+  if any(c.train.patience for c in cfgs):
+    raise UserError("train.patience: not with several seeds in one program (each would end apart); train them apart")
   with contextlib.ExitStack() as stack:
     for w in workdirs:
       if w.exists() and not w.is_dir():
@@ -118,7 +121,9 @@ def train_vectorized(cfgs, workdirs, *, force: bool = False) -> list[dict]:
       stack.enter_context(workdir_lock(w))
     keep_old = [_check_saved_config(w, c, force) for w, c in zip(workdirs, cfgs)]
     ds = load_dataset(cfgs[0].data)
-    for line in dataset_notes(ds):
+    sized = [sized_to_data(c, ds) for c in cfgs]
+    cfgs = [c for c, _ in sized]
+    for line in [*dataset_notes(ds), *([sized[0][1]] if sized[0][1] else [])]:
       print(line, file=sys.stderr if line.startswith("warning") else sys.stdout, flush=True)
     managers = [ckpt.create_manager(w, keep=c.train.keep_checkpoints) for w, c in zip(workdirs, cfgs)]
     for m in managers:

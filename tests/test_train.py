@@ -441,3 +441,24 @@ def test_a_checkpoint_whose_step_is_no_number_is_one_line(tmp_path):
   meta.write_text(_json.dumps(data))
   with pytest.raises(_UserError, match=r"6/meta/metadata: damaged checkpoint"):
     load_run(run)
+
+
+def test_epochs_size_the_run_to_the_data_and_patience_ends_it_when_the_loss_stops_falling(tmp_path, capsys):
+  """``train.epochs`` sets the step count from the training frames; ``train.patience`` ends training after that
+  many validation passes without a lower loss (at learning rate 0 the first pass's loss is never lowered: the
+  run ends two passes later), with a checkpoint of that step and the end's sample written as usual."""
+  import math
+
+  cfg = tiny_config("train.epochs=0.5", "optim.lr=0", "train.eval_every=1", "train.patience=2", "log.tensorboard=false")
+  frames = sum(len(x) for _, x in load_dataset(cfg.data).train)
+  steps = math.ceil(0.5 * frames / (cfg.train.batch_size * cfg.data.seq_length))
+  summary = train_and_evaluate(cfg, tmp_path / "run")
+  out = capsys.readouterr().out
+  assert f"train.epochs = 0.5: {steps:,} steps ({frames:,} training frames" in out and steps > 3
+  assert summary["final_step"] == 3 and "ended at step 3: 2 validation passes without a lower loss" in out
+  assert (ckpt.checkpoint_dir(tmp_path / "run") / "3").is_dir() and summary["samples"]
+  assert json.loads((tmp_path / "run" / "config.json").read_text())["train"]["num_steps"] == steps
+
+  no_val = tiny_config("train.patience=2", "train.eval_every=1", "data.val_takes=[]", "log.tensorboard=false")
+  with pytest.raises(UserError, match=r"train.patience: needs validation passes"):
+    train_and_evaluate(no_val, tmp_path / "none")
