@@ -72,7 +72,8 @@ class Cache:
     with these reader ``settings``."""
     if self.root is None:
       return read()
-    key = digest(str(Path(path).resolve()), Path(path).read_bytes(), settings)  # names come from the path
+    # the path as given, not resolved: a take's name comes from it, and two links to one file are two takes
+    key = digest(str(Path(path).absolute()), Path(path).read_bytes(), settings)
     return self._entry("takes", key, read, _save_motions, _load_motions, f"{path}")
 
   def encoded(self, motion: Motion, settings: dict, make: Callable[[], dict]) -> dict:

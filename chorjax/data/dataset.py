@@ -380,7 +380,6 @@ def _generation_stats(features: Features, train, fps: float) -> Features:
   """What generation may hold to: the range the encoded training frames span (``sample.clamp``), the range
   of their changes from one frame to the next (``sample.clamp_steps``) and their pace, how far the pose
   features move in half a second (``sample.pace``)."""
-  every = np.concatenate([x for _, x in train])
   lag = max(round(0.5 * fps), 1)
   pose = features.pose_channels
   moved = [np.abs(x[lag:, pose] - x[:-lag, pose]).mean(-1) for _, x in train if len(x) > lag]
@@ -388,13 +387,14 @@ def _generation_stats(features: Features, train, fps: float) -> Features:
   joints = features.joint_motion
   if joints is not None:  # the same as the judge measures it: joints relative to the root, turning included
     moved = takes_joint_pace([x for _, x in train if len(x) > lag], lag, joints)
-  steps = np.concatenate([np.diff(x, axis=0) for _, x in train if len(x) > 1])
+  steps = [np.diff(x, axis=0) for _, x in train if len(x) > 1]
+  # per take, then over takes: no copy of every frame at once (a library's hours of motion)
   return dataclasses.replace(
     features,
-    low=every.min(0),
-    high=every.max(0),
-    step_low=steps.min(0),
-    step_high=steps.max(0),
+    low=np.min([x.min(0) for _, x in train], 0),
+    high=np.max([x.max(0) for _, x in train], 0),
+    step_low=np.min([d.min(0) for d in steps], 0),
+    step_high=np.max([d.max(0) for d in steps], 0),
     pace_lag=lag,
     pace=pace,
     pace_joints=None if joints is None else float(np.concatenate(moved).mean()),
@@ -418,8 +418,7 @@ class WindowSampler:
     self.seq_length, self.batch_size, self.seed = seq_length, batch_size, seed
     self.ids = conditions([i for i, _ in sequences])
     lengths = np.array([x.shape[0] for _, x in sequences])
-    self.data = np.concatenate([x for _, x in sequences]).astype(np.float32)
-    self.offsets = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+    self.sequences = [np.asarray(x, np.float32) for _, x in sequences]  # the takes' own arrays: no second copy
     self.max_start = lengths - (seq_length + 1)
     self.probs = lengths / lengths.sum()
 
@@ -434,7 +433,7 @@ class WindowSampler:
     """Batch ``step`` (optionally only some rows: one process's share of a global batch)."""
     seq, start = self.indices(step)
     seq, start = seq[rows], start[rows]
-    frames = self.data[(self.offsets[seq] + start)[:, None] + np.arange(self.seq_length + 1)]
+    frames = np.stack([self.sequences[q][s : s + self.seq_length + 1] for q, s in zip(seq, start)])
     return {"inputs": frames[:, :-1], "targets": frames[:, 1:], "motion_ids": self.ids[seq]}
 
 

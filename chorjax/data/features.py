@@ -50,17 +50,36 @@ def take_joint_pace(z_TxD, lag: int, m: JointMotion) -> np.ndarray:
   return takes_joint_pace([z_TxD], lag, m)[0]
 
 
+PACE_CHUNK = 1 << 15  # frame pairs a call of takes_joint_pace: one shape, one compile, bounded memory
+
+
 def takes_joint_pace(takes, lag: int, m: JointMotion) -> list[np.ndarray]:
-  """:func:`take_joint_pace` of each take in ``takes``, computed in one call over all their frame pairs (one
-  program per operation, not one for each take's length: a library of takes of many lengths compiles once)."""
-  now, then, turn = [], [], []
+  """:func:`take_joint_pace` of each take in ``takes``, computed over all their frame pairs ``PACE_CHUNK`` at a
+  time (one program for every take's length, and no copy of a library's hours of frames at once)."""
+  dim = takes[0].shape[-1]
+  now, then, turn = (
+    np.zeros((PACE_CHUNK, dim), np.float32),
+    np.zeros((PACE_CHUNK, dim), np.float32),
+    np.zeros(PACE_CHUNK, np.float32),
+  )
+  buffers = (now, then, turn)
+  out, filled, lengths = [], 0, []
   for z_TxD in takes:
     turned = np.cumsum(z_TxD[:, 0] * m.std[0] + m.mean[0])
-    now.append(z_TxD[lag:])
-    then.append(z_TxD[:-lag])
-    turn.append(turned[lag:] - turned[:-lag])
-  pace = np.asarray(joint_pace(np.concatenate(now), np.concatenate(then), np.concatenate(turn), m))
-  return np.split(pace, np.cumsum([len(t) for t in turn])[:-1])
+    parts = (z_TxD[lag:], z_TxD[:-lag], turned[lag:] - turned[:-lag])
+    lengths.append(len(parts[2]))
+    done = 0
+    while done < lengths[-1]:
+      k = min(PACE_CHUNK - filled, lengths[-1] - done)
+      for buffer, part in zip(buffers, parts):
+        buffer[filled : filled + k] = part[done : done + k]
+      filled, done = filled + k, done + k
+      if filled == PACE_CHUNK:
+        out.append(np.asarray(joint_pace(now, then, turn, m)))
+        filled = 0
+  if filled:
+    out.append(np.asarray(joint_pace(now, then, turn, m))[:filled])  # the rest of the buffer: the last chunk's, unused
+  return np.split(np.concatenate(out), np.cumsum(lengths)[:-1])
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
