@@ -111,6 +111,12 @@ class DataConfig:
       "alone; a damaged entry is made again, with one line saying so. chorjax never deletes it."
     ),
   )
+  workers: int = _field(
+    0,
+    "processes that read and encode takes not yet in the cache: 0 = every core when there are 64 or more, else 1",
+    minimum=0,
+    resumable=True,
+  )
   labels: str = _field(
     "",
     "condition on named labels, not take ids: a pattern with named groups over take names, or a take,FIELD CSV",

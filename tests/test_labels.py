@@ -166,3 +166,18 @@ def test_the_cache_reads_a_changed_take_alone_and_makes_a_damaged_entry_again(ta
   assert _same(fourth, third) and len(parsed) == 1  # that file alone parsed again
   load_dataset(config(tmp_path / "cache"))
   assert not [line for line in capsys.readouterr().err.splitlines() if line.startswith("cache:")]  # made again
+
+
+def test_takes_read_and_encoded_in_processes_are_the_ones_read_here(takes, tmp_path, monkeypatch):
+  """``data.workers = 2``: two fresh processes parse and encode the takes into the cache, and this process
+  reads them back (it parses none): the dataset is the one read in this process alone."""
+  config = lambda cache, workers: (
+    tiny_config(
+      f"data.dataset={takes}", f"data.labels={PATTERN}", f"data.cache={cache}", f"data.workers={workers}"
+    ).data
+  )
+  here = load_dataset(config(tmp_path / "here", 1))
+  parsed = _parses(monkeypatch)
+  there = load_dataset(config(tmp_path / "there", 2))
+  assert parsed == [] and _same(here, there)
+  assert len(list((tmp_path / "there").rglob("*.npz"))) == 2 * len(TAKES)

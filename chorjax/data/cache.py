@@ -9,6 +9,8 @@ Two kinds of entries, each one ``.npz`` file under the cache folder (``data.cach
   take's positions after mapping and resampling and by the settings that encode them. Whatever changes
   upstream (a file, the joint mapping, the frame rate, a ``data.*`` key) changes the key.
 
+A library's files and takes not yet in the cache are parsed and encoded in fresh processes
+(``in_processes``, ``data.workers``), which write their entries; the reading process then reads them back.
 An entry is written whole (through a temporary file) and checked when read: one that cannot be read or does
 not hold what its key says is damaged, said in one line, and made again; it is never trusted. Entries are
 never removed by chorjax: delete the folder to reclaim its space.
@@ -72,21 +74,38 @@ class Cache:
     with these reader ``settings``."""
     if self.root is None:
       return read()
+    return self._entry("takes", self._motions_key(path, settings), read, _save_motions, _load_motions, f"{path}")
+
+  @staticmethod
+  def _motions_key(path: Path, settings: dict) -> str:
     # the path as given, not resolved: a take's name comes from it, and two links to one file are two takes
-    key = digest(str(Path(path).absolute()), Path(path).read_bytes(), settings)
-    return self._entry("takes", key, read, _save_motions, _load_motions, f"{path}")
+    return digest(str(Path(path).absolute()), Path(path).read_bytes(), settings)
+
+  @staticmethod
+  def _encoded_key(motion: Motion, settings: dict) -> str:
+    return digest(np.asarray(motion.positions, np.float32), motion.skeleton.to_dict(), motion.fps, settings)
+
+  def _path(self, kind: str, key: str) -> Path:
+    assert self.root is not None
+    return self.root / kind / key[:2] / f"{key}.npz"
+
+  def has_motions(self, path: Path, settings: dict) -> bool:
+    """Whether the file's motions are kept (an entry that turns out damaged is made again when read)."""
+    return self.root is not None and self._path("takes", self._motions_key(path, settings)).exists()
+
+  def has_encoded(self, motion: Motion, settings: dict) -> bool:
+    return self.root is not None and self._path("features", self._encoded_key(motion, settings)).exists()
 
   def encoded(self, motion: Motion, settings: dict, make: Callable[[], dict]) -> dict:
     """``make()``'s arrays for ``motion`` (``{name: array}``), from the cache when the same positions were
     encoded with these ``settings`` before."""
     if self.root is None:
       return make()
-    key = digest(np.asarray(motion.positions, np.float32), motion.skeleton.to_dict(), motion.fps, settings)
+    key = self._encoded_key(motion, settings)
     return self._entry("features", key, make, _save_arrays, _load_arrays, motion.source or motion.name)
 
   def _entry(self, kind: str, key: str, make, save, load, what: str):
-    assert self.root is not None
-    path = self.root / kind / key[:2] / f"{key}.npz"
+    path = self._path(kind, key)
     if path.exists():
       try:
         value = load(path, key)
@@ -142,3 +161,26 @@ def _load_motions(path: Path, key: str) -> list[Motion]:
     )
     for k, m in enumerate(meta)
   ]
+
+
+PARALLEL_MIN = 64  # entries to make before ``workers = 0`` (auto) starts processes: each costs seconds to start
+
+
+def workers_for(setting: int, missing: int) -> int:
+  """How many processes make ``missing`` entries: ``data.workers`` when set, else (0) every core once there are
+  at least ``PARALLEL_MIN`` to make, else 1 (this process)."""
+  if setting > 0:
+    return setting
+  return max(1, min(os.cpu_count() or 1, missing // (PARALLEL_MIN // 2))) if missing >= PARALLEL_MIN else 1
+
+
+def in_processes(fn: Callable, items: list, workers: int) -> None:
+  """``fn(item)`` for every item, in ``workers`` fresh processes (each writes its entries into the cache; the
+  caller then reads them). A worker's UserError (a bad file) reaches the caller as it is."""
+  import concurrent.futures
+  import multiprocessing
+
+  context = multiprocessing.get_context("spawn")  # jax is threaded: a forked copy of it can deadlock
+  with concurrent.futures.ProcessPoolExecutor(workers, mp_context=context) as pool:
+    for _ in pool.map(fn, items, chunksize=max(1, len(items) // (8 * workers))):
+      pass

@@ -7,6 +7,7 @@ integer id from the sorted order of the file names; the id map travels with ever
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
@@ -15,7 +16,7 @@ import jax
 import numpy as np
 
 from chorjax.data import transforms
-from chorjax.data.cache import Cache, cache_root
+from chorjax.data.cache import Cache, cache_root, in_processes, workers_for
 from chorjax.data.csv import read_csv
 from chorjax.data.features import Features, feature_dim, floor_height, takes_joint_pace
 from chorjax.data.labels import Labels, read_labels, take_condition
@@ -88,9 +89,19 @@ def read_takes(specs: Sequence[str], data_cfg=None, cache: Cache | None = None) 
   before (the same bytes, the same settings) is not parsed again."""
   kw = {} if data_cfg is None else {"skeleton": data_cfg.skeleton, "fps": data_cfg.fps, "up_axis": data_cfg.up_axis}
   cache = cache or Cache(None)
+  if cache.root is not None and data_cfg is not None:  # a library's new files: parsed in processes, then read back
+    missing = [f for spec in specs for f in resolve_files(spec) if not cache.has_motions(f, kw)]
+    workers = workers_for(data_cfg.workers, len(missing))
+    if workers > 1:
+      in_processes(functools.partial(_read_into, root=cache.root, settings=kw), missing, workers)
   return [
     m for spec in specs for f in resolve_files(spec) for m in cache.motions(f, kw, lambda f=f: read_motions(f, **kw))
   ]
+
+
+def _read_into(path: Path, root: Path, settings: dict) -> None:
+  """A worker of :func:`read_takes`: parses one file into the cache."""
+  Cache(root).motions(path, settings, lambda: read_motions(path, **settings))
 
 
 def to_up_axis(motion: Motion, up_axis: str) -> Motion:
@@ -234,10 +245,34 @@ def load_dataset(data_cfg) -> Dataset:
     return _load_dataset(data_cfg)
 
 
+def _encoding(proto: Features, augment) -> dict:
+  """The settings a take's encoding depends on (with its positions, skeleton and rate: ``Cache.encoded``)."""
+  return {"representation": proto.representation, "up_axis": proto.up_axis, "scale": proto.scale} | {
+    "augment": list(augment)
+  }
+
+
+def _encode_into(motion: Motion, proto: Features, augment, root: Path) -> None:
+  """A worker of :func:`_load_dataset`: encodes one take into the cache."""
+  _encoded(motion, proto, augment, Cache(root))
+
+
+def _encode_missing(motions, proto: Features, data_cfg, cache: Cache) -> None:
+  """A library's takes not yet encoded in the cache, encoded in processes (``data.workers``): encoding compiles
+  once per take length, and a library has hundreds of lengths."""
+  if cache.root is None:
+    return
+  settings = _encoding(proto, data_cfg.augment)
+  # by length: a worker gets takes of neighbouring lengths and compiles each length once, not every worker
+  missing = sorted((m for m in motions if not cache.has_encoded(m, settings)), key=lambda m: m.num_frames)
+  if (workers := workers_for(data_cfg.workers, len(missing))) > 1:
+    encode = functools.partial(_encode_into, proto=proto, augment=data_cfg.augment, root=cache.root)
+    in_processes(encode, missing, workers)
+
+
 def _encoded(motion: Motion, proto: Features, augment, cache: Cache) -> dict:
   """A take's canonical positions (``canon``) and its encoded versions (``version0``: as it is, then the
   augmentations), made once and kept in ``cache``."""
-  settings = {"representation": proto.representation, "up_axis": proto.up_axis, "scale": proto.scale}
 
   def make() -> dict:
     canon = np.asarray(proto.canonical(motion.positions))
@@ -248,7 +283,7 @@ def _encoded(motion: Motion, proto: Features, augment, cache: Cache) -> dict:
       out += [np.asarray(transforms.reverse_time(c)) for c in out]
     return {"canon": canon, **{f"version{k}": np.asarray(proto.represent(c)) for k, c in enumerate(out)}}
 
-  return cache.encoded(motion, settings | {"augment": list(augment)}, make)
+  return cache.encoded(motion, _encoding(proto, augment), make)
 
 
 def _load_dataset(data_cfg) -> Dataset:
@@ -276,6 +311,7 @@ def _load_dataset(data_cfg) -> Dataset:
     np.zeros(feature_dim(skeleton, data_cfg.representation), np.float32),
     np.ones(feature_dim(skeleton, data_cfg.representation), np.float32),
   )
+  _encode_missing(motions, proto, data_cfg, cache)
   encoded = {n: _encoded(by_name[n], proto, data_cfg.augment, cache) for n in names}
   # the training takes' mean bone lengths: `directions` builds every frame with them, rigid decoding too
   canon = [encoded[n]["canon"] for n in train_names]
