@@ -137,9 +137,6 @@ def write_web(workdir, folder, *, ort_web=None, controls=None, checkpoint="kept"
   return out
 
 
-UP_AXES = ("y", "-y", "z", "-z", "x", "-x")
-
-
 def write_blender_addon(output, *, force: bool = False) -> Path:
   """``chorjax blender-addon``: the Blender add-on as a zip to install in Blender (Preferences > Add-ons >
   Install from Disk): ``chorjax/blender_addon`` with the joint-name rules (``chorjax.data.joint_names``), the
@@ -152,7 +149,7 @@ def write_blender_addon(output, *, force: bool = False) -> Path:
   from chorjax import __version__
   from chorjax.data.skeletons import MPII16
   from chorjax.data.transforms import up_axis_matrix
-  from chorjax.errors import atomic_write, check_output, refuse_existing
+  from chorjax.errors import UP_AXES, atomic_write, check_output, refuse_existing
 
   out, _ = check_output(output, (".zip",))
   refuse_existing([out], force)

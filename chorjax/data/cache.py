@@ -63,11 +63,11 @@ def digest(*parts) -> str:
 
 
 class Cache:
-  """The entries under one folder (``root`` None: nothing is kept, everything is made each time).
-  ``damaged`` lists the one-line notes of entries made again."""
+  """The entries under one folder (``root`` None: nothing is kept, everything is made each time). An entry's
+  key is computed once per cache object: asking whether it is kept and then reading it hashes a file once."""
 
   def __init__(self, root: Path | None):
-    self.root, self.damaged, self.hits, self.misses = root, [], 0, 0
+    self.root, self.keys = root, {}
 
   def motions(self, path: Path, settings: dict, read: Callable[[], list[Motion]]) -> list[Motion]:
     """The motions of the file ``path`` (``read()`` parses it), from the cache when its bytes were read before
@@ -76,14 +76,21 @@ class Cache:
       return read()
     return self._entry("takes", self._motions_key(path, settings), read, _save_motions, _load_motions, f"{path}")
 
-  @staticmethod
-  def _motions_key(path: Path, settings: dict) -> str:
+  def _motions_key(self, path: Path, settings: dict) -> str:
     # the path as given, not resolved: a take's name comes from it, and two links to one file are two takes
-    return digest(str(Path(path).absolute()), Path(path).read_bytes(), settings)
+    where = str(Path(path).absolute())
+    return self._key(("takes", where, digest(settings)), lambda: digest(where, Path(path).read_bytes(), settings))
 
-  @staticmethod
-  def _encoded_key(motion: Motion, settings: dict) -> str:
-    return digest(np.asarray(motion.positions, np.float32), motion.skeleton.to_dict(), motion.fps, settings)
+  def _encoded_key(self, motion: Motion, settings: dict) -> str:
+    make = lambda: digest(np.asarray(motion.positions, np.float32), motion.skeleton.to_dict(), motion.fps, settings)
+    return self._key(("features", id(motion), digest(settings)), make, motion)
+
+  def _key(self, memo: tuple, make: Callable[[], str], owner=None) -> str:
+    """``make()``, once per ``memo`` (for ``owner``: an id is only that object's while it lives)."""
+    kept = self.keys.get(memo)
+    if kept is None or kept[0] is not owner:
+      kept = self.keys[memo] = (owner, make())
+    return kept[1]
 
   def _path(self, kind: str, key: str) -> Path:
     assert self.root is not None
@@ -108,14 +115,9 @@ class Cache:
     path = self._path(kind, key)
     if path.exists():
       try:
-        value = load(path, key)
-        self.hits += 1
-        return value
+        return load(path, key)
       except Exception as e:  # anything that cannot be read back is damage: made again, never trusted
-        note = f"cache: {path} was damaged ({type(e).__name__}); {what} is read again"
-        self.damaged.append(note)
-        print(note, file=sys.stderr, flush=True)
-    self.misses += 1
+        print(f"cache: {path} was damaged ({type(e).__name__}); {what} is read again", file=sys.stderr, flush=True)
     value = make()
     try:
       atomic_write(path, lambda tmp: save(tmp, key, value))

@@ -89,14 +89,13 @@ def read_takes(specs: Sequence[str], data_cfg=None, cache: Cache | None = None) 
   before (the same bytes, the same settings) is not parsed again."""
   kw = {} if data_cfg is None else {"skeleton": data_cfg.skeleton, "fps": data_cfg.fps, "up_axis": data_cfg.up_axis}
   cache = cache or Cache(None)
+  files = [f for spec in specs for f in resolve_files(spec)]
   if cache.root is not None and data_cfg is not None:  # a library's new files: parsed in processes, then read back
-    missing = [f for spec in specs for f in resolve_files(spec) if not cache.has_motions(f, kw)]
+    missing = [f for f in files if not cache.has_motions(f, kw)]
     workers = workers_for(data_cfg.workers, len(missing))
     if workers > 1:
       in_processes(functools.partial(_read_into, root=cache.root, settings=kw), missing, workers)
-  return [
-    m for spec in specs for f in resolve_files(spec) for m in cache.motions(f, kw, lambda f=f: read_motions(f, **kw))
-  ]
+  return [m for f in files for m in cache.motions(f, kw, lambda f=f: read_motions(f, **kw))]
 
 
 def _read_into(path: Path, root: Path, settings: dict) -> None:
@@ -112,7 +111,7 @@ def to_up_axis(motion: Motion, up_axis: str) -> Motion:
   # in numpy: the matrix holds 0 and +-1 only, so the result is exact either way, and jax would compile the
   # product once per take length (3.6 of the 4.6 s of reading 300 cached Bandai takes)
   positions = np.asarray(motion.positions, np.float32) @ np.asarray(m, np.float32).T
-  return motion.replace(positions=positions.astype(np.float32), up_axis=up_axis)
+  return motion.replace(positions=positions, up_axis=up_axis)
 
 
 def to_rate(motion: Motion, fps: float) -> Motion:
@@ -247,8 +246,11 @@ def load_dataset(data_cfg) -> Dataset:
 
 def _encoding(proto: Features, augment) -> dict:
   """The settings a take's encoding depends on (with its positions, skeleton and rate: ``Cache.encoded``)."""
-  return {"representation": proto.representation, "up_axis": proto.up_axis, "scale": proto.scale} | {
-    "augment": list(augment)
+  return {
+    "representation": proto.representation,
+    "up_axis": proto.up_axis,
+    "scale": proto.scale,
+    "augment": list(augment),
   }
 
 

@@ -213,13 +213,10 @@ class Features:
     rep = transforms.denormalize(z_BxD, self.mean, self.std)[:, None, :]
     root = self.skeleton.root
     canon = _unrepresent(rep, self, place_Bx3)[:, 0]
-    if self.representation == "canonical":
-      turned = place_Bx3[:, 0] + rep[:, 0, 0]
-    else:
-      turned = place_Bx3[:, 0]
-    place = jnp.stack([turned, canon[:, root, 0], canon[:, root, 2]], -1)
-    if self.representation not in ("canonical", "directions"):
-      place = place_Bx3
+    place = place_Bx3  # the representations that place every frame themselves carry nothing
+    if self.representation in ("canonical", "directions"):  # they integrate the root: where it got to
+      turned = place_Bx3[:, 0] + rep[:, 0, 0] if self.representation == "canonical" else place_Bx3[:, 0]
+      place = jnp.stack([turned, canon[:, root, 0], canon[:, root, 2]], -1)
     if rigid:
       canon = transforms.rigid_bones(canon, self.skeleton.parents, self.lengths)
     return self.uncanonical(canon), place

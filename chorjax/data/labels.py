@@ -28,7 +28,7 @@ class Labels:
   Attributes:
     fields: field -> its values (sorted), in the order the pattern or the CSV names them.
     pattern: the regular expression read from take names (named groups), or None (a CSV gave them).
-    table: take name -> {field: value}: every take the run read (and, from a CSV, every row).
+    table: take name -> {field: value}: the CSV's rows (empty with a pattern: the names say it).
   """
 
   fields: dict
@@ -136,7 +136,7 @@ def read_labels(spec: str, take_names: list[str], where: str = "data.labels") ->
       raise UserError(f"{where}: take {name!r} {how}")
     found[name] = got
   values = {f: tuple(sorted({str(t[f]) for t in found.values()})) for f in fields}
-  return Labels(values, pattern, {**table, **found})
+  return Labels(values, pattern, table)
 
 
 def _read_label_csv(path: str, where: str) -> tuple[list[str], dict]:
