@@ -33,6 +33,28 @@ def test_principal_axes_find_the_direction_the_data_varies_along():
     principal_axes(x[:1])
 
 
+def test_a_librarys_axes_are_summed_take_by_take_to_the_same_covariance(monkeypatch):
+  """Frames too many for one float64 copy: the covariance is summed take by take, and it is numpy's to float64
+  rounding, on the bundled takes' features (so the axes with distinct variances are the same ones)."""
+  import chorjax.data.features as features
+
+  takes = [z for _, z in load_dataset(load_config("configs/quickstart.toml").data).train]
+  n = sum(len(t) for t in takes)
+  whole = features._covariance(takes, n)
+  np.testing.assert_allclose(whole, np.cov(np.concatenate(takes).astype(np.float64), rowvar=False), rtol=0, atol=0)
+  monkeypatch.setattr(features, "COVARIANCE_IN_ONE", 0)
+  streamed = features._covariance(takes, n)
+  assert np.abs(streamed - whole).max() < 1e-9 * np.abs(whole).max()
+  once, summed = principal_axes(np.concatenate(takes)), principal_axes(takes)
+  np.testing.assert_allclose(summed.T @ summed, np.eye(len(whole)), atol=1e-5)
+  variance = np.sort(np.linalg.eigvalsh(whole))[::-1]
+  distinct = np.flatnonzero(
+    np.minimum(-np.diff(variance, prepend=np.inf), -np.diff(variance, append=-np.inf)) > 1e-3 * variance[0]
+  )
+  assert len(distinct) >= 10
+  np.testing.assert_allclose(summed[:, distinct], once[:, distinct], atol=1e-4)
+
+
 def _head_with_basis(d, k, seed):
   head = MDNHead(8, d, num_mixtures=k, basis=True, rngs=nnx.Rngs(seed))
   q, _ = np.linalg.qr(np.random.default_rng(seed).normal(size=(d, d)))
@@ -71,7 +93,7 @@ def test_a_pca_run_fixes_its_basis_from_its_training_frames_and_never_trains_it(
   )
   train_and_evaluate(cfg, w)
   ds = load_dataset(cfg.data)
-  want = principal_axes(np.concatenate([z for _, z in ds.train]))
+  want = principal_axes([z for _, z in ds.train])
   run = load_run(w)
   np.testing.assert_allclose(np.asarray(run.params["head"]["basis"]), want, atol=1e-6)
   pos, _ = sample_dancers(run, 40, 2, 0)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import re
 from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
@@ -212,22 +213,38 @@ class Dataset:
     return take_condition(self.labels, self.id_map, self.motions[take].name)
 
 
-def _val_names(names: list[str], val_takes: Sequence) -> list[str]:
-  if tuple(val_takes) == ("auto",):
+def _val_names(names: list[str], val_takes: Sequence, val_pattern: str = "") -> list[str]:
+  if val_pattern:
+    if tuple(val_takes) != ("auto",):
+      raise UserError("data.val_pattern: set it or data.val_takes, not both")
+    try:
+      found = re.compile(val_pattern).search
+    except re.error as e:
+      raise UserError(f"data.val_pattern: not a regular expression ({e})") from None
+    out = [n for n in names if found(n)]
+    if not out:
+      raise UserError(f"data.val_pattern: {val_pattern!r} finds no take; takes: {_some(names)}")
+  elif tuple(val_takes) == ("auto",):
     return names[-1:] if len(names) > 1 else []
-  out = []
-  for v in val_takes:
-    if isinstance(v, int):
-      if not 0 <= v < len(names):
-        raise UserError(f"data.val_takes: id {v} out of range (0..{len(names) - 1})")
-      out.append(names[v])
-    elif v in names:
-      out.append(v)
-    else:
-      raise UserError(f"data.val_takes: no take named {v!r}; takes: {', '.join(names)}")
+  else:
+    out = [_val_name(names, v) for v in val_takes]
   if len(out) == len(names):
     raise UserError("data.val_takes: holds out every take; nothing is left to train on")
   return out
+
+
+def _val_name(names: list[str], v) -> str:
+  if isinstance(v, int):
+    if not 0 <= v < len(names):
+      raise UserError(f"data.val_takes: id {v} out of range (0..{len(names) - 1})")
+    return names[v]
+  if v not in names:
+    raise UserError(f"data.val_takes: no take named {v!r}; takes: {_some(names)}")
+  return v
+
+
+def _some(names: list[str], most: int = 12) -> str:
+  return ", ".join(names[:most]) + (f" ... ({len(names)} takes)" if len(names) > most else "")
 
 
 def load_dataset(data_cfg) -> Dataset:
@@ -300,7 +317,7 @@ def _load_dataset(data_cfg) -> Dataset:
   labels = read_labels(data_cfg.labels, names) if data_cfg.labels else None
   id_map = {n: i for i, n in enumerate(labels.names if labels else names)}
   condition = lambda n: take_condition(labels, id_map, n)
-  val_names = _val_names(names, data_cfg.val_takes)
+  val_names = _val_names(names, data_cfg.val_takes, data_cfg.val_pattern)
   train_names = [n for n in names if n not in val_names]
   by_name = dict(zip(names, motions))
 
@@ -321,17 +338,17 @@ def _load_dataset(data_cfg) -> Dataset:
   lengths[[c for _, c in skeleton.bones]] = np.concatenate([bone_lengths(c, skeleton) for c in canon]).mean(0)
   floor = floor_height(canon, skeleton) if data_cfg.representation == "canonical" else None
   proto = dataclasses.replace(proto, lengths=lengths, floor=floor)
-  versions = lambda n: [encoded[n][k] for k in sorted(encoded[n]) if k.startswith("version")]
-  train_raw = [(condition(n), x) for n in train_names for x in versions(n)]
-  val_raw = [(condition(n), versions(n)[0]) for n in val_names]
+  versions = {n: [v for k, v in sorted(encoded.pop(n).items()) if k.startswith("version")] for n in names}
+  train_raw = [(condition(n), x) for n in train_names for x in versions[n]]
+  val_raw = [(condition(n), versions[n][0]) for n in val_names]
+  del versions, canon  # the raw versions live on in train_raw / val_raw alone, each let go once normalized
   stats = transforms.merged_stats([x for _, x in train_raw])
   # Root-motion representations hold features that are constant by construction (the hips' depth in
   # the facing frame, the root's direction slot): a floor keeps float noise in them from being blown up.
   floor = 1e-3 if data_cfg.representation in ("canonical", "directions") else 1e-8
   std = stats.std(ddof=1, floor=floor).astype(np.float32)
   features = dataclasses.replace(proto, mean=stats.mean.astype(np.float32), std=std)
-  enc = lambda x: ((x - features.mean) / features.std).astype(np.float32)
-  train = tuple((i, enc(x)) for i, x in train_raw)
+  train = _normalized(train_raw, features)
   features = _generation_stats(features, train, fps)
   return Dataset(
     id_map,
@@ -340,12 +357,24 @@ def _load_dataset(data_cfg) -> Dataset:
     tuple(val_names),
     features,
     train,
-    tuple((i, enc(x)) for i, x in val_raw),
+    _normalized(val_raw, features),
     mappings,
     fps,
     tuple(notes),
     labels,
   )
+
+
+def _normalized(raw: list, features: Features) -> tuple:
+  """``raw``'s ``(condition, frames)`` in the features' normalized units, each raw take let go from ``raw``
+  once its normalized copy is made: a library is held once, not twice."""
+  out = []
+  for k, (i, x) in enumerate(raw):
+    z = x - features.mean
+    z /= features.std
+    out.append((i, z.astype(np.float32, copy=False)))
+    raw[k] = None
+  return tuple(out)
 
 
 def _usable(motions, data_cfg) -> tuple[list, list[str]]:

@@ -309,16 +309,34 @@ def floor_height(canon_takes, skeleton: Skeleton) -> float:
   return float(np.median(np.concatenate([np.asarray(c)[:, feet, 1].min(-1) for c in canon_takes])))
 
 
-def principal_axes(frames_NxD) -> np.ndarray:
+# Frames whose float64 copy fits in this many entries (256 MB) get numpy's covariance over all of them at
+# once; a library's millions of frames are summed take by take instead (the same covariance to float64's last
+# bits, without three whole copies of the training set).
+COVARIANCE_IN_ONE = 1 << 25
+
+
+def principal_axes(frames) -> np.ndarray:
   """``[D, D]`` orthogonal: the principal axes of the frames (columns, most variance first, each signed so
-  that its largest entry is positive): the MDN's coordinates under ``model.mdn_basis = "pca"``."""
-  x = np.asarray(frames_NxD, np.float64)
-  if x.ndim != 2 or len(x) < 2:
-    raise ValueError(f"principal_axes: need [N >= 2, D] frames, got {x.shape}")
-  variance, axes = np.linalg.eigh(np.cov(x, rowvar=False))
+  that its largest entry is positive): the MDN's coordinates under ``model.mdn_basis = "pca"``. ``frames``:
+  one ``[N, D]`` array or a sequence of them (a run's training takes)."""
+  takes = [np.asarray(frames)] if isinstance(frames, np.ndarray) else [np.asarray(t) for t in frames]
+  n = sum(len(t) for t in takes)
+  if any(t.ndim != 2 for t in takes) or n < 2:
+    raise ValueError(f"principal_axes: need [N >= 2, D] frames, got {[t.shape for t in takes]}")
+  variance, axes = np.linalg.eigh(_covariance(takes, n))
   axes = axes[:, np.argsort(variance)[::-1]]
   signs = np.sign(axes[np.abs(axes).argmax(0), np.arange(axes.shape[1])])
   return (axes * np.where(signs == 0, 1.0, signs)).astype(np.float32)
+
+
+def _covariance(takes: list[np.ndarray], n: int) -> np.ndarray:
+  """The frames' ``[D, D]`` covariance (ddof 1) in float64: ``np.cov`` when a float64 copy of them is small,
+  else in two passes over the takes (their mean, then the centred products), one take in float64 at a time."""
+  if n * takes[0].shape[1] <= COVARIANCE_IN_ONE:
+    return np.cov(np.concatenate(takes).astype(np.float64), rowvar=False)
+  mean = sum(t.sum(0, dtype=np.float64) for t in takes) / n
+  centred = (t.astype(np.float64) - mean for t in takes)
+  return sum(c.T @ c for c in centred) / (n - 1)
 
 
 def feature_dim(skeleton: Skeleton, representation: str) -> int:

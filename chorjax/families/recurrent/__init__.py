@@ -8,8 +8,6 @@ predicting every next frame through a mixture-density (or MSE) head, sampled fra
 
 from __future__ import annotations
 
-import numpy as np
-
 from chorjax.families.family import Family
 from chorjax.registry import register
 
@@ -28,7 +26,7 @@ class Recurrent(Family):
     from chorjax.data.features import principal_axes
     from chorjax.families.recurrent.steps import create_train_state
 
-    basis = principal_axes(np.concatenate([z for _, z in ds.train])) if cfg.model.pca_basis else None
+    basis = principal_axes([z for _, z in ds.train]) if cfg.model.pca_basis else None
     return create_train_state(cfg, ds.features.dim, ds.num_motions, basis)
 
   def parts(self, cfg, ds):
