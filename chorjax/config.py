@@ -101,6 +101,11 @@ class DataConfig:
   )
   seq_length: int = _field(100, "frames per training window (inputs; targets are shifted by one)", minimum=1)
   val_takes: tuple = _field(("auto",), "held-out take names; 'auto' = the last take by name; [] = none")
+  val_pattern: str = _field(
+    "",
+    "held out instead: every take whose name the pattern finds (e.g. a trial of each label: '_001$')",
+    more="A regular expression searched in take names, as `data.labels`'s; `data.val_takes` then stays `auto`.",
+  )
   cache: str = _field(
     "auto",
     "where read and encoded takes are kept, so a library is read once: auto (~/.cache/chorjax), off, or a folder",
@@ -175,6 +180,14 @@ class ModelConfig:
   initial_state: str = _field(
     "motion", "initial (c, h): projected motion-id weights, or zeros", choices=("motion", "zero")
   )
+  condition_every_frame: bool = _field(
+    False,
+    "the motion weights (take ids or labels) enter every frame's input too, not only the initial state",
+    more=(
+      "An initial state fades within seconds of free-running generation; a library's labels (`data.labels`) "
+      "have to hold for the whole dance. Recurrent family only."
+    ),
+  )
   lstm_kernel: str = _field(
     "fused",
     "how model.cell = 'lstm' runs: 'fused' (every backend) or 'cudnn' (cuDNN on a CUDA GPU, fused elsewhere)",
@@ -196,6 +209,8 @@ class ModelConfig:
         f"key 'model.lstm_kernel': 'cudnn' runs the rnn family's plain LSTM only (model.family = 'rnn', "
         f"model.cell = 'lstm'); here model.family is {self.family!r} and model.cell {self.cell!r}"
       )
+    if self.condition_every_frame and self.family != "rnn":
+      raise UserError(f"key 'model.condition_every_frame': the rnn family's only; model.family is {self.family!r}")
 
 
 @dataclasses.dataclass(frozen=True)

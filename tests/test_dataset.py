@@ -29,6 +29,17 @@ def test_val_takes_by_name_and_id_and_errors():
   assert load_dataset(cfg.data).val_names == ("94_01_skeleton_3d", "94_05_skeleton_3d")
   with pytest.raises(UserError, match="no take named 'nope'"):
     load_dataset(load_config(None, ["data.val_takes=['nope']"]).data)
+  # a library holds out by pattern (a trial of every label); the errors name the key
+  by_pattern = load_dataset(load_config(None, ["data.val_pattern='_0[59]_'"]).data)
+  assert by_pattern.val_names == ("94_05_skeleton_3d", "94_09_skeleton_3d") and len(by_pattern.train_names) == 8
+  for bad, says in [
+    (["data.val_pattern='_77_'"], "finds no take"),
+    (["data.val_pattern='('"], "not a regular expression"),
+    (["data.val_pattern='_'"], "holds out every take"),
+    (["data.val_pattern='_05'", "data.val_takes=[0]"], "not both"),
+  ]:
+    with pytest.raises(UserError, match=says):
+      load_dataset(load_config(None, bad).data)
 
 
 def test_augmentations_add_sequences():

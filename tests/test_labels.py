@@ -37,7 +37,13 @@ def takes(tmp_path_factory, shared_data):
 @pytest.fixture(scope="module")
 def labelled_run(takes, tmp_path_factory):
   run_dir = tmp_path_factory.mktemp("labelled") / "run"
-  cfg = tiny_config(f"data.dataset={takes}", f"data.labels={PATTERN}", "train.num_steps=3", "log.tensorboard=false")
+  cfg = tiny_config(
+    f"data.dataset={takes}",
+    f"data.labels={PATTERN}",
+    "model.condition_every_frame=true",  # as configs/library.toml: the labels enter every frame
+    "train.num_steps=3",
+    "log.tensorboard=false",
+  )
   train_and_evaluate(cfg, run_dir)
   return run_dir
 

@@ -87,6 +87,28 @@ def test_motion_weights_choose_the_initial_state_and_blends_interpolate():
   np.testing.assert_allclose(zero(x, w4), zero(x, w5))
 
 
+@pytest.mark.parametrize("cell", CELLS)
+def test_motion_weights_beside_every_frame_condition_every_step(cell):
+  """``model.condition_every_frame``: the weights ride in the carry and join every frame's input, so frame by
+  frame is the window call, and with a zero initial state they still change every later frame."""
+  m = make(cell, "mdn", condition_every_frame="true")
+  x, w = inputs(t=9)
+  raw, weights = m(x, w), as_weights(w, 10)
+  carry, outs = m.initial_carry(w), []
+  for t in range(9):
+    carry, r = m.step(carry, x[:, t])
+    outs.append(r)
+  np.testing.assert_allclose(jnp.stack(outs, 1), raw, atol=1e-5)
+  np.testing.assert_array_equal(carry[-1][0], weights)  # still the dancers' weights after nine frames
+  zero = make(cell, "mdn", condition_every_frame="true", initial_state="'zero'")
+  a, b = zero(x, jnp.array([4, 4, 4])), zero(x, jnp.array([5, 5, 5]))
+  assert (np.abs(np.asarray(a - b))[:, -1].max(-1) > 1e-4).all()
+  assert np.allclose(
+    make(cell, "mdn", initial_state="'zero'")(x, jnp.array([4, 4, 4]))[:, -1],
+    make(cell, "mdn", initial_state="'zero'")(x, jnp.array([5, 5, 5]))[:, -1],
+  )
+
+
 def test_dropout_uses_one_mask_for_all_time_steps():
   mask = dropout_mask(jax.random.key(0), (4, 1, 32), 0.5)
   assert set(np.unique(np.asarray(mask))) == {0.0, 2.0}

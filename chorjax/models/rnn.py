@@ -3,6 +3,8 @@
 The motion-id conditioning follows the reference notebook: a weight vector over the dataset's
 motions (one-hot, or a blend such as 0.5/0.5) goes through one dense layer that produces the initial
 carry of every layer, so the id chooses the choreography. ``initial_state='zero'`` turns it off.
+``every_frame`` also puts the weights beside every frame's input (``model.condition_every_frame``): an initial
+state fades within seconds, and a library's labels have to hold for a whole dance.
 """
 
 from __future__ import annotations
@@ -40,14 +42,17 @@ class RecurrentCore(nnx.Module):
     dropout: float = 0.0,
     initial_state: str = "motion",
     lstm_kernel: str = "fused",
+    every_frame: bool = False,
     rngs: nnx.Rngs,
   ):
     cls = CELLS[cell]
     self.lstm_kernel = lstm_kernel
     self.hidden, self.num_layers, self.dropout = hidden, num_layers, dropout
     self.num_carries = cls.num_carries
+    self.every_frame = every_frame
+    first = in_features + (num_motions if every_frame else 0)
     self.cells = nnx.List(
-      [cls(in_features if l == 0 else hidden, hidden, forget_bias=forget_bias, rngs=rngs) for l in range(num_layers)]
+      [cls(first if l == 0 else hidden, hidden, forget_bias=forget_bias, rngs=rngs) for l in range(num_layers)]
     )
     self.initial_state = initial_state
     if initial_state == "motion":
@@ -56,13 +61,26 @@ class RecurrentCore(nnx.Module):
       )
 
   def initial_carry(self, weights_BxM):
-    """Per layer, a tuple of ``[B, H]`` arrays, from motion-id weights ``[B, M]``."""
+    """Per layer, a tuple of ``[B, H]`` arrays, from motion-id weights ``[B, M]``; with ``every_frame``, then
+    ``(weights,)``: the weights ride in the carry, so every frame's input gets them."""
     b = weights_BxM.shape[0]
     if self.initial_state == "zero":
       z = jnp.zeros((b, self.hidden), weights_BxM.dtype)
-      return tuple(tuple(z for _ in range(self.num_carries)) for _ in range(self.num_layers))
-    flat = self.init_proj(weights_BxM).reshape(b, self.num_layers, self.num_carries, self.hidden)
-    return tuple(tuple(flat[:, l, k] for k in range(self.num_carries)) for l in range(self.num_layers))
+      layers = tuple(tuple(z for _ in range(self.num_carries)) for _ in range(self.num_layers))
+    else:
+      flat = self.init_proj(weights_BxM).reshape(b, self.num_layers, self.num_carries, self.hidden)
+      layers = tuple(tuple(flat[:, l, k] for k in range(self.num_carries)) for l in range(self.num_layers))
+    return (*layers, (weights_BxM,)) if self.every_frame else layers
+
+  def _conditioned(self, carry, x):
+    """``x`` (``[..., B, D]``) with the carry's motion weights beside each frame, where ``every_frame``."""
+    if not self.every_frame:
+      return x
+    w = carry[-1][0].astype(x.dtype)
+    return jnp.concatenate([x, jnp.broadcast_to(w, (*x.shape[:-1], w.shape[-1]))], -1)
+
+  def _with_weights(self, carry, new_layers: list) -> tuple:
+    return (*new_layers, carry[-1]) if self.every_frame else tuple(new_layers)
 
   def __call__(self, x_BxTxD, carry, dropout_key=None):
     """Runs the stack over a window: ``([B, T, H] top-layer outputs, final carry)``.
@@ -71,7 +89,7 @@ class RecurrentCore(nnx.Module):
     layer's output at every time step. Inside, the window is time-major (one transpose in, one out).
     """
     new_carry = []
-    inp = jnp.swapaxes(x_BxTxD, 0, 1)
+    inp = self._conditioned(carry, jnp.swapaxes(x_BxTxD, 0, 1))
     cudnn = self.lstm_kernel == "cudnn" and on_cuda()
     drop = dropout_key is not None and self.dropout > 0
     masks = self.dropout_masks(dropout_key, inp.shape[1]) if drop else None
@@ -83,7 +101,7 @@ class RecurrentCore(nnx.Module):
       new_carry.append(c)
       if masks is not None:
         inp = inp * masks[l]
-    return jnp.swapaxes(inp, 0, 1), tuple(new_carry)
+    return jnp.swapaxes(inp, 0, 1), self._with_weights(carry, new_carry)
 
   def dropout_masks(self, key, batch: int) -> tuple:
     """Each layer's variational dropout mask ``[B, H]`` for a window drawn with ``key`` (what the whole-window
@@ -95,9 +113,10 @@ class RecurrentCore(nnx.Module):
     """One frame through every layer: ``(carry, h_BxH)``. No dropout unless ``masks`` (``dropout_masks``)
     are given: generation has none; training with feedback runs a window frame by frame with them."""
     new_carry = []
+    x_BxD = self._conditioned(carry, x_BxD)
     for l, cell in enumerate(self.cells):
       c, x_BxD = cell.step(carry[l], cell.project(x_BxD))
       new_carry.append(c)
       if masks is not None:
         x_BxD = x_BxD * masks[l]
-    return tuple(new_carry), x_BxD
+    return self._with_weights(carry, new_carry), x_BxD

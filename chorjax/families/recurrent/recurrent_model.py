@@ -31,6 +31,7 @@ class ChorModel(nnx.Module):
       dropout=cfg.dropout,
       initial_state=cfg.initial_state,
       lstm_kernel=cfg.lstm_kernel,
+      every_frame=cfg.condition_every_frame,
       rngs=rngs,
     )
     self.head: MDNHead | MSEHead
