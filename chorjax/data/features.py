@@ -334,9 +334,16 @@ def _covariance(takes: list[np.ndarray], n: int) -> np.ndarray:
   else in two passes over the takes (their mean, then the centred products), one take in float64 at a time."""
   if n * takes[0].shape[1] <= COVARIANCE_IN_ONE:
     return np.cov(np.concatenate(takes).astype(np.float64), rowvar=False)
-  mean = sum(t.sum(0, dtype=np.float64) for t in takes) / n
-  centred = (t.astype(np.float64) - mean for t in takes)
-  return sum(c.T @ c for c in centred) / (n - 1)
+  d = takes[0].shape[1]
+  mean = np.zeros(d)
+  for t in takes:
+    mean += t.sum(0, dtype=np.float64)
+  mean /= n
+  products = np.zeros((d, d))
+  for t in takes:
+    c = t.astype(np.float64) - mean
+    products += c.T @ c
+  return products / (n - 1)
 
 
 def feature_dim(skeleton: Skeleton, representation: str) -> int:
