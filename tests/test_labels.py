@@ -4,6 +4,7 @@ them from the command line, the API and live."""
 
 import json
 import tarfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,6 +21,7 @@ from chorjax.training import train_and_evaluate
 ARCHIVE = "bandai-motion.tar.xz"
 TAKES = [f"dataset-2_{a}_{s}_{t:03d}" for a in ("walk", "run") for s in ("elderly", "active") for t in (1, 2)]
 PATTERN = r"_(?P<action>[^_]+)_(?P<style>[^_]+)_\d+$"
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
@@ -37,14 +39,20 @@ def takes(tmp_path_factory, shared_data):
 @pytest.fixture(scope="module")
 def labelled_run(takes, tmp_path_factory):
   run_dir = tmp_path_factory.mktemp("labelled") / "run"
+  # the shipped recipe for a labelled library at toy sizes: its labels pattern, its held-out trial 001 of every
+  # label (4 of the 8 takes), the labels beside every frame, a length in passes over the data
   cfg = tiny_config(
     f"data.dataset={takes}",
-    f"data.labels={PATTERN}",
-    "model.condition_every_frame=true",  # as configs/library.toml: the labels enter every frame
-    "train.num_steps=3",
+    "train.epochs=0.5",
+    "train.eval_every=1",
+    "train.calibrate=false",
     "log.tensorboard=false",
+    path=ROOT / "configs" / "library.toml",
   )
+  assert cfg.data.labels == PATTERN and cfg.model.condition_every_frame
   train_and_evaluate(cfg, run_dir)
+  run = load_run(run_dir)
+  assert run.val_takes == tuple(t for t in sorted(TAKES) if t.endswith("_001")) and run.step >= 3
   return run_dir
 
 
