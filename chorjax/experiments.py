@@ -123,10 +123,16 @@ def sweep_points(sweep: dict) -> list[tuple[str, list[str]]]:
 
 
 def is_finished(workdir: Path, num_steps: int, with_eval: bool) -> bool:
+  """Whether a point's run trained to its end (and was evaluated, ``with_eval``): a checkpoint of its last
+  step, that step read from the run's own config where ``train.epochs`` resolved it, or the end-of-run sample
+  that a finished run writes (also where ``train.patience`` ended it early)."""
   from chorjax import checkpoint as ckpt
   from chorjax.evaluate import metrics_path
 
-  done = (ckpt.checkpoint_dir(workdir) / str(num_steps)).is_dir()
+  with contextlib.suppress(OSError, ValueError, KeyError, TypeError):
+    num_steps = json.loads((Path(workdir) / "config.json").read_text())["train"]["num_steps"]
+  samples = Path(workdir) / "samples"
+  done = (ckpt.checkpoint_dir(workdir) / str(num_steps)).is_dir() or (samples.is_dir() and any(samples.iterdir()))
   return done and (not with_eval or metrics_path(workdir).exists())
 
 

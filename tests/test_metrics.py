@@ -103,6 +103,22 @@ def test_novelty_zero_for_a_copied_window_and_positive_otherwise():
 # ---------------------------------------------------------------- eval, sweep, compare
 
 
+def test_a_sweep_knows_a_run_sized_by_epochs_or_ended_by_patience_is_finished(tmp_path):
+  """A point trained with `train.epochs` ends at the step its own config.json resolved (not the sweep's
+  num_steps), and one that `train.patience` ended early has its end-of-run sample: neither is trained again."""
+  from chorjax.experiments import is_finished
+
+  sized, ended, stopped = (tmp_path / n for n in ("sized", "ended", "stopped"))
+  for run, step in ((sized, 3514), (ended, 750), (stopped, 750)):
+    (run / "checkpoints" / str(step)).mkdir(parents=True)
+    (run / "config.json").write_text(json.dumps({"train": {"num_steps": 3514 if run == sized else 2000}}))
+  (ended / "samples").mkdir()
+  (ended / "samples" / "sample.csv").write_text("x")
+  assert is_finished(sized, 2000, False) and is_finished(ended, 2000, False)
+  assert not is_finished(stopped, 2000, False)  # stopped by a signal: resumed
+  assert not is_finished(sized, 2000, True)  # trained, not evaluated yet
+
+
 def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
   monkeypatch.chdir(tmp_path)
   set_lines = "\n".join(
