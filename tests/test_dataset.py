@@ -35,7 +35,7 @@ def test_val_takes_by_name_and_id_and_errors():
   for bad, says in [
     (["data.val_pattern='_77_'"], "finds no take"),
     (["data.val_pattern='('"], "not a regular expression"),
-    (["data.val_pattern='_'"], "holds out every take"),
+    (["data.val_pattern='_'"], "data.val_pattern: holds out every take"),
     (["data.val_pattern='_05'", "data.val_takes=[0]"], "not both"),
   ]:
     with pytest.raises(UserError, match=says):

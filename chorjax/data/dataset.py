@@ -229,7 +229,8 @@ def _val_names(names: list[str], val_takes: Sequence, val_pattern: str = "") -> 
   else:
     out = [_val_name(names, v) for v in val_takes]
   if len(out) == len(names):
-    raise UserError("data.val_takes: holds out every take; nothing is left to train on")
+    key = "data.val_pattern" if val_pattern else "data.val_takes"
+    raise UserError(f"{key}: holds out every take; nothing is left to train on")
   return out
 
 
