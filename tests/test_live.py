@@ -540,8 +540,10 @@ def test_a_server_on_every_interface_refuses_forged_hosts_and_a_flooding_client_
       flooded = watch(watcher, 4.0)
     stop.set()
     flooder.join(timeout=5)
-    # a flood once held every viewer to 0.27x the fps; now the watcher keeps the rate it had before the flood
-    assert calm > 0.5 * FPS and flooded > 0.8 * calm, (calm, flooded)
+    # a flood once held every viewer to 0.27x the fps; now the watcher keeps most of the rate it had before the
+    # flood (alone it kept 17.1 and 19.6 of 20 fps; 0.74x of its calm rate while another process kept both cores busy:
+    # the flood's own messages take CPU there too), so 0.55x tells starving from sharing a loaded machine
+    assert calm > 0.5 * FPS and flooded > 0.55 * calm, (calm, flooded)
     refused = [r for r in replies if "too many prime messages" in r.get("error", "")]
     assert len(replies) > 20 and len(refused) > 0.8 * len(replies), (len(replies), len(refused))
   finally:
