@@ -8,8 +8,10 @@ decode is the exact inverse, so a sample comes back in the data's own units and 
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -170,9 +172,7 @@ class Features:
     return transforms.scale_units(transforms.to_y_up(pos_TxJx3, self.up_axis), self.scale)
 
   def uncanonical(self, pos_TxJx3):
-    return transforms.rotate(
-      transforms.scale_units(pos_TxJx3, 1.0 / self.scale), transforms.up_axis_matrix(self.up_axis).T
-    )
+    return _uncanonical(pos_TxJx3, self.up_axis, 1.0 / self.scale)
 
   def represent(self, canon_TxJx3):
     """Canonical positions -> un-normalized flat features ``[T, D]``."""
@@ -190,19 +190,28 @@ class Features:
     ``lock_feet``: feet the features call in contact do not slide, see ``transforms.lock_feet``;
     ``ground``: feet the features call in contact stand on the training floor, see ``transforms.ground_feet``)."""
     self.check_decode(rigid, lock_feet, ground=ground)
-    rep = transforms.denormalize(z_TxD, self.mean, self.std)
-    pos = _unrepresent(rep, self, place)
-    if rigid:
-      pos = transforms.rigid_bones(pos, self.skeleton.parents, self.lengths)
-    feet = self.skeleton.feet
-    contacts = rep[..., -len(feet) :]  # canonical features end with the feet's contacts (ground, lock_feet)
-    if ground:
-      assert self.floor is not None  # check_decode
-      pos = transforms.ground_feet(pos, contacts, feet, self.floor, root=self.skeleton.root, max_rise=self.max_rise)
-    if lock_feet:
-      leg = leg_length(np.asarray(pos).reshape(-1, *pos.shape[-2:]), self.skeleton)
-      pos = transforms.lock_feet(pos, contacts, feet, max_step=0.05 * leg)  # foot_contacts' speed
-    return self.uncanonical(pos)
+    floor = 0.0 if self.floor is None else self.floor
+    max_rise = self.max_rise
+    statics = {"representation": self.representation, "skeleton": self.skeleton, "up_axis": self.up_axis}
+    lengths = self.lengths if (rigid or self.representation == "directions") else None
+    pos = _decoded(
+      z_TxD,
+      self.mean,
+      self.std,
+      place,
+      lengths,
+      floor,
+      1.0 / self.scale,
+      max_rise,
+      **statics,
+      rigid=rigid,
+      ground=ground,
+      finish=not lock_feet,
+    )
+    if not lock_feet:
+      return pos
+    leg = leg_length(np.asarray(pos).reshape(-1, *pos.shape[-2:]), self.skeleton)
+    return _locked(pos, z_TxD, self.mean, self.std, 0.05 * leg, 1.0 / self.scale, **statics)  # foot_contacts' speed
 
   def decode_frame(self, z_BxD, place_Bx3, rigid: bool = False):
     """One frame of each of B dancers -> ``(positions [B, J, 3] in data space, the next frame's place [B, 3])``:
@@ -394,13 +403,48 @@ def _represent(pos, skeleton: Skeleton, representation: str):
   raise ValueError(f"unknown representation {representation!r}; one of {REPRESENTATIONS}")
 
 
+# Decoding as two compiled programs (one per shape) instead of some forty operations run one by one, each compiled
+# anew for every sample length: most of what a short `chorjax sample` or a calibration spent compiling.
+_STATIC = ("representation", "skeleton", "up_axis")
+
+
+@functools.partial(jax.jit, static_argnames=(*_STATIC, "rigid", "ground", "finish"))
+def _decoded(
+  z, mean, std, place, lengths, floor, inv_scale, max_rise, *, representation, skeleton, up_axis, rigid, ground, finish
+):
+  """:meth:`Features.decode` up to ``lock_feet``: y-up scaled positions, or (``finish``) data-space ones."""
+  rep = transforms.denormalize(z, mean, std)
+  pos = _unrepresent_as(rep, representation, skeleton, lengths, place)
+  if rigid:
+    pos = transforms.rigid_bones(pos, skeleton.parents, lengths)
+  if ground:
+    contacts = rep[..., -len(skeleton.feet) :]  # canonical features end with the feet's contacts
+    pos = transforms.ground_feet(pos, contacts, skeleton.feet, floor, root=skeleton.root, max_rise=max_rise)
+  return _uncanonical(pos, up_axis, inv_scale) if finish else pos
+
+
+@functools.partial(jax.jit, static_argnames=_STATIC)
+def _locked(pos, z, mean, std, max_step, inv_scale, *, representation, skeleton, up_axis):
+  """:meth:`Features.decode`'s ``lock_feet`` on y-up scaled positions, then back to data space."""
+  contacts = transforms.denormalize(z, mean, std)[..., -len(skeleton.feet) :]
+  pos = transforms.lock_feet(pos, contacts, skeleton.feet, max_step=max_step)
+  return _uncanonical(pos, up_axis, inv_scale)
+
+
+def _uncanonical(pos, up_axis: str, inv_scale):
+  return transforms.rotate(transforms.scale_units(pos, inv_scale), transforms.up_axis_matrix(up_axis).T)
+
+
 def _unrepresent(rep, features: Features, place=None):
-  skeleton, representation = features.skeleton, features.representation
+  return _unrepresent_as(rep, features.representation, features.skeleton, features.lengths, place)
+
+
+def _unrepresent_as(rep, representation: str, skeleton: Skeleton, lengths, place=None):
   if representation == "canonical":
     return transforms.from_canonical(rep, skeleton.root, skeleton.num_joints, place)
   if representation == "directions":
     start = (0.0, 0.0) if place is None else jnp.asarray(place)[..., 1:3]
-    return transforms.from_directions(rep, skeleton.parents, features.lengths, start)
+    return transforms.from_directions(rep, skeleton.parents, lengths, start)
   rep = rep.reshape(rep.shape[:-1] + (skeleton.num_joints, 3))
   if representation == "absolute":
     return rep
