@@ -105,17 +105,17 @@ def unroll_ab(reps: int = 5) -> dict:
 
   graphdef, params = sampler_model()
   motion = jax.nn.one_hot(jnp.zeros(B, jnp.int32), 10)
-  pairs, unroll = [], chorjax.families.recurrent.generation.UNROLL
-  for n in (1, unroll):
-    chorjax.families.recurrent.generation.UNROLL = n  # read when the program is traced, just below
+  from chorjax.controls import Draw
+
+  pairs = []
+  for n in (1, chorjax.families.recurrent.generation.UNROLL):
     fn = jax.jit(
-      lambda p: chorjax.families.recurrent.generation._generate.__wrapped__(
-        graphdef, p, motion, jax.random.key(0), num_frames=FRAMES
+      lambda p, n=n: chorjax.families.recurrent.generation._generate.__wrapped__(
+        graphdef, p, motion, jax.random.key(0), Draw(), num_frames=FRAMES, unroll=n
       )
     )
-    compiled = fn.lower(params).compile()  # this program, whatever UNROLL says later
+    compiled = fn.lower(params).compile()
     pairs.append((n, lambda compiled=compiled: compiled(params), jax.block_until_ready))
-  chorjax.families.recurrent.generation.UNROLL = unroll
   return alternate(pairs, reps)
 
 

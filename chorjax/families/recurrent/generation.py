@@ -22,11 +22,15 @@ from chorjax.data.features import joint_pace
 from chorjax.families.family import frame_io
 from chorjax.models.heads import frame_numbers
 
-# Frames per iteration of the plain generation loop: an iteration's fixed cost (the loop's bookkeeping, one
-# dispatch per operation) then serves four frames; 6% faster at batch 64 (benchmarks.sampling_ceiling), the
-# same frames to the bit. The smoothed loop stays at one: no faster there (batch 1-4), and unrolled its
-# rounding differs, which a free-running dance grows into another dance.
+# Frames per iteration of the plain generation loop, for long batched draws (at least UNROLL_FROM frames over
+# the batch): an iteration's fixed cost (the loop's bookkeeping, one dispatch per operation) then serves four
+# frames, 6-8% faster for the 3 x 256 LSTM at batch 64 over 1,000 frames (benchmarks.sampling_ceiling), the
+# same frames to the bit. Shorter draws run one frame per iteration: the unrolled program takes 0.5 s longer to
+# compile (1.25 s against 0.76 s for the quick start's 2 x 192 model), more than it saves below ~100,000 frames
+# at batch 1, and at 2 x 192 it was no faster even at batch 64. The smoothed loop stays at one: no faster there
+# (batch 1-4), and unrolled its rounding differs, which a free-running dance grows into another dance.
 UNROLL = 4
+UNROLL_FROM = 64 * 1000
 
 
 def generate(graphdef, params, motion, key, *, num_frames: int, draw: Draw | None = None, prime_BxPxD=None):
@@ -52,15 +56,36 @@ def generate(graphdef, params, motion, key, *, num_frames: int, draw: Draw | Non
     ``[B, num_frames, D]`` normalized frames.
   """
   draw = draw or Draw()
+  unroll = UNROLL if num_frames * np.shape(motion)[0] >= UNROLL_FROM else 1
   return _generate(
-    graphdef, params, motion, key, draw, num_frames=num_frames, prime_BxPxD=prime_BxPxD, plain=draw.plain
+    graphdef,
+    params,
+    motion,
+    key,
+    draw,
+    num_frames=num_frames,
+    prime_BxPxD=prime_BxPxD,
+    plain=draw.plain,
+    unroll=unroll,
   )
 
 
-@functools.partial(jax.jit, static_argnames=("graphdef", "num_frames", "plain"))
-def _generate(graphdef, params, motion, key, draw: Draw, *, num_frames: int, prime_BxPxD=None, plain: bool = True):
+@functools.partial(jax.jit, static_argnames=("graphdef", "num_frames", "plain", "unroll"))
+def _generate(
+  graphdef,
+  params,
+  motion,
+  key,
+  draw: Draw,
+  *,
+  num_frames: int,
+  prime_BxPxD=None,
+  plain: bool = True,
+  unroll: int = 1,
+):
   """:func:`generate`'s program; ``plain``: ``draw.plain`` (decided before tracing, where persistence and
-  crossfade are still numbers). ``draw``'s static fields are part of what the program is compiled for."""
+  crossfade are still numbers); ``unroll``: frames per iteration of the plain loop (the same frames either way).
+  ``draw``'s static fields are part of what the program is compiled for."""
   model = nnx.merge(graphdef, params)
   carry, x0 = _primed(model, motion, prime_BxPxD)
 
@@ -74,7 +99,7 @@ def _generate(graphdef, params, motion, key, draw: Draw, *, num_frames: int, pri
       x = x if bounds is None else bounds.clip(x, previous)
       return (carry, x), x
 
-    _, xs_NxBxD = jax.lax.scan(body, (carry, x0), jax.random.split(key, num_frames), unroll=UNROLL)
+    _, xs_NxBxD = jax.lax.scan(body, (carry, x0), jax.random.split(key, num_frames), unroll=unroll)
     return jnp.swapaxes(xs_NxBxD, 0, 1)
 
   if draw.pace and draw.pacing is None:
