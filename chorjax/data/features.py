@@ -191,18 +191,16 @@ class Features:
     ``ground``: feet the features call in contact stand on the training floor, see ``transforms.ground_feet``)."""
     self.check_decode(rigid, lock_feet, ground=ground)
     floor = 0.0 if self.floor is None else self.floor
-    max_rise = self.max_rise
     statics = {"representation": self.representation, "skeleton": self.skeleton, "up_axis": self.up_axis}
-    lengths = self.lengths if (rigid or self.representation == "directions") else None
     pos = _decoded(
       z_TxD,
       self.mean,
       self.std,
       place,
-      lengths,
+      self.lengths,
       floor,
       1.0 / self.scale,
-      max_rise,
+      self.max_rise,
       **statics,
       rigid=rigid,
       ground=ground,
@@ -221,7 +219,7 @@ class Features:
     locked: those look at every frame). Traceable: the exported dancer decodes in its graph."""
     rep = transforms.denormalize(z_BxD, self.mean, self.std)[:, None, :]
     root = self.skeleton.root
-    canon = _unrepresent(rep, self, place_Bx3)[:, 0]
+    canon = _unrepresent(rep, self.representation, self.skeleton, self.lengths, place_Bx3)[:, 0]
     place = place_Bx3  # the representations that place every frame themselves carry nothing
     if self.representation in ("canonical", "directions"):  # they integrate the root: where it got to
       turned = place_Bx3[:, 0] + rep[:, 0, 0] if self.representation == "canonical" else place_Bx3[:, 0]
@@ -414,7 +412,7 @@ def _decoded(
 ):
   """:meth:`Features.decode` up to ``lock_feet``: y-up scaled positions, or (``finish``) data-space ones."""
   rep = transforms.denormalize(z, mean, std)
-  pos = _unrepresent_as(rep, representation, skeleton, lengths, place)
+  pos = _unrepresent(rep, representation, skeleton, lengths, place)
   if rigid:
     pos = transforms.rigid_bones(pos, skeleton.parents, lengths)
   if ground:
@@ -435,11 +433,7 @@ def _uncanonical(pos, up_axis: str, inv_scale):
   return transforms.rotate(transforms.scale_units(pos, inv_scale), transforms.up_axis_matrix(up_axis).T)
 
 
-def _unrepresent(rep, features: Features, place=None):
-  return _unrepresent_as(rep, features.representation, features.skeleton, features.lengths, place)
-
-
-def _unrepresent_as(rep, representation: str, skeleton: Skeleton, lengths, place=None):
+def _unrepresent(rep, representation: str, skeleton: Skeleton, lengths, place=None):
   if representation == "canonical":
     return transforms.from_canonical(rep, skeleton.root, skeleton.num_joints, place)
   if representation == "directions":

@@ -24,11 +24,12 @@ from chorjax.models.heads import frame_numbers
 
 # Frames per iteration of the plain generation loop, for long batched draws (at least UNROLL_FROM frames over
 # the batch): an iteration's fixed cost (the loop's bookkeeping, one dispatch per operation) then serves four
-# frames, 6-8% faster for the 3 x 256 LSTM at batch 64 over 1,000 frames (benchmarks.sampling_ceiling), the
-# same frames to the bit. Shorter draws run one frame per iteration: the unrolled program takes 0.5 s longer to
-# compile (1.25 s against 0.76 s for the quick start's 2 x 192 model), more than it saves below ~100,000 frames
-# at batch 1, and at 2 x 192 it was no faster even at batch 64. The smoothed loop stays at one: no faster there
-# (batch 1-4), and unrolled its rounding differs, which a free-running dance grows into another dance.
+# frames, 6-8% faster for the 3 x 256 LSTM at batch 64 over 1,000 frames (benchmarks.sampling_ceiling); the
+# frames agree within 1.2e-7 (to the bit there, not always at batch 4). Shorter draws run one frame per
+# iteration: the unrolled program takes 0.5 s longer to compile (1.25 s against 0.76 s for the quick start's
+# 2 x 192 model), more than it saves below ~100,000 frames at batch 1, and at 2 x 192 it was no faster even at
+# batch 64. The smoothed loop stays at one: no faster there (batch 1-4), and unrolled its rounding differs,
+# which a free-running dance grows into another dance.
 UNROLL = 4
 UNROLL_FROM = 64 * 1000
 
@@ -84,7 +85,7 @@ def _generate(
   unroll: int = 1,
 ):
   """:func:`generate`'s program; ``plain``: ``draw.plain`` (decided before tracing, where persistence and
-  crossfade are still numbers); ``unroll``: frames per iteration of the plain loop (the same frames either way).
+  crossfade are still numbers); ``unroll``: frames per iteration of the plain loop (frames within 1.2e-7 either way).
   ``draw``'s static fields are part of what the program is compiled for."""
   model = nnx.merge(graphdef, params)
   carry, x0 = _primed(model, motion, prime_BxPxD)
