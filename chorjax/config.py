@@ -494,7 +494,8 @@ class SampleConfig:
     more=(
       "The pace is how far the joints move relative to the root in half a second, turning included (the "
       "pose features where the run has no canonical features), averaged over about 5 s: a dancer who slows "
-      "gets more energy, one who races less, and either lets go of its component sooner."
+      "gets more energy, one who races less, and either lets go of its component sooner. A run conditioned on "
+      "labels (data.labels) holds each dancer to the pace of its own labels' training takes."
     ),
     minimum=0.0,
     resumable=True,

@@ -21,6 +21,7 @@ from flax import nnx
 
 from chorjax.errors import UserError
 
+LABEL_PACE_WIDTH = 0.05  # two label combinations that differ in one value are 2 apart: each its own pace
 FLAGS = ("greedy", "rigid_bones", "foot_lock", "ground", "clamp", "clamp_steps")  # the on/off controls
 
 
@@ -149,19 +150,37 @@ class Pacing:
   """The pace the governor holds a dancer to: ``ref``, the training pace over the lag, in the measure of
   ``joints`` (the judge's: joints relative to the root, turning included; ``Features.pace_joints``) or,
   for runs whose training data cannot tell how their joints move, ``weights`` ``[D]`` that average the pose
-  features' change (``Features.pace``)."""
+  features' change (``Features.pace``). Runs conditioned on labels carry the pace of each label combination
+  of their training takes (``by_label``: ``Features.pace_by_label``), and :meth:`for_motion` turns ``ref``
+  into each dancer's own: a run asked for a run dances at a run's pace, a wave at a wave's."""
 
   ref: Any
   joints: Any = None
   weights: Any = None
+  by_label: Any = None
 
   @classmethod
   def of(cls, features) -> Pacing:
+    by_label = features.pace_by_label
     if features.pace_joints is not None:  # canonical runs: the judge's measure
-      return cls(features.pace_joints, joints=features.joint_motion)
+      return cls(features.pace_joints, joints=features.joint_motion, by_label=by_label)
     weights = np.zeros(features.dim, np.float32)
     weights[features.pose_channels] = 1.0 / len(features.pose_channels)
-    return cls(features.pace, weights=weights)
+    return cls(features.pace, weights=weights, by_label=by_label)
+
+  def for_motion(self, motion_BxM) -> Pacing:
+    """The pace for dancers conditioned on label weights ``[B, M]``: ``ref`` ``[B]``, each dancer's the
+    training pace of its labels; a blend, or labels the takes never combine, get the paces of the nearest
+    combinations the takes hold, mixed in log space (a blend of two by its weights: softmax over the squared
+    distances in weights / ``LABEL_PACE_WIDTH``). Unchanged without ``by_label`` or for take ids."""
+    if self.by_label is None or jnp.ndim(motion_BxM) != 2:
+      return self
+    table = jnp.asarray(self.by_label)
+    combos, log_pace = table[:, :-1], table[:, -1]
+    w = jnp.asarray(motion_BxM, jnp.float32)
+    apart = jnp.square(w[:, None, :] - combos[None]).sum(-1)  # [B, K]
+    near = jax.nn.softmax(-apart / LABEL_PACE_WIDTH, axis=-1)
+    return dataclasses.replace(self, ref=jnp.exp(near @ log_pace), by_label=None)
 
 
 @jax.tree_util.register_dataclass
@@ -186,6 +205,13 @@ class Draw:
 
   def replace(self, **changes) -> Draw:
     return dataclasses.replace(self, **changes)
+
+  def for_motion(self, motion) -> Draw:
+    """This draw for dancers conditioned on ``motion`` (ids ``[B]`` or weights ``[B, M]``): with labels, the
+    governor holds each to its labels' pace (:meth:`Pacing.for_motion`)."""
+    if self.pacing is None or self.pacing.by_label is None:
+      return self
+    return self.replace(pacing=self.pacing.for_motion(motion))
 
   @property
   def plain(self) -> bool:

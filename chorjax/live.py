@@ -84,7 +84,11 @@ class Stream:
 
   def _started(self, prime_1xPxD):
     start_stream, _ = self.run.family.stream()
-    return start_stream(self.run.graphdef, self.run.params, self.weights[None], self.draw, prime_1xPxD)
+    return start_stream(self.run.graphdef, self.run.params, self.weights[None], self._draw(), prime_1xPxD)
+
+  def _draw(self):
+    """The draw for the weights danced now (with labels, the governor holds their pace)."""
+    return self.draw.for_motion(self.weights[None])
 
   def next_chunk(self) -> np.ndarray:
     """The next ``chunk`` frames ``[C, J, 3]`` in data space."""
@@ -92,7 +96,7 @@ class Stream:
     key = jax.random.fold_in(self.key, self.count)
     self.count += 1
     self.state, z = continue_stream(
-      self.run.graphdef, self.run.params, self.state, key, self.draw, num_frames=self.chunk
+      self.run.graphdef, self.run.params, self.state, key, self._draw(), num_frames=self.chunk
     )
     z = np.asarray(z[0])
     if self.last is None:

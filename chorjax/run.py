@@ -161,6 +161,7 @@ class Run:
     needs = (
       (sampling.clamp and f.low is None)
       or (sampling.pace and (f.pace is None or (f.pace_joints is None and f.joint_motion is not None)))
+      or (sampling.pace and self.labels is not None and f.pace_by_label is None)
       or (sampling.ground and f.floor is None and f.representation == "canonical")
       or (sampling.clamp_steps and f.step_low is None)
     )
@@ -180,7 +181,7 @@ class Run:
     same = fresh.dim == f.dim and close(fresh.mean, f.mean) and close(fresh.std, f.std)
     if not same:
       raise UserError(f"{self.workdir}: sampling needs {what} from its training data, which changed")
-    keys = (*Features.RANGES, *Features.STEPS, "pace_lag", "pace", "pace_joints", "floor")
+    keys = (*Features.RANGES, *Features.STEPS, "pace_lag", "pace", "pace_joints", "pace_by_label", "floor")
     stats = {k: getattr(fresh, k) for k in keys} if needs else {}
     f = dataclasses.replace(f, **stats)
     f = with_ceiling(f, self.graphdef, self.params, ds.train, self.config.data.seq_length, sampling)

@@ -13,9 +13,12 @@ from helpers import tiny_config
 from chorjax import cli
 from chorjax.api import load_run
 from chorjax.data.dataset import WindowSampler, dataset_notes, load_dataset
+from chorjax.data.features import takes_joint_pace
 from chorjax.data.labels import read_labels
 from chorjax.errors import UserError
+from chorjax.export import OnnxDancer, sample_numbers
 from chorjax.live import Stream
+from chorjax.sample import sample_dancers
 from chorjax.training import train_and_evaluate
 
 ARCHIVE = "bandai-motion.tar.xz"
@@ -125,6 +128,58 @@ def test_a_labelled_run_dances_the_labels_asked_for_from_the_cli_api_and_live(la
     assert cli.main(["sample", str(labelled_run), "-o", str(tmp_path / "x.csv"), "--motion", motion]) == 2
     assert capsys.readouterr().err.strip() == f"chorjax: error: {line}"
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_the_governor_holds_each_dancer_to_the_pace_of_its_labels_in_sample_live_and_export(labelled_run, tmp_path):
+  """A labelled run keeps the pace of each label pair of its training takes (the judge's measure), and the pace
+  governor holds a dancer to its own labels' pace: a run's where it is asked for a run, a walk's for a walk
+  (one pace for the whole library held runs to a walk's and waves to a run's)."""
+  run = load_run(labelled_run)
+  ds = load_dataset(run.config.data)
+  f = run.ranged(run.sampling()).features
+  table = f.pace_by_label
+  assert table.shape == (4, run.num_motions + 1)  # walk and run, elderly and active: trial 002 of each trains
+  paces = {}
+  for weights, z in ds.train:
+    moved = np.concatenate(takes_joint_pace([z], f.pace_lag, f.joint_motion))
+    paces[tuple(weights)] = paces.get(tuple(weights), ()) + (moved,)
+  for row in table:
+    moved = np.concatenate(paces[tuple(row[:-1])])
+    np.testing.assert_allclose(np.exp(row[-1]), moved.mean(), rtol=1e-5)
+
+  draw = run.sampling().draw(f)
+  pace = lambda motion=None, mix=None: float(draw.for_motion(run.motion_weights(motion, mix)[None]).pacing.ref[0])
+  own = {(a, s): float(np.exp(r[-1])) for r in table for a, s in [_pair(run, r[:-1])]}
+  for (action, style), expected in own.items():
+    assert pace(f"action={action},style={style}") == pytest.approx(expected, rel=1e-5)
+  for style in ("elderly", "active"):
+    assert own["run", style] > 1.3 * own["walk", style]  # running moves more than walking, in the real takes
+  halfway = pace(mix="action=run:0.5,action=walk:0.5,style=active:1")  # a blend: between, in log space
+  assert halfway == pytest.approx((own["run", "active"] * own["walk", "active"]) ** 0.5, rel=1e-3)
+  assert draw.for_motion(np.array([0])).pacing.ref == f.pace_joints  # take ids: one pace
+
+  # the draw starts each dancer's running pace at its own labels' pace: sample (the API), live and export
+  weights = np.stack([run.motion_weights("action=run,style=active"), run.motion_weights("action=walk,style=elderly")])
+  start, _ = run.family.stream()
+  state = start(run.graphdef, run.params, weights, draw.for_motion(weights))
+  np.testing.assert_allclose(state[-1][-1], [own["run", "active"], own["walk", "elderly"]], rtol=1e-5)
+  stream = Stream(run.ranged(run.sampling()), run.sampling(), weights[1], 0, 4)
+  assert float(stream.state[-1][-1][0]) == pytest.approx(own["walk", "elderly"], rel=1e-5)
+  stream.set(mix="action=run:1,style=active:1")
+  assert float(stream.state[-1][-1][0]) == pytest.approx(own["run", "active"], rel=1e-5)
+
+  assert cli.main(["export", str(labelled_run), "-o", str(tmp_path / "d.onnx")]) == 0
+  frames = 40
+  gumbel, normal = sample_numbers(run, 0, frames)
+  z = OnnxDancer(tmp_path / "d.onnx").dance(weights[:1], gumbel, normal)
+  expected, _ = sample_dancers(run, frames, 1, 0, motion="action=run,style=active")
+  got = OnnxDancer(tmp_path / "d.onnx").positions(z)
+  assert np.abs(got - expected).max() <= 1e-4 * float(np.ptp(expected.reshape(-1, 3), axis=0).max())
+
+
+def _pair(run, weights_M) -> tuple[str, str]:
+  named = [k for k, w in zip(run.id_map, weights_M, strict=True) if w == 1]
+  return tuple(k.split("=")[1] for k in named)
 
 
 def _parses(monkeypatch) -> list:

@@ -456,9 +456,11 @@ def _generation_stats(features: Features, train, fps: float) -> Features:
   if joints is not None:  # the same as the judge measures it: joints relative to the root, turning included
     moved = takes_joint_pace([x for _, x in train if len(x) > lag], lag, joints)
   steps = [np.diff(x, axis=0) for _, x in train if len(x) > 1]
+  labelled = [c for c, x in train if len(x) > lag and isinstance(c, np.ndarray)]
   # per take, then over takes: no copy of every frame at once (a library's hours of motion)
   return dataclasses.replace(
     features,
+    pace_by_label=label_pace(labelled, moved) if labelled else None,
     low=np.min([x.min(0) for _, x in train], 0),
     high=np.max([x.max(0) for _, x in train], 0),
     step_low=np.min([d.min(0) for d in steps], 0),
@@ -467,6 +469,20 @@ def _generation_stats(features: Features, train, fps: float) -> Features:
     pace=pace,
     pace_joints=None if joints is None else float(np.concatenate(moved).mean()),
   )
+
+
+def label_pace(weights: Sequence[np.ndarray], moved: Sequence[np.ndarray]) -> np.ndarray:
+  """``Features.pace_by_label``: one row per distinct label combination of the training takes (take k: label
+  weights ``weights[k]`` ``[M]``, its movement over the lag ``moved[k]``): the weights ``[M]`` and the log of
+  their takes' pace (every frame weighing alike), ``[K, M + 1]``."""
+  rows: dict = {}
+  for w, m in zip(weights, moved):
+    total, n = rows.get(w.tobytes(), (0.0, 0))
+    rows[w.tobytes()] = (total + float(m.sum()), n + len(m))
+  floor = 1e-3 * sum(t for t, _ in rows.values()) / sum(n for _, n in rows.values())  # a pair that stands still
+  dtype = np.asarray(weights[0]).dtype
+  out = [np.r_[np.frombuffer(k, dtype), np.log(max(t / n, floor))] for k, (t, n) in rows.items()]
+  return np.stack(out).astype(np.float32)
 
 
 class WindowSampler:

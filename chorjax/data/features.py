@@ -104,6 +104,10 @@ class Features:
       own pace to it (``sample.pace``).
     pace_joints: canonical runs: the same as the judge measures it (:func:`joint_pace`: joints relative
       to the root, turning included, scaled units); where it is known the governor holds this instead.
+    pace_by_label: runs conditioned on labels (``data.labels``): the pace of each label combination of the
+      training takes, ``[K, M + 1]`` (its weights ``[M]``, the log of its takes' pace in the governor's
+      measure); the governor holds each dancer to the pace of the labels it dances
+      (``controls.Pacing.for_motion``).
     step_low, step_high: ``[D]`` the smallest and largest change of each normalized feature from one frame
       to the next over the training split; generation can hold each frame's change to them
       (``sample.clamp_steps``).
@@ -131,6 +135,7 @@ class Features:
   pace_lag: int | None = None
   pace: float | None = None
   pace_joints: float | None = None
+  pace_by_label: np.ndarray | None = None
   floor: float | None = None
   step_low: np.ndarray | None = None
   step_high: np.ndarray | None = None
@@ -288,6 +293,7 @@ class Features:
   def _optional(self) -> dict:
     ranges = {k: getattr(self, k) for k in (*self.RANGES, *self.STEPS)}
     paces = {"pace_lag": self.pace_lag, "pace": self.pace, "pace_joints": self.pace_joints}
+    paces["pace_by_label"] = self.pace_by_label
     return {"lengths": self.lengths, **ranges, **paces, "floor": self.floor}
 
   RANGES = ("low", "high")
@@ -306,6 +312,7 @@ class Features:
       pace_lag=None if d.get("pace_lag") is None else int(d["pace_lag"]),
       pace=None if d.get("pace") is None else float(d["pace"]),
       pace_joints=None if d.get("pace_joints") is None else float(d["pace_joints"]),
+      pace_by_label=None if d.get("pace_by_label") is None else np.asarray(d["pace_by_label"], np.float32),
       floor=None if d.get("floor") is None else float(d["floor"]),
     )
 

@@ -56,7 +56,7 @@ def generate(graphdef, params, motion, key, *, num_frames: int, draw: Draw | Non
   Returns:
     ``[B, num_frames, D]`` normalized frames.
   """
-  draw = draw or Draw()
+  draw = (draw or Draw()).for_motion(motion)
   unroll = UNROLL if num_frames * np.shape(motion)[0] >= UNROLL_FROM else 1
   return _generate(
     graphdef,
@@ -179,16 +179,17 @@ def frame_program(graphdef, params, draw: Draw, batch: int):
   the dancers ``start`` marks begin from the weights' initial state (:func:`_smooth_start`), with example
   inputs (the state zeros) and the names of the inputs and outputs (``state.carry.0.1``, ``state.filters`` ...)."""
   model = nnx.merge(graphdef, params)
-  step = frame_step(model, draw)
   b, d = batch, model.dim
-  fresh = lambda weights: _smooth_start(model.initial_carry(weights), jnp.zeros((b, d), jnp.float32), draw)
-  template = jax.eval_shape(fresh, jax.ShapeDtypeStruct((b, model.num_motions), jnp.float32))
+  fresh = lambda weights, draw: _smooth_start(model.initial_carry(weights), jnp.zeros((b, d), jnp.float32), draw)
+  weights_like = jax.ShapeDtypeStruct((b, model.num_motions), jnp.float32)
+  template = jax.eval_shape(lambda w: fresh(w, draw.for_motion(w)), weights_like)
   top = ("carry", "previous", "filters", "drawn", "governor")
   treedef, args, inputs, outputs = frame_io(template, top, b, model.num_motions, model.num_mixtures, d)
 
   def program(weights, start, gumbel, normal, *leaves):
-    state = _restart(jax.tree.unflatten(treedef, leaves), fresh(weights), start > 0.5)
-    state, x = step(state, gumbel, normal)
+    held = draw.for_motion(weights)  # with labels, the pace of the weights' labels
+    state = _restart(jax.tree.unflatten(treedef, leaves), fresh(weights, held), start > 0.5)
+    state, x = frame_step(model, held)(state, gumbel, normal)
     return (x, *jax.tree.leaves(state))
 
   return program, args, inputs, outputs
