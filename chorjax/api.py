@@ -22,7 +22,7 @@ from typing import Any  # noqa: F401  (the inherited fields' annotations name th
 import numpy as np  # noqa: F401
 
 # What every command does, as functions (the command line calls these and prints what they return).
-from chorjax.calibrate import calibrate_run  # noqa: F401
+from chorjax.calibrate import CALIBRATION_DANCERS, LABELLED_DANCERS, calibrate_run  # noqa: F401
 from chorjax.calibration_file import CALIBRATED  # noqa: F401
 from chorjax.config import (  # noqa: F401
   Config,

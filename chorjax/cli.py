@@ -635,7 +635,11 @@ def _add_calibrate_command(sub) -> None:
     "--data", nargs="+", metavar="PATH_OR_NAME", help="reference takes (default: the run's training takes)"
   )
   cal.add_argument("--frames", type=int, default=1200, help="frames per drawn dancer (default 1200)")
-  cal.add_argument("--num", type=int, default=4, help="dancers drawn per setting (default 4)")
+  cal.add_argument(
+    "--num",
+    type=int,
+    help=f"dancers drawn per setting (default {api.CALIBRATION_DANCERS}; {api.LABELLED_DANCERS} for a run with labels)",
+  )
   cal.add_argument("--seed", type=int, default=0, help="sampling seed (default 0)")
   cal.add_argument(
     "--noise-order",

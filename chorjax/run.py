@@ -116,8 +116,11 @@ class Run:
 
   def dancer_conditions(self, takes, num: int) -> np.ndarray:
     """``[num]`` ids or ``[num, M]`` weights: dancer k conditioned on the k-th of ``takes`` (cycled; none:
-    take 0, or each label's first value)."""
+    take 0, or each label's first value). With labels and more takes than dancers, the dancers' takes are
+    spread evenly over ``takes`` instead: a library's names sort by label, so its first few are one action."""
     conds = [self.take_condition(m.name) for m in takes] or [self.motion_weights() if self.labels else 0]
+    if self.labels is not None and len(conds) > num:
+      return np.array([conds[(k * len(conds)) // num] for k in range(num)])
     return np.array([conds[k % len(conds)] for k in range(num)])
 
   @property

@@ -157,6 +157,10 @@ def test_the_governor_holds_each_dancer_to_the_pace_of_its_labels_in_sample_live
   halfway = pace(mix="action=run:0.5,action=walk:0.5,style=active:1")  # a blend: between, in log space
   assert halfway == pytest.approx((own["run", "active"] * own["walk", "active"]) ** 0.5, rel=1e-3)
   assert draw.for_motion(np.array([0])).pacing.ref == f.pace_joints  # take ids: one pace
+  # calibration's dancers stand for the takes spread over them, not the first few (a library's sort by label)
+  named = [type("Take", (), {"name": n}) for n in run.train_takes]
+  expected = [run.take_condition(run.train_takes[k]) for k in (0, 2)]
+  np.testing.assert_array_equal(run.dancer_conditions(named, 2), expected)
 
   # the draw starts each dancer's running pace at its own labels' pace: sample (the API), live and export
   weights = np.stack([run.motion_weights("action=run,style=active"), run.motion_weights("action=walk,style=elderly")])
