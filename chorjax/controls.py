@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import functools
 from typing import Any
 
 import jax
@@ -183,17 +184,32 @@ class Pacing:
     return dataclasses.replace(self, ref=jnp.exp(near @ log_pace), by_label=None)
 
 
+@functools.cache
+def noise_gain(rho: float, order: int) -> float:
+  """The factor that gives ``order`` cascaded AR(1) filters with coefficient ``rho`` unit stationary variance:
+  one over the root energy of their impulse response ``C(k + order - 1, k) rho^k`` (for two filters
+  ``(1 + rho^2) / (1 - rho^2)^3``)."""
+  if order < 1 or not 0.0 <= rho < 1.0:
+    raise ValueError(f"noise filters: need order >= 1 and 0 <= rho < 1, got {order}, {rho}")
+  if order == 2:  # the closed form: the draws of runs before other orders existed, to the bit
+    return ((1 - rho**2) ** 3 / (1 + rho**2)) ** 0.5
+  k = np.arange(1, int(60 * order / (1 - rho)) + 100)  # the response has fallen below 1e-20 of its peak by then
+  h = np.cumprod(np.r_[1.0, rho * (k + order - 1) / k])  # h_k = h_(k-1) rho (k + order - 1) / k
+  return float(np.sum(h**2) ** -0.5)
+
+
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
 class Draw:
   """What the frame-by-frame draw takes (``Controls.draw``); defaults: full temperature, white noise, nothing
-  held. ``greedy``, ``noise_smoothing``, ``noise_order``, ``pace`` (the governor's gain) and ``pace_lag``
-  are static: a program is compiled for each value; the rest are traced."""
+  held. ``greedy``, ``noise_order``, ``pace`` (the governor's gain) and ``pace_lag`` are static: a program is
+  compiled for each value; the rest are traced (one program for every noise smoothing: calibration draws
+  ten). ``noise_gain`` is :func:`noise_gain` of the smoothing and the order, filled in where they are made."""
 
   pi_temperature: Any = 1.0
   sigma_temperature: Any = 1.0
   greedy: bool = dataclasses.field(default=False, metadata={"static": True})
-  noise_smoothing: float = dataclasses.field(default=0.0, metadata={"static": True})
+  noise_smoothing: Any = 0.0
   noise_order: int = dataclasses.field(default=2, metadata={"static": True})
   persistence: Any = 0.0
   crossfade: Any = 0.0
@@ -202,8 +218,15 @@ class Draw:
   pace_lag: int = dataclasses.field(default=15, metadata={"static": True})
   pacing: Pacing | None = None
   scale_cap: Any = None
+  noise_gain: Any = None
+
+  def __post_init__(self):
+    if self.noise_gain is None:  # made here (not unflattened in a trace): the smoothing is a number
+      object.__setattr__(self, "noise_gain", noise_gain(float(self.noise_smoothing), self.noise_order))
 
   def replace(self, **changes) -> Draw:
+    if {"noise_smoothing", "noise_order"} & changes.keys():
+      changes.setdefault("noise_gain", None)  # made again for the new filters
     return dataclasses.replace(self, **changes)
 
   def for_motion(self, motion) -> Draw:

@@ -17,7 +17,7 @@ import numpy as np
 from flax import nnx
 
 from chorjax.config import MAX_NOISE_ORDER
-from chorjax.controls import Controls, Draw, Pacing
+from chorjax.controls import Controls, Draw, Pacing, noise_gain
 from chorjax.data.features import joint_pace
 from chorjax.families.family import frame_io
 from chorjax.models.heads import frame_numbers
@@ -161,7 +161,7 @@ def frame_step(model, draw: Draw):
   def step(c, gumbel_BxK, normal_BxD):
     carry, previous, filters, drawn, (recent, at, own) = c
     carry, out = model.step(carry, previous)
-    filters, eps_BxD = smooth(filters, normal_BxD, draw.noise_smoothing, draw.noise_order)
+    filters, eps_BxD = smooth(filters, normal_BxD, draw.noise_smoothing, draw.noise_order, draw.noise_gain)
     governed = _governed(controls, own, pacing.ref, draw.pace) if pacing is not None else controls
     x, drawn = model.draw(out, gumbel_BxK, eps_BxD, drawn, **governed)
     x = x if draw.bounds is None else draw.bounds.clip(x, previous)
@@ -252,28 +252,15 @@ def smooth_noise(filters_KxBxD, key, rho: float, order: int = 2):
   return smooth(filters_KxBxD, jax.random.normal(key, filters_KxBxD.shape[1:], filters_KxBxD.dtype), rho, order)
 
 
-def smooth(filters_KxBxD, white_BxD, rho: float, order: int = 2):
-  """:func:`smooth_noise` of the given white noise ``white_BxD``: ``(filters, noise [B, D])``."""
+def smooth(filters_KxBxD, white_BxD, rho, order: int = 2, gain=None):
+  """:func:`smooth_noise` of the given white noise ``white_BxD``: ``(filters, noise [B, D])``; ``gain``:
+  :func:`noise_gain` of ``rho`` and ``order`` where ``rho`` is traced (``Draw.noise_gain``)."""
   x = white_BxD
   states = []
   for k in range(order):
     x = rho * filters_KxBxD[k] + x
     states.append(x)
-  return filters_KxBxD.at[:order].set(jnp.stack(states)), x * noise_gain(rho, order)
-
-
-@functools.cache
-def noise_gain(rho: float, order: int) -> float:
-  """The factor that gives ``order`` cascaded AR(1) filters with coefficient ``rho`` unit stationary variance:
-  one over the root energy of their impulse response ``C(k + order - 1, k) rho^k`` (for two filters
-  ``(1 + rho^2) / (1 - rho^2)^3``)."""
-  if order < 1 or not 0.0 <= rho < 1.0:
-    raise ValueError(f"noise filters: need order >= 1 and 0 <= rho < 1, got {order}, {rho}")
-  if order == 2:  # the closed form: the draws of runs before other orders existed, to the bit
-    return ((1 - rho**2) ** 3 / (1 + rho**2)) ** 0.5
-  k = np.arange(1, int(60 * order / (1 - rho)) + 100)  # the response has fallen below 1e-20 of its peak by then
-  h = np.cumprod(np.r_[1.0, rho * (k + order - 1) / k])  # h_k = h_(k-1) rho (k + order - 1) / k
-  return float(np.sum(h**2) ** -0.5)
+  return filters_KxBxD.at[:order].set(jnp.stack(states)), x * (noise_gain(rho, order) if gain is None else gain)
 
 
 def dance(graphdef, params, features, motion, key, num_frames: int, controls: Controls, prime_BxPxD=None) -> np.ndarray:
