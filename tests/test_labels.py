@@ -32,9 +32,14 @@ def takes(tmp_path_factory, shared_data):
   """Eight takes of the library: walk and run, elderly and active, two trials each."""
   where = tmp_path_factory.mktemp("bandai")
   wanted = {f"bandai-motion/{t}.bvh" for t in TAKES}
+  members = []
   with tarfile.open(shared_data / ARCHIVE) as tar:
-    members = [m for m in tar if m.name in wanted]
-    tar.extractall(where, members=members, filter="data")
+    for m in tar:  # an xz archive is read from its start: stop once the last wanted take is out
+      if m.name in wanted:
+        tar.extract(m, where, filter="data")
+        members.append(m)
+        if len(members) == len(wanted):
+          break
   assert len(members) == len(TAKES)
   return where / "bandai-motion"
 
@@ -179,6 +184,33 @@ def test_the_governor_holds_each_dancer_to_the_pace_of_its_labels_in_sample_live
   expected, _ = sample_dancers(run, frames, 1, 0, motion="action=run,style=active")
   got = OnnxDancer(tmp_path / "d.onnx").positions(z)
   assert np.abs(got - expected).max() <= 1e-4 * float(np.ptp(expected.reshape(-1, 3), axis=0).max())
+
+
+def test_calibration_holds_each_labelled_dancer_to_the_poses_of_its_own_labels(labelled_run, monkeypatch):
+  """A labelled run's calibration measures each dancer's poses against its own labels' takes: the real takes,
+  each as a dancer under its own labels, are nearer than under another pair's (pooled over the library, the
+  labels would not count); a pair with too few takes leaves the pooled distribution in its place."""
+  from chorjax.calibrate import PosesByLabel
+  from chorjax.data.transforms import to_y_up
+  from chorjax.scoring import PoseDistribution
+
+  run = load_run(labelled_run)
+  ds = load_dataset(run.config.data)
+  motions = sorted(ds.motions, key=lambda m: m.name)
+  takes = [np.asarray(to_y_up(m.positions, run.features.up_axis)) for m in motions]
+  own = [run.take_condition(m.name) for m in motions]
+  sk = run.features.skeleton
+  assert PosesByLabel(takes, sk, own, own).groups == []  # two takes per pair: fewer than MIN_TAKES
+  assert PosesByLabel(takes, sk, own, own).ratio(takes) == pytest.approx(PoseDistribution(takes, sk).ratio(takes))
+  monkeypatch.setattr(PosesByLabel, "MIN_TAKES", 2)
+  by_label = PosesByLabel(takes, sk, own, own)
+  assert len(by_label.groups) >= 3  # a pair with a take under two windows (75 frames) is left out
+  for _, dancers in by_label.groups:  # each pair's two dancers, against its two takes
+    assert len(dancers) == 2 and np.array_equal(own[dancers[0]], own[dancers[1]])
+  other = [own[(k + 4) % len(own)] for k in range(len(own))]  # run <-> walk, each style kept
+  assert [_pair(run, w)[1] for w in other] == [_pair(run, w)[1] for w in own]
+  assert [_pair(run, w)[0] for w in other] != [_pair(run, w)[0] for w in own]
+  assert 2 * by_label.ratio(takes) < PosesByLabel(takes, sk, own, other).ratio(takes)
 
 
 def _pair(run, weights_M) -> tuple[str, str]:
