@@ -22,6 +22,7 @@ def _each(values, fmt="{:.2f}") -> str:
 def _row(recipe: str, runs: list[dict]) -> str:
   ratio = lambda f: _each([r["fields"][f]["ratio"] for r in runs])
   inside = lambda k: _each([np.mean([0.7 <= p[k] <= 1.3 for p in r["per_pair"]]) for r in runs], "{:.0%}")
+  median = lambda k: _each([np.median([p[k] for p in r["per_pair"]]) for r in runs])
   fid = lambda k: (
     _each([r["pooled"][k]["mean"] for r in runs], "{:.1f}") + f" ({runs[0]['pooled'][k + '_real']['mean']:.1f})"
   )
@@ -33,6 +34,7 @@ def _row(recipe: str, runs: list[dict]) -> str:
     ratio("style"),
     inside("movement"),
     inside("jitter"),
+    median("movement") + " / " + median("jitter"),
     fid("fid_k"),
     fid("fid_g"),
   ]
@@ -46,9 +48,10 @@ def main() -> None:
     by_recipe[recipe] += json.loads(f.read_text())
   print(
     "| recipe | seeds | action: samples / held-out | style: samples / held-out "
-    "| pairs with movement in 0.7-1.3 | with jitter in 0.7-1.3 | FID_k (real's own) | FID_g (real's own) |"
+    "| pairs with movement in 0.7-1.3 | with jitter in 0.7-1.3 | movement / jitter, median pair "
+    "| FID_k (real's own) | FID_g (real's own) |"
   )
-  print("|---|---|---|---|---|---|---|---|")
+  print("|---|---|---|---|---|---|---|---|---|")
   for recipe, runs in by_recipe.items():
     print(_row(recipe, runs))
 
