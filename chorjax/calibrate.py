@@ -280,14 +280,8 @@ def calibrate(
   if run.labels is not None and not data:  # each dancer against its own labels' training takes
     poses = PosesByLabel(positions, f.skeleton, [run.take_condition(m.name) for m in reference], motion)
   best, table = search(draw, positions, f.skeleton, run.fps, grid, log, known=known, poses=poses)
-  result = {
-    "settings": best,
-    "reference": list(data) if data else "training takes",
-    "frames": frames,
-    "num": num,
-    "seed": seed,
-    "table": [{"settings": s, **m, "objective": o} for s, m, o in table],
-  }
+  result = {"settings": best, "reference": list(data) if data else "training takes", "frames": frames, "num": num}
+  result |= {"seed": seed, "table": [{"settings": s, **m, "objective": o} for s, m, o in table]}
   atomic_write(calibration_path(workdir), lambda p: p.write_text(json.dumps(result, indent=2)))
   row = min(table, key=lambda r: r[2])
   said = ", ".join(f"{k.replace('_', ' ')} {v:.3f}" for k, v in row[1].items())

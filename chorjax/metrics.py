@@ -250,35 +250,36 @@ def _angle(a, b, c):
 
 
 def geometric_features(pos_TxJx3, skeleton: Skeleton, size: float) -> np.ndarray:
-  """``[T, F]`` booleans (as 0/1) of ``GEOMETRIC_FEATURES`` for y-up positions of an mpii16 skeleton."""
+  """``[T, F]`` booleans (as 0/1) of ``GEOMETRIC_FEATURES`` for y-up positions of an mpii16 skeleton; a stack
+  of motions ``[..., T, J, 3]`` gives ``[..., T, F]``, each with its own floor, as one at a time would."""
   j = {n: i for i, n in enumerate(skeleton.joint_names)}
   p = np.asarray(pos_TxJx3, np.float64) / size
-  at = lambda name: p[:, j[name]]
+  at = lambda name: p[..., j[name], :]
   lateral = at("left_hip") - at("right_hip")
-  lateral[:, 1] = 0
+  lateral[..., 1] = 0
   lateral /= np.maximum(np.linalg.norm(lateral, axis=-1, keepdims=True), 1e-9)
   forward = np.cross(lateral, [0.0, 1.0, 0.0])  # left x up: the way the chest faces (y-up, right-handed)
-  floor = np.percentile(np.minimum(at("left_foot")[:, 1], at("right_foot")[:, 1]), 5)
+  floor = np.percentile(np.minimum(at("left_foot")[..., 1], at("right_foot")[..., 1]), 5, axis=-1, keepdims=True)
   ahead = lambda v: (v * forward).sum(-1)
   torso = at("thorax") - at("pelvis")
-  lean = np.degrees(np.arccos(np.clip(torso[:, 1] / np.maximum(np.linalg.norm(torso, axis=-1), 1e-9), -1, 1)))
+  lean = np.degrees(np.arccos(np.clip(torso[..., 1] / np.maximum(np.linalg.norm(torso, axis=-1), 1e-9), -1, 1)))
   answers = [
     ahead(at("left_foot") - at("right_foot")) > 0.05,
     ahead(at("right_foot") - at("left_foot")) > 0.05,
-    at("left_hand")[:, 1] > at("head_top")[:, 1],
-    at("right_hand")[:, 1] > at("head_top")[:, 1],
-    at("left_hand")[:, 1] > at("left_shoulder")[:, 1],
-    at("right_hand")[:, 1] > at("right_shoulder")[:, 1],
+    at("left_hand")[..., 1] > at("head_top")[..., 1],
+    at("right_hand")[..., 1] > at("head_top")[..., 1],
+    at("left_hand")[..., 1] > at("left_shoulder")[..., 1],
+    at("right_hand")[..., 1] > at("right_shoulder")[..., 1],
     _angle(at("left_hip"), at("left_knee"), at("left_foot")) < 150,
     _angle(at("right_hip"), at("right_knee"), at("right_foot")) < 150,
     _angle(at("left_shoulder"), at("left_elbow"), at("left_hand")) < 120,
     _angle(at("right_shoulder"), at("right_elbow"), at("right_hand")) < 120,
-    at("left_foot")[:, 1] - floor > 0.1,
-    at("right_foot")[:, 1] - floor > 0.1,
+    at("left_foot")[..., 1] - floor > 0.1,
+    at("right_foot")[..., 1] - floor > 0.1,
     np.linalg.norm(at("left_hand") - at("right_hand"), axis=-1) > 0.6,
     ahead(at("left_hand") - at("thorax")) > 0.2,
     ahead(at("right_hand") - at("thorax")) > 0.2,
-    at("pelvis")[:, 1] - floor < 0.38,
+    at("pelvis")[..., 1] - floor < 0.38,
     np.abs(((at("left_foot") - at("right_foot")) * lateral).sum(-1)) > 0.25,
     lean > 20,
   ]

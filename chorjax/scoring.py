@@ -134,7 +134,8 @@ def _bones(motions, skeleton: Skeleton) -> dict:
 
 
 def _window_rows(takes, window: int, hop: int, features) -> list:
-  return [features(w) for t in takes for w in metrics.windows(t, window, hop)]
+  """Each window's feature row, take by take: ``features`` maps a take's windows ``[N, W, J, 3]`` to N rows."""
+  return [row for t in takes for row in features(metrics.windows(t, window, hop))]
 
 
 # geometric features are fractions of a window's frames: a std below 5% of the frames is noise
@@ -142,9 +143,9 @@ GEO_STD_FLOOR = 0.05
 
 
 def _pose_features(skeleton: Skeleton, size: float):
-  """A window ``[W, J, 3]`` (y-up) -> the fraction of its frames answering yes to each pose question (FID_g's
-  features)."""
-  return lambda w: metrics.geometric_features(w, skeleton, size).mean(0)
+  """Windows ``[N, W, J, 3]`` (y-up) -> ``[N, F]``: the fraction of each one's frames answering yes to each pose
+  question (FID_g's features), all windows at once."""
+  return lambda ws: metrics.geometric_features(ws, skeleton, size).mean(-2)
 
 
 def _stack(rows) -> np.ndarray:
@@ -313,7 +314,7 @@ def score(
   """
   size = float(np.mean([metrics.body_size(t, skeleton) for t in reference]))
   _check_reference(reference, skeleton, fps, size)
-  kin = lambda w: metrics.kinetic_features(w / size, fps)
+  kin = lambda ws: [metrics.kinetic_features(w / size, fps) for w in ws]
   geo = _pose_features(skeleton, size)
   fid_k, fid_k_real, div_k, div_k_real = _distribution(motions, reference, kin, window, splits, seed, 1e-10)
   fid_g, fid_g_real, div_g, div_g_real = _distribution(motions, reference, geo, window, splits, seed, GEO_STD_FLOOR)
