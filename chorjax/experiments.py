@@ -247,17 +247,26 @@ RULES = {
 }
 
 
+def cpu_info() -> dict[str, str]:
+  """The first processor's fields in /proc/cpuinfo (``model name``, ``cpu family``, ``flags``, ...); empty where
+  there is no such file."""
+  info = {}
+  with contextlib.suppress(OSError):
+    for line in Path("/proc/cpuinfo").read_text().splitlines():
+      if not line.strip():
+        break  # the first processor is enough
+      key, _, value = line.partition(":")
+      info[key.strip()] = value.strip()
+  return info
+
+
 def machine_info() -> str:
   """CPU model, core count and library versions, for reports and benchmarks."""
   import os
 
   import jax
 
-  cpu = platform.processor() or platform.machine()
-  with contextlib.suppress(OSError, StopIteration):
-    cpu = next(
-      l.split(":", 1)[1].strip() for l in Path("/proc/cpuinfo").read_text().splitlines() if l.startswith("model name")
-    )
+  cpu = cpu_info().get("model name") or platform.processor() or platform.machine()
   return (
     f"{cpu}, {os.cpu_count()} cores, {jax.devices()[0].platform}; Python {platform.python_version()}, "
     f"jax {jax.__version__}"

@@ -22,6 +22,7 @@ from helpers import GAN_NETWORKS, QUICKSTART_SAMPLING, tiny_config
 
 from chorjax import cli
 from chorjax.data.dataset import bundled_path
+from chorjax.experiments import cpu_info
 from chorjax.training import train_and_evaluate
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -110,13 +111,7 @@ def _drawn(runs, tmp_path) -> dict:
 
 def this_cpu() -> str:
   """The CPU as draws.json names it: model name, family and model, and its widest vector instructions."""
-  info = {}
-  cpuinfo = Path("/proc/cpuinfo")
-  for line in cpuinfo.read_text().splitlines() if cpuinfo.exists() else []:
-    if not line.strip():
-      break  # the first processor is enough
-    key, _, value = line.partition(":")
-    info[key.strip()] = value.strip()
+  info = cpu_info()
   flags = info.get("flags", "").split()
   isa = next((f for f in ("avx512f", "avx2", "avx") if f in flags), platform.machine())
   name = info.get("model name") or platform.processor() or platform.machine()
