@@ -8,16 +8,21 @@ its kernels by the instruction set), so draws.json holds one set of digests per 
 the draws must equal one of them whole. ``CHORJAX_RECORD_DRAWS=1 python -m pytest tests/test_draws.py -n 0``
 records this CPU's set (added beside the others): on a CPU not listed yet, or, with ``CHORJAX_RECORD_DRAWS=only``
 (every other set dropped, since it no longer holds), after an intended change of what is drawn.
+The rest of the suite compiles for speed of compiling (tests/conftest.py: QUICK_COMPILE), which changes last bits
+too: the draws are made in a process of their own (``python tests/test_draws.py OUT``) without those flags, as a
+user's programs compile, and with a takes cache of their own (the run's holds features the quick programs encoded).
 """
 
 import hashlib
 import json
 import os
 import platform
+import re
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
-import pytest
 from helpers import GAN_NETWORKS, QUICKSTART_SAMPLING, tiny_config
 
 from chorjax import cli
@@ -82,10 +87,8 @@ COMMANDS = {
 }
 
 
-@pytest.fixture(scope="module")
-def runs(tmp_path_factory):
+def _trained(root: Path) -> dict[str, Path]:
   """Every family's tiny run (3 steps, its end sample written) and a copy of the checkpoint written before."""
-  root = tmp_path_factory.mktemp("draws")
   made = {}
   for name, overrides in FAMILIES.items():
     made[name] = root / name
@@ -98,11 +101,12 @@ def _digest(path: Path) -> str:
   return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def _drawn(runs, tmp_path) -> dict:
-  """SHA-256 of every file the commands and the runs' end samples wrote."""
+def drawn(root: Path) -> dict[str, str]:
+  """SHA-256 of every file the commands and the runs' end samples (trained under ``root``) wrote."""
+  runs = _trained(root / "runs")
   found = {f"end_{name}.csv": _digest(runs[name] / "samples" / "sample.csv") for name in FAMILIES}
   for name, (run, argv) in COMMANDS.items():
-    out = tmp_path / name
+    out = root / name
     args = [a.replace("{run}", str(runs[run])).replace("{out}", str(out)) for a in argv]
     assert cli.main(args) == 0, name
     found[name] = _digest(out if out.exists() else out.with_name(f"{out.stem}_0{out.suffix}"))
@@ -118,8 +122,16 @@ def this_cpu() -> str:
   return f"{name} (family {info.get('cpu family', '?')}, model {info.get('model', '?')}, {isa})"
 
 
-def test_draws_and_trained_parameters_are_the_recorded_ones(runs, tmp_path):
-  found = _drawn(runs, tmp_path)
+def test_draws_and_trained_parameters_are_the_recorded_ones(tmp_path):
+  flags = re.sub(r"--xla_(backend_optimization_level|cpu_use_fusion_emitters)=\S+", "", os.environ.get("XLA_FLAGS", ""))
+  made = subprocess.run(
+    [sys.executable, __file__, str(tmp_path)],
+    env={**os.environ, "XLA_FLAGS": flags, "CHORJAX_CACHE": str(tmp_path / "takes")},
+    capture_output=True,
+    text=True,
+  )
+  assert made.returncode == 0, made.stderr[-3000:]
+  found = json.loads((tmp_path / "digests.json").read_text())
   recorded = json.loads(DIGESTS.read_text())  # CPU -> {file: SHA-256}
   if RECORD in ("1", "only"):
     recorded = {**(recorded if RECORD == "1" else {}), this_cpu(): found}
@@ -132,3 +144,7 @@ def test_draws_and_trained_parameters_are_the_recorded_ones(runs, tmp_path):
     f"these draws changed: {changed[nearest]} against the set recorded on {nearest}; this CPU is {this_cpu()} "
     "(see this file's docstring)"
   )
+
+
+if __name__ == "__main__":  # the test above runs this in a process of its own
+  (Path(sys.argv[1]) / "digests.json").write_text(json.dumps(drawn(Path(sys.argv[1]))))
