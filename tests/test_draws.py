@@ -17,7 +17,6 @@ import hashlib
 import json
 import os
 import platform
-import re
 import shutil
 import subprocess
 import sys
@@ -123,7 +122,9 @@ def this_cpu() -> str:
 
 
 def test_draws_and_trained_parameters_are_the_recorded_ones(tmp_path):
-  flags = re.sub(r"--xla_(backend_optimization_level|cpu_use_fusion_emitters)=\S+", "", os.environ.get("XLA_FLAGS", ""))
+  from conftest import QUICK_COMPILE  # here, not at the top: the child process runs this file without pytest
+
+  flags = " ".join(f for f in os.environ.get("XLA_FLAGS", "").split() if f not in QUICK_COMPILE.split())
   made = subprocess.run(
     [sys.executable, __file__, str(tmp_path)],
     env={**os.environ, "XLA_FLAGS": flags, "CHORJAX_CACHE": str(tmp_path / "takes")},
