@@ -71,6 +71,20 @@ def test_calibration_recovers_the_settings_that_drew_the_reference(run_dir, true
   assert min(o for *_, o in table) < 0.2  # four measures within ~5% of the reference's
 
 
+def test_the_grid_drawn_two_at_a_time_is_the_grid_drawn_one_at_a_time(run_dir, monkeypatch):
+  """The search draws DRAWERS settings at once (threads): every row, to the last bit, and its order are what
+  drawing them one after another gives."""
+  run = load_run(run_dir)
+  reference = list(_drawer(run, 1)({"noise_smoothing": 0.85, "sigma_temperature": 1.3}))
+  grid = {"noise_smoothing": (0.6, 0.85, 0.95), "sigma_temperature": (0.9, 1.3)}
+  tables = {}
+  for drawers in (1, 2):
+    monkeypatch.setattr(calibrate, "DRAWERS", drawers)
+    tables[drawers] = search(_drawer(run, 0), reference, run.features.skeleton, run.fps, grid, beyond={})[1]
+  assert calibrate.DRAWERS == 2 and len(tables[1]) == 6
+  assert json.dumps(tables[2]) == json.dumps(tables[1])
+
+
 def test_the_walk_past_the_grid_starts_from_its_three_best_settings(monkeypatch):
   """A constructed landscape (objective by settings): the grid's best has its scale temperature inside the
   grid; its third best sits at the low end, and past it the objective falls below the grid's best. Walking from
