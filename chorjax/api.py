@@ -52,7 +52,7 @@ from chorjax.live import run_live  # noqa: F401
 from chorjax.render.files import plot_file, render  # noqa: F401
 from chorjax.reports import METRIC_KEYS, check_report, metric_lines, takes_table  # noqa: F401
 from chorjax.run import Run as _Run
-from chorjax.runtime import keep_freed_memory  # noqa: F401
+from chorjax.runtime import keep_compiled_programs, keep_freed_memory  # noqa: F401
 from chorjax.sample import write_inbetween, write_sample  # noqa: F401
 from chorjax.scoring import score_to  # noqa: F401
 

@@ -810,7 +810,9 @@ def build_parser() -> argparse.ArgumentParser:
     description=("Learn a dancer's movement language from motion capture and write new dance in it."),
     epilog=(
       "environment: CHORJAX_MALLOC=system keeps glibc's malloc defaults (by default chorjax keeps freed "
-      "memory for reuse, which saves page faults on every CPU training step)"
+      "memory for reuse, which saves page faults on every CPU training step); CHORJAX_COMPILE_CACHE=off keeps no "
+      "compiled programs (by default every program XLA compiles is kept in the xla folder of $CHORJAX_CACHE or "
+      "~/.cache/chorjax, and later commands load it instead of compiling it again)"
     ),
   )
   sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -837,6 +839,7 @@ def _quiet_closed_loop(hook):
 
 def main(argv=None) -> int:
   api.keep_freed_memory()  # before the first JAX computation; see chorjax/runtime.py
+  api.keep_compiled_programs()  # a program compiled once per machine; see chorjax/runtime.py
   if not getattr(sys.unraisablehook, "chorjax", False):
     sys.unraisablehook = _quiet_closed_loop(sys.unraisablehook)
     sys.unraisablehook.chorjax = True  # type: ignore[attr-defined]

@@ -52,6 +52,7 @@ from chorjax.config import check_training_size, load_config, plain_name, suggest
 from chorjax.controls import Controls
 from chorjax.errors import UserError, atomic_write, load_json, load_toml, read_text
 from chorjax.families import family_of
+from chorjax.runtime import cpu_info
 from chorjax.scoring import mean_of, upgrade
 
 SWEEP_KEYS = {"name", "base", "root", "grid", "set", "eval", "candidates", "vectorize"}
@@ -245,19 +246,6 @@ RULES = {
   "train": "lowest relative to the training takes' FID against the held-out takes",
   "data": "closest to the real data's value",
 }
-
-
-def cpu_info() -> dict[str, str]:
-  """The first processor's fields in /proc/cpuinfo (``model name``, ``cpu family``, ``flags``, ...); empty where
-  there is no such file."""
-  info = {}
-  with contextlib.suppress(OSError):
-    for line in Path("/proc/cpuinfo").read_text().splitlines():
-      if not line.strip():
-        break  # the first processor is enough
-      key, _, value = line.partition(":")
-      info[key.strip()] = value.strip()
-  return info
 
 
 def machine_info() -> str:
