@@ -42,7 +42,6 @@ the whole library's.
 
 from __future__ import annotations
 
-import concurrent.futures
 import itertools
 import json
 from collections.abc import Sequence
@@ -54,6 +53,7 @@ from chorjax import metrics, scoring
 from chorjax.calibration_file import CALIBRATED, calibration_path, read_calibration  # noqa: F401  (re-exported)
 from chorjax.data.transforms import to_y_up
 from chorjax.errors import UserError, atomic_write
+from chorjax.runtime import side_by_side
 
 GRID = {
   "noise_smoothing": (0.6, 0.75, 0.85, 0.9, 0.95),  # 0.95: a model that trembles (cmu05 seed 1: jitter 3 at 0.9)
@@ -73,7 +73,6 @@ BEYOND = {
 # The walk starts from each of the grid's WALKS best settings: from the best alone it missed, on one martial run,
 # a setting a quarter nearer (objective 0.51 against 0.67) that the third best's walk reaches.
 WALKS = 3
-DRAWERS = 2  # draws at once (threads), see search
 RATES = ("movement", "jitter", "speed", "root_travel")
 MEASURES = (*RATES, "poses")
 
@@ -182,7 +181,7 @@ def search(
   best settings whose value of a control in ``beyond`` (default ``BEYOND``) is an end of the grid's values,
   the ladder's next values past that end with the other controls held (while the objective falls); the table
   rows are ``(settings, measures, objective)``, the grid's first, each setting once. The grid's settings are
-  drawn ``DRAWERS`` at a time, in threads (``draw`` must allow that; each draw is what it is alone).
+  drawn side by side (``runtime.side_by_side``: ``draw`` must allow two threads).
   ``known``: ``(settings, measures)`` pairs measured before with the same draws (a calibration table of the same
   checkpoint, frames, dancers and seed), not drawn again. ``poses``: see :func:`reference_rates`."""
   grid = grid or GRID
@@ -203,12 +202,9 @@ def search(
         log(f"  {settings}: " + ", ".join(f"{k.replace('_', ' ')} {v:.3f}" for k, v in found.items()))
     return drawn[key]
 
-  # One draw's frame loop keeps one core busy with small kernels: two at once take 0.8 of the time (the quick
-  # start's `chorjax calibrate`, 2 cores: 34.5 -> 28.0 s, every row the same); rows go into the table in grid order.
   settings = [dict(zip(grid, values)) for values in itertools.product(*grid.values())]
-  with concurrent.futures.ThreadPoolExecutor(DRAWERS) as pool:
-    for one, found in zip(settings, pool.map(measured, settings)):
-      row(one, found)
+  for one, found in zip(settings, side_by_side(measured, settings)):  # into the table in grid order
+    row(one, found)
   for start in sorted(drawn.values(), key=lambda r: r[2])[:WALKS]:
     _walk(row, start, grid, beyond)
   table = list(drawn.values())

@@ -16,6 +16,7 @@ from chorjax.data.motion import Motion
 from chorjax.data.transforms import to_y_up
 from chorjax.errors import UserError, atomic_write
 from chorjax.run import HELD_OUT, Run, load_run, read_reference  # noqa: F401  (re-exported)
+from chorjax.runtime import side_by_side
 
 
 def evaluate(
@@ -64,7 +65,7 @@ def evaluate(
   scored_takes, loss_takes = held_out(real, run.train_takes)
   loss = heldout_loss(run, scored_takes) if run.family.likelihood else None
   seeds = list(seeds) if seeds else [seed]
-  decoded = [generate_positions(run, train, num, frames, s, sampling) for s in seeds]
+  decoded = list(side_by_side(lambda s: generate_positions(run, train, num, frames, s, sampling), seeds))
   y_up = lambda pos: np.asarray(to_y_up(pos, feats.up_axis))  # data space -> y-up: what the metrics measure
   gen = [y_up(p) for d in decoded for p in d]
   real_c = [y_up(m.positions) for m in real]

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from helpers import QUICKSTART_SAMPLING, tiny_config
 
-from chorjax import calibrate, cli
+from chorjax import calibrate, cli, runtime
 from chorjax.calibrate import calibration_path, search
 from chorjax.calibration_file import CALIBRATED, chosen_calibration_row
 from chorjax.controls import Draw, Pacing
@@ -72,16 +72,16 @@ def test_calibration_recovers_the_settings_that_drew_the_reference(run_dir, true
 
 
 def test_the_grid_drawn_two_at_a_time_is_the_grid_drawn_one_at_a_time(run_dir, monkeypatch):
-  """The search draws DRAWERS settings at once (threads): every row, to the last bit, and its order are what
+  """The search draws DRAWS_AT_ONCE settings at once (threads): every row, to the last bit, and its order are what
   drawing them one after another gives."""
   run = load_run(run_dir)
   reference = list(_drawer(run, 1)({"noise_smoothing": 0.85, "sigma_temperature": 1.3}))
   grid = {"noise_smoothing": (0.6, 0.85, 0.95), "sigma_temperature": (0.9, 1.3)}
   tables = {}
   for drawers in (1, 2):
-    monkeypatch.setattr(calibrate, "DRAWERS", drawers)
+    monkeypatch.setattr(runtime, "DRAWS_AT_ONCE", drawers)
     tables[drawers] = search(_drawer(run, 0), reference, run.features.skeleton, run.fps, grid, beyond={})[1]
-  assert calibrate.DRAWERS == 2 and len(tables[1]) == 6
+  assert runtime.DRAWS_AT_ONCE == 2 and len(tables[1]) == 6
   assert json.dumps(tables[2]) == json.dumps(tables[1])
 
 
@@ -299,3 +299,18 @@ def test_calibration_measures_a_dance_as_the_judge_does():
   assert set(judge) == set(calibrate.RATES)
   for key, name in judge.items():  # one segment of 600 frames: the judge's first is the whole dance
     assert measured[key] == pytest.approx(judged[name], rel=1e-6), key
+
+
+def test_an_evaluation_over_seeds_drawn_side_by_side_is_the_one_drawn_seed_after_seed(run_dir, monkeypatch):
+  """``chorjax eval --seeds``' draws run side by side (``runtime.side_by_side``, as calibration's): every
+  figure and the first dancer are what drawing the seeds one after another gives."""
+  from chorjax.evaluate import evaluate
+
+  results = {}
+  for drawers in (1, 2):
+    monkeypatch.setattr(runtime, "DRAWS_AT_ONCE", drawers)
+    results[drawers] = evaluate(run_dir, ["cmu94"], frames=200, num=2, seeds=[0, 1, 2], splits=2)
+  first = {k: results[k].pop("first_sample").positions for k in results}
+  assert np.array_equal(first[1], first[2])
+  assert json.dumps(results[2], sort_keys=True) == json.dumps(results[1], sort_keys=True)
+  assert set(results[1]["fid_k"]) == {"mean", "sd"} and results[1]["fid_k"]["sd"] > 0  # three seeds, three draws
