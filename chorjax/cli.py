@@ -839,7 +839,6 @@ def _quiet_closed_loop(hook):
 
 def main(argv=None) -> int:
   api.keep_freed_memory()  # before the first JAX computation; see chorjax/runtime.py
-  api.keep_compiled_programs()  # a program compiled once per machine; see chorjax/runtime.py
   if not getattr(sys.unraisablehook, "chorjax", False):
     sys.unraisablehook = _quiet_closed_loop(sys.unraisablehook)
     sys.unraisablehook.chorjax = True  # type: ignore[attr-defined]
@@ -848,6 +847,7 @@ def main(argv=None) -> int:
     logging.getLogger("asyncio").setLevel(logging.CRITICAL)
   parser = build_parser()
   args, extra = parser.parse_known_args(argv)
+  api.keep_compiled_programs()  # (not for --help) a program compiled once per machine; see chorjax/runtime.py
   # KEY=VALUE overrides may also follow options (`train c.toml --workdir w model.cell=gru`).
   if extra:
     if hasattr(args, "overrides") and all("=" in e and not e.startswith("-") for e in extra):
