@@ -64,8 +64,8 @@ def keep_freed_memory() -> bool:
 # Draws run this many at a time (threads): calibrating the quick start's run on 2 cores took 34.5 s one at a time,
 # 28.0 s two at a time, 28.2 s three, 29.6 s four, every row of its table the same.
 DRAWS_AT_ONCE = 2
-# The compiled programs kept (bytes): the least recently used go first beyond it. Calibrating the quick start's run
-# keeps 0.85 MB.
+# The compiled programs kept (bytes): the least recently used go first beyond it. README command 1 (the quick start:
+# training, calibration, its sample) keeps 2.1 MB.
 COMPILED_BYTES = 2**30
 
 
