@@ -5,7 +5,9 @@ quickstart's MDN head (8 diagonal components in the data's principal axes) and w
     python -m benchmarks.shipped [--reps N] [--out benchmarks/results_shipped.json]
 
 Both frameworks in this one process, repetitions alternating after one untimed round, medians reported (as
-``benchmarks.run``). Synthetic batches of 48 features. BENCHMARKS.md's opening table is this script's output.
+``benchmarks.run``); chorjax's step both as one program and with ``train.batch_parts = 2`` (the batch's two
+halves side by side in threads). Synthetic batches of 48 features. BENCHMARKS.md's opening table is this
+script's output.
 """
 
 from __future__ import annotations
@@ -34,6 +36,28 @@ def jax_step(head: str, shape: str):
   basis = ["model.mdn_basis=pca"] if head == "mdn" else []
   cfg = load_config(None, [*keys, f"model.num_mixtures={K}", *basis])
   return compiled_train_step(cfg, b, t, np.eye(D) if head == "mdn" else None)
+
+
+def parted_step(head: str, shape: str, parts: int = 2):
+  """chorjax's LSTM train step with ``train.batch_parts = parts``: the shares' gradients in threads, then the
+  update (``run() -> loss``)."""
+  from benchmarks.run import random_batch
+  from chorjax.config import load_config
+  from chorjax.families.recurrent.steps import create_train_state, parted_train_step
+
+  layers, hidden, b, t = SHAPES[shape]
+  keys = ["model.cell=lstm", f"model.head={head}", f"model.num_layers={layers}", f"model.hidden_size={hidden}"]
+  basis = ["model.mdn_basis=pca"] if head == "mdn" else []
+  cfg = load_config(None, [*keys, f"model.num_mixtures={K}", *basis, f"train.batch_parts={parts}"])
+  state, spec = create_train_state(cfg, D, 10, np.eye(D) if head == "mdn" else None)
+  batch, key, box = random_batch(np.random.default_rng(0), b, t, D), jax.random.key(0), {"state": state}
+  step = parted_train_step(parts)
+
+  def run():
+    box["state"], m = step(box["state"], batch, key, spec)
+    return m["loss"]
+
+  return run
 
 
 def torch_step(head: str, shape: str):
@@ -65,15 +89,20 @@ def main(argv=None) -> None:
   for shape in SHAPES:
     for head in ("mdn", "mse"):
       ours, compile_s = jax_step(head, shape)
-      times = alternate(
-        [("chorjax", ours, jax.block_until_ready), ("torch", torch_step(head, shape), lambda x: x.item())],
-        args.reps,
-      )
+      parted = parted_step(head, shape)
+      pairs = [("chorjax", ours, jax.block_until_ready), ("chorjax_parts2", parted, jax.block_until_ready)]
+      times = alternate([*pairs, ("torch", torch_step(head, shape), lambda x: x.item())], args.reps)
       name = f"lstm {head} {shape}"
-      res[name] = {**times, "ratio": times["torch"] / times["chorjax"], "compile_s": compile_s}
+      res[name] = {
+        **times,
+        "ratio": times["torch"] / times["chorjax"],
+        "ratio_parts2": times["torch"] / times["chorjax_parts2"],
+        "compile_s": compile_s,
+      }
       print(
-        f"{name:22s} chorjax {times['chorjax'] * 1e3:7.1f} ms  torch nn.LSTM {times['torch'] * 1e3:7.1f} ms  "
-        f"x{times['torch'] / times['chorjax']:.2f} (compile {compile_s:.1f} s)",
+        f"{name:22s} chorjax {times['chorjax'] * 1e3:7.1f} ms (x{res[name]['ratio']:.2f}), batch in 2 shares "
+        f"{times['chorjax_parts2'] * 1e3:7.1f} ms (x{res[name]['ratio_parts2']:.2f}), torch nn.LSTM "
+        f"{times['torch'] * 1e3:7.1f} ms (compile {compile_s:.1f} s)",
         flush=True,
       )
   Path(args.out).write_text(json.dumps(res, indent=2))

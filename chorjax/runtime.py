@@ -113,9 +113,9 @@ def keep_compiled_programs() -> Path | None:
   return folder
 
 
-def side_by_side(fn: Callable[[Any], Any], items: Iterable) -> Iterator:
-  """``fn(item)`` for each item, in order, ``DRAWS_AT_ONCE`` of them running at a time in threads (a draw: each
-  is what it is alone; ``fn`` must allow being called from two threads at once). Lazy: a result is yielded as
-  soon as it and those before it are done."""
-  with concurrent.futures.ThreadPoolExecutor(DRAWS_AT_ONCE) as pool:
+def side_by_side(fn: Callable[[Any], Any], items: Iterable, at_once: int | None = None) -> Iterator:
+  """``fn(item)`` for each item, in order, ``at_once`` (default ``DRAWS_AT_ONCE``) of them running at a time in
+  threads (a draw: each is what it is alone; ``fn`` must allow being called from several threads at once).
+  Lazy: a result is yielded as soon as it and those before it are done."""
+  with concurrent.futures.ThreadPoolExecutor(at_once or DRAWS_AT_ONCE) as pool:
     yield from pool.map(fn, items)

@@ -112,6 +112,8 @@ def train_vectorized(cfgs, workdirs, *, force: bool = False) -> list[dict]:
   """
   cfgs, workdirs = list(cfgs), [Path(w).absolute() for w in workdirs]
   check_group(cfgs)
+  if any(c.train.batch_parts > 1 for c in cfgs):
+    raise UserError("train.batch_parts: not with several seeds in one program; train them apart or in one share")
   if any(c.train.patience for c in cfgs):
     raise UserError("train.patience: not with several seeds in one program (each would end apart); train them apart")
   with contextlib.ExitStack() as stack:

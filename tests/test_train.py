@@ -23,7 +23,7 @@ from chorjax.config import load_config, to_toml
 from chorjax.data.csv import read_csv
 from chorjax.data.dataset import WindowSampler, load_dataset
 from chorjax.errors import UserError
-from chorjax.families.recurrent.steps import create_train_state, eval_step, train_step
+from chorjax.families.recurrent.steps import create_train_state, eval_step, parted_train_step, train_step
 from chorjax.run import load_run
 from chorjax.training import due, train_and_evaluate, workdir_lock
 
@@ -104,6 +104,36 @@ def test_a_few_steps_lower_the_loss_and_the_step_compiles_once(tiny_setup, head)
   assert float(metrics["param_norm"]) == pytest.approx(norm(state["params"]), rel=1e-5)
   assert 0 < float(metrics["update_norm"]) < 0.1 * float(metrics["param_norm"])
   assert int(state["step"]) == 40
+
+
+@pytest.mark.parametrize("head", ["mse", "mdn"])
+def test_a_batch_in_shares_side_by_side_makes_the_update_of_the_whole_batch(tiny_setup, head):
+  """``train.batch_parts``: without noise or dropout, the mean of the shares' gradients is the whole batch's (to
+  float rounding), so one step of each lands on the same parameters and metrics; ``min_`` metrics take the
+  least of the shares'."""
+  _, ds = tiny_setup
+  cfg = load_config(None, [*TINY, f"model.head={head}", "model.dropout=0", "train.input_noise=0"])
+  state, spec = create_train_state(cfg, 48, ds.num_motions)
+  batch = WindowSampler(ds.train, cfg.data.seq_length, 8, seed=0).batch(3)
+  copy = jax.tree.map(jnp.array, state)
+  whole, m_whole = train_step(state, batch, jax.random.key(0), spec)
+  for parts in (2, 4):
+    parted, m_parted = parted_train_step(parts)(jax.tree.map(jnp.array, copy), batch, jax.random.key(0), spec)
+    assert int(parted["step"]) == 1
+    for a, b in zip(jax.tree.leaves(parted["params"]), jax.tree.leaves(whole["params"]), strict=True):
+      np.testing.assert_allclose(a, b, rtol=2e-4, atol=2e-6)
+    for k in m_whole:
+      assert float(m_parted[k]) == pytest.approx(float(m_whole[k]), rel=2e-4), k
+  assert ("min_scale" in m_whole) == (head == "mdn")
+  for refused in (["train.batch_size=9"], ["parallel.data_parallel=true"], ["model.family=gan"]):
+    assert cli_error(["train.batch_parts=2", *refused]) == "key 'train.batch_parts'", refused
+
+
+def cli_error(overrides):
+  """The start of the one-line error loading the default config with ``overrides`` gives."""
+  with pytest.raises(UserError) as e:
+    load_config(None, [*TINY, *overrides])
+  return str(e.value).split(":")[0]
 
 
 def test_non_finite_loss_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path, capsys):

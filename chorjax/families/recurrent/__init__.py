@@ -31,11 +31,12 @@ class Recurrent(Family):
 
   def parts(self, cfg, ds):
     from chorjax.data.dataset import WindowSampler, eval_windows
-    from chorjax.families.recurrent.steps import eval_step, train_step
+    from chorjax.families.recurrent.steps import eval_step, parted_train_step, train_step
 
     sampler = WindowSampler(ds.train, cfg.data.seq_length, cfg.train.batch_size, cfg.train.seed)
     val = eval_windows(ds.val, cfg.data.seq_length, cfg.train.val_windows)
-    return train_step, sampler, val, lambda params, val, spec: eval_step(params, val, spec.graphdef)
+    step = train_step if cfg.train.batch_parts == 1 else parted_train_step(cfg.train.batch_parts)
+    return step, sampler, val, lambda params, val, spec: eval_step(params, val, spec.graphdef)
 
   def window_loss(self, graphdef, params, windows: dict) -> float:
     from chorjax.families.recurrent.steps import eval_step

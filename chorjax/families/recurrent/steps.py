@@ -21,6 +21,7 @@ from flax import nnx
 from chorjax.config import Config
 from chorjax.families.recurrent.recurrent_model import create_model
 from chorjax.optimizer import create_optimizer, step_key
+from chorjax.runtime import side_by_side
 
 
 @dataclasses.dataclass(frozen=True)
@@ -170,12 +171,19 @@ def _train_step(state, batch, key, spec: StepSpec, lr_scale=None, noise=None):
   ``chorjax.vectorized``): the update scaled by ``lr_scale``, the input noise ``noise`` instead of
   ``spec.input_noise``."""
   key = step_key(key, state["step"])
+  (loss, aux), grads = _gradients(state["params"], batch, key, state["step"], spec, noise)
+  return _update(state, loss, aux, grads, spec, lr_scale)
+
+
+def _gradients(params, batch, key, step, spec: StepSpec, noise=None):
+  """``((loss, aux), gradients)`` of ``batch`` at ``step`` (``key``: the step's)."""
   if spec.feedback is None:  # teacher forcing: the fused layers over whole windows
-    grad_fn = jax.value_and_grad(_loss_fn, has_aux=True)
-    (loss, aux), grads = grad_fn(state["params"], batch, key, spec, noise)
-  else:
-    grad_fn = jax.value_and_grad(_feedback_loss_fn, has_aux=True)
-    (loss, aux), grads = grad_fn(state["params"], batch, key, state["step"], spec)
+    return jax.value_and_grad(_loss_fn, has_aux=True)(params, batch, key, spec, noise)
+  return jax.value_and_grad(_feedback_loss_fn, has_aux=True)(params, batch, key, step, spec)
+
+
+def _update(state, loss, aux, grads, spec: StepSpec, lr_scale=None):
+  """The optimizer's step with ``grads``: ``(state, metrics)``."""
   updates, opt_state = spec.tx.update(grads, state["opt_state"], state["params"])
   if lr_scale is not None:
     updates = jax.tree.map(lambda u: u * lr_scale.astype(u.dtype), updates)
@@ -194,6 +202,36 @@ def _train_step(state, batch, key, spec: StepSpec, lr_scale=None, noise=None):
 train_step = functools.partial(jax.jit, static_argnums=3, donate_argnums=0)(_train_step)
 train_step.__doc__ = """``train_step(state, batch, key, spec) -> (state, metrics)``; ``state`` is donated,
 ``spec`` (a :class:`chorjax.run.StepSpec`) is static."""
+
+
+_part_gradients = functools.partial(jax.jit, static_argnums=4)(_gradients)
+
+
+@functools.partial(jax.jit, static_argnums=2, donate_argnums=0)
+def _update_with_parts(state, parts, spec: StepSpec):
+  """The update with ``parts`` (``((loss, aux), gradients)`` of equal shares of one batch): their mean (a
+  ``min_`` metric: their least)."""
+  mean = lambda *xs: sum(xs) / len(xs)
+  least = lambda *xs: functools.reduce(jnp.minimum, xs)
+  losses, auxes, grads = [p[0][0] for p in parts], [p[0][1] for p in parts], [p[1] for p in parts]
+  aux = {k: (least if k.startswith("min_") else mean)(*(a[k] for a in auxes)) for k in auxes[0]}
+  return _update(state, mean(*losses), aux, jax.tree.map(mean, *grads), spec)
+
+
+def parted_train_step(parts: int):
+  """``train_step`` with each batch in ``parts`` equal shares of its windows (``train.batch_parts``), their
+  gradients computed side by side in threads (one program each: on a CPU each share's time loops run on
+  a core of their own, where one program runs a loop's small kernels one after another), then one update
+  with their mean. The same loss in exact arithmetic; each share draws its own noise and dropout."""
+
+  def step(state, batch, key, spec: StepSpec):
+    keys = jax.random.split(step_key(key, state["step"]), parts)
+    rows = len(batch["inputs"]) // parts
+    shares = [{k: v[i * rows : (i + 1) * rows] for k, v in batch.items()} for i in range(parts)]
+    part = lambda i: jax.block_until_ready(_part_gradients(state["params"], shares[i], keys[i], state["step"], spec))
+    return _update_with_parts(state, list(side_by_side(part, range(parts), at_once=parts)), spec)
+
+  return step
 
 
 def sharded_train_step(parallel):
