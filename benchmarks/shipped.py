@@ -27,29 +27,33 @@ SHAPES = {"shipped": (2, 192, 32, 64), "reference": (3, 256, 50, 100)}  # layers
 HERE = Path(__file__).resolve().parent
 
 
-def jax_step(head: str, shape: str):
-  """chorjax's jitted LSTM train step: ``run() -> loss`` and its compile seconds."""
+def _config(head: str, shape: str, *more: str):
+  """The LSTM config of ``shape`` with ``head`` (and ``more`` keys), and the MDN's basis (None for MSE)."""
   from chorjax.config import load_config
 
-  layers, hidden, b, t = SHAPES[shape]
+  layers, hidden, _, _ = SHAPES[shape]
   keys = ["model.cell=lstm", f"model.head={head}", f"model.num_layers={layers}", f"model.hidden_size={hidden}"]
   basis = ["model.mdn_basis=pca"] if head == "mdn" else []
-  cfg = load_config(None, [*keys, f"model.num_mixtures={K}", *basis])
-  return compiled_train_step(cfg, b, t, np.eye(D) if head == "mdn" else None)
+  cfg = load_config(None, [*keys, f"model.num_mixtures={K}", *basis, *more])
+  return cfg, np.eye(D) if head == "mdn" else None
+
+
+def jax_step(head: str, shape: str):
+  """chorjax's jitted LSTM train step: ``run() -> loss`` and its compile seconds."""
+  _, _, b, t = SHAPES[shape]
+  cfg, basis = _config(head, shape)
+  return compiled_train_step(cfg, b, t, basis)
 
 
 def parted_step(head: str, shape: str, parts: int = 2):
   """chorjax's LSTM train step with ``train.batch_parts = parts``: the shares' gradients in threads, then the
   update (``run() -> loss``)."""
   from benchmarks.run import random_batch
-  from chorjax.config import load_config
   from chorjax.families.recurrent.steps import create_train_state, parted_train_step
 
-  layers, hidden, b, t = SHAPES[shape]
-  keys = ["model.cell=lstm", f"model.head={head}", f"model.num_layers={layers}", f"model.hidden_size={hidden}"]
-  basis = ["model.mdn_basis=pca"] if head == "mdn" else []
-  cfg = load_config(None, [*keys, f"model.num_mixtures={K}", *basis, f"train.batch_parts={parts}"])
-  state, spec = create_train_state(cfg, D, 10, np.eye(D) if head == "mdn" else None)
+  _, _, b, t = SHAPES[shape]
+  cfg, basis = _config(head, shape, f"train.batch_parts={parts}")
+  state, spec = create_train_state(cfg, D, 10, basis)
   batch, key, box = random_batch(np.random.default_rng(0), b, t, D), jax.random.key(0), {"state": state}
   step = parted_train_step(parts)
 
