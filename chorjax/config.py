@@ -806,18 +806,16 @@ def check_combinations(config: Config) -> None:
   """Keys that make sense alone but not together, refused when a config is loaded (before any training;
   runs already saved with them still load: their sampling says so when asked)."""
   parts, size, family = config.train.batch_parts, config.train.batch_size, config.model.family
-  if parts > 1:
-    why = (
-      f"{parts} does not divide train.batch_size = {size}"
-      if size % parts
-      else f"only the rnn family computes its batch in shares (model.family = {family!r})"
-      if family != "rnn"
-      else "not with parallel.data_parallel (the batch is shared over the devices already)"
-      if config.parallel.data_parallel
-      else None
+  if parts > 1 and size % parts:
+    raise UserError(f"key 'train.batch_parts': {parts} does not divide train.batch_size = {size}")
+  if parts > 1 and family != "rnn":
+    raise UserError(
+      f"key 'train.batch_parts': only the rnn family computes its batch in shares (model.family = {family!r})"
     )
-    if why:
-      raise UserError(f"key 'train.batch_parts': {why}")
+  if parts > 1 and config.parallel.data_parallel:
+    raise UserError(
+      "key 'train.batch_parts': not with parallel.data_parallel (the batch is shared over the devices already)"
+    )
   rep = config.data.representation
   for key in ("foot_lock", "ground"):
     if getattr(config.sample, key) and rep != "canonical":
