@@ -437,7 +437,8 @@ def _cli_with_small_files(argv):
     f"sys.exit(main({argv!r}))"
   )
   root = Path(__file__).resolve().parents[1]
-  env = {k: v for k, v in os.environ.items() if k != "JAX_COMPILATION_CACHE_DIR"}  # no cache writes to fail
+  # no cache writes to fail first: neither compiled programs nor (below) the takes read
+  env = {k: v for k, v in os.environ.items() if k != "JAX_COMPILATION_CACHE_DIR"} | {"CHORJAX_COMPILE_CACHE": "off"}
   return subprocess.run([sys.executable, "-c", code], cwd=root, env=env, capture_output=True, text=True, timeout=300)
 
 
@@ -445,7 +446,8 @@ def test_a_checkpoint_that_cannot_be_written_is_one_line_and_leaves_no_partial_s
   """A real failing write, without root: files beyond 10 kB fail (RLIMIT_FSIZE, as a full disk would)."""
 
   work = tmp_path / "w"
-  done = _cli_with_small_files(["train", "configs/quickstart.toml", *TINY_TRAIN, "--workdir", str(work)])
+  argv = ["train", "configs/quickstart.toml", *TINY_TRAIN, "data.cache=off", "--workdir", str(work)]
+  done = _cli_with_small_files(argv)
   assert done.returncode == 2, done.stderr[-2000:]
   assert done.stderr.splitlines() == [
     f"chorjax: error: {work}/checkpoints: the checkpoint at step 2 could not be written (File too large)"
