@@ -7,7 +7,7 @@ quickstart's MDN head (8 diagonal components in the data's principal axes) and w
 Both frameworks in this one process, repetitions alternating after one untimed round, medians reported (as
 ``benchmarks.run``); chorjax's step both as one program and with ``train.batch_parts = 2`` (the batch's two
 halves side by side in threads). Synthetic batches of 48 features. BENCHMARKS.md's opening table is this
-script's output.
+script's output; ``python -m benchmarks.run`` runs it too.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from benchmarks.run import alternate, compiled_train_step
 D, K = 48, 8
 SHAPES = {"shipped": (2, 192, 32, 64), "reference": (3, 256, 50, 100)}  # layers, hidden, batch, frames
 HERE = Path(__file__).resolve().parent
+OUT = HERE / "results_shipped.json"
 
 
 def _config(head: str, shape: str, *more: str):
@@ -77,25 +78,20 @@ def torch_step(head: str, shape: str):
   return lambda: step(x, y)
 
 
-def main(argv=None) -> None:
-  ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-  ap.add_argument("--reps", type=int, default=15, help="timed repetitions per step (default 15)")
-  ap.add_argument("--out", default=str(HERE / "results_shipped.json"))
-  args = ap.parse_args(argv)
-  from chorjax.experiments import machine_info
-  from chorjax.runtime import keep_freed_memory
-
-  keep_freed_memory()  # as the chorjax command does; the PyTorch peer in this process gains too
+def measure(reps: int) -> dict:
+  """Every shape x head: chorjax one program, with two shares, and ``nn.LSTM`` (medians, ratios); prints a line
+  each. The caller sets up the process (``keep_freed_memory``, torch's threads)."""
   import torch
 
-  torch.set_num_threads(os.cpu_count() or 1)
-  res = {"machine": machine_info(), "jax": jax.__version__, "torch": torch.__version__, "reps": args.reps}
+  from chorjax.experiments import machine_info
+
+  res = {"machine": machine_info(), "jax": jax.__version__, "torch": torch.__version__, "reps": reps}
   for shape in SHAPES:
     for head in ("mdn", "mse"):
       ours, compile_s = jax_step(head, shape)
       parted = parted_step(head, shape)
       pairs = [("chorjax", ours, jax.block_until_ready), ("chorjax_parts2", parted, jax.block_until_ready)]
-      times = alternate([*pairs, ("torch", torch_step(head, shape), lambda x: x.item())], args.reps)
+      times = alternate([*pairs, ("torch", torch_step(head, shape), lambda x: x.item())], reps)
       name = f"lstm {head} {shape}"
       res[name] = {
         **times,
@@ -109,7 +105,21 @@ def main(argv=None) -> None:
         f"{times['torch'] * 1e3:7.1f} ms (compile {compile_s:.1f} s)",
         flush=True,
       )
-  Path(args.out).write_text(json.dumps(res, indent=2))
+  return res
+
+
+def main(argv=None) -> None:
+  ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+  ap.add_argument("--reps", type=int, default=15, help="timed repetitions per step (default 15)")
+  ap.add_argument("--out", default=str(OUT))
+  args = ap.parse_args(argv)
+  from chorjax.runtime import keep_freed_memory
+
+  keep_freed_memory()  # as the chorjax command does; the PyTorch peer in this process gains too
+  import torch
+
+  torch.set_num_threads(os.cpu_count() or 1)
+  Path(args.out).write_text(json.dumps(measure(args.reps), indent=2))
   print(f"wrote {args.out}")
 
 

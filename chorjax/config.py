@@ -341,8 +341,8 @@ class TrainConfig:
     minimum=1,
     more=(
       "On a CPU one program runs a time loop's small kernels one after another on one core; shares in threads "
-      "run their loops on a core each. 2 on 2 cores: the LSTM step 11-22% less time (benchmarks.shipped), the "
-      "quick start's 8-10%. The same loss in exact arithmetic, not in its last bits: each share draws its own "
+      "run their loops on a core each. 2 on 2 cores: the LSTM step 11-20% less time (benchmarks.shipped), the "
+      "quick start's 11-12%. The same loss in exact arithmetic, not in its last bits: each share draws its own "
       "noise and dropout. Must divide train.batch_size; not with parallel.data_parallel or a list of seeds."
     ),
   )
