@@ -207,8 +207,8 @@ train_step.__doc__ = """``train_step(state, batch, key, spec) -> (state, metrics
 @functools.partial(jax.jit, static_argnums=(4, 5, 6))
 def _share_gradients(params, batch, key, step, spec: StepSpec, share: int, parts: int):
   """``_gradients`` of share ``share`` of ``parts`` equal shares of ``batch``'s windows, with that share's key
-  (the batch's cut and the keys' split inside the program: a step then dispatches three programs, not a dozen
-  small operations)."""
+  (the batch's cut and the keys' split inside the program: a step dispatches one program per share and the
+  update, no small operations between them)."""
   rows = len(batch["inputs"]) // parts
   part = {k: v[share * rows : (share + 1) * rows] for k, v in batch.items()}
   return _gradients(params, part, jax.random.split(step_key(key, step), parts)[share], step, spec)
