@@ -382,3 +382,28 @@ def test_the_cudnn_kernel_computes_what_the_fused_lstm_does(real_batch, monkeypa
   np.testing.assert_array_equal(b_ih[0], cell.b[...])
   with pytest.raises(UserError, match=r"key 'model\.lstm_kernel': 'cudnn' runs the rnn family's plain LSTM only"):
     tiny_config("model.cell=lnlstm", "model.lstm_kernel=cudnn")
+
+
+@pytest.mark.parametrize("cell_name", ["lstm", "lnlstm"])
+def test_the_fused_loops_work_in_place_without_copying_their_buffer(cell_name):
+  """The (LN-)LSTM's loops overwrite one [T, B, 4H] buffer row by row (projections -> gate activations ->
+  gate gradients); the compiled forward and backward must hold no copy of an array that size, which XLA
+  makes every step when a loop reads a row of the buffer before writing another."""
+  from chorjax.models.fused import lnlstm_scan, lstm_scan
+
+  frames, batch, hidden = 40, 6, 32
+  k = jax.random.split(jax.random.key(0), 4)
+  w_h = 0.1 * jax.random.normal(k[0], (hidden, 4 * hidden))
+  xp = jax.random.normal(k[1], (frames, batch, 4 * hidden))
+  zeros = jnp.zeros((batch, hidden))
+  gains = (jnp.ones((4, hidden)), jnp.ones(hidden), jnp.zeros(hidden))
+  layer = {
+    "lstm": lambda w, x: lstm_scan(w, x, zeros, zeros),
+    "lnlstm": lambda w, x: lnlstm_scan(w, *gains, x, zeros, zeros),
+  }[cell_name]
+  loss = lambda w, x: jnp.sum(layer(w, 2.0 * x)[1] ** 2)  # the projections made inside the program, as in a model
+  hlo = jax.jit(jax.grad(loss, argnums=(0, 1))).lower(w_h, xp).compile().as_text()
+  assert " while(" in hlo
+  big = f"f32[{frames},{batch},{4 * hidden}]"
+  copies = [line for line in hlo.splitlines() if f"= {big}" in line and " copy(" in line]
+  assert not copies, copies[:3]

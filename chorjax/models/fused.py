@@ -6,10 +6,13 @@ step, and the reverse loop runs many small elementwise kernels and a second, per
 recurrent weight gradient. :func:`lstm_scan` keeps exactly three stacks (the gate activations, the
 cell state and the output), computes every gate gradient in one elementwise pass, keeps one matmul in
 the reverse loop (``dz @ w_h.T``), and computes the recurrent weight gradient after the loop as one
-large matmul. :func:`lnlstm_scan` does the same for the layer-normalized LSTM, whose layer-norm gains
-also get their gradients after the loop, and :func:`gru_scan` for the GRU. Tests check them against
-the straightforward scan (outputs and gradients to 1e-5); BENCHMARKS.md has the timings.
-:func:`dense` is the input projections' and the heads' matmul with the same kind of backward pass.
+large matmul. Its loops work in place on one ``[T, B, 4H]`` buffer: the gate activations overwrite the
+input projections row by row, and the gate gradients the activations (no zero-filled stack of that
+size). :func:`lnlstm_scan` does the same for the layer-normalized LSTM, whose layer-norm gains also get
+their gradients after the loop, and :func:`gru_scan` for the GRU (whose stacks are of other widths
+than its projections, so it keeps a stack each). Tests check them against the straightforward scan
+(outputs and gradients to 1e-5); BENCHMARKS.md has the timings. :func:`dense` is the input
+projections' and the heads' matmul with the same kind of backward pass.
 
 Being ``jax.custom_vjp`` functions they support reverse-mode differentiation (``jax.grad``,
 ``jax.vjp``, ``jax.jacrev``) and ``vmap``, not forward mode (``jax.jvp``, ``jax.jacfwd``); a
@@ -99,14 +102,44 @@ def lstm_update(a_Bx4H, c_BxH, squash=jnp.tanh):
   return c, o * squash(c)
 
 
+def _row(stack, t):
+  """``stack[t]`` for a traced ``t``."""
+  return jax.lax.dynamic_index_in_dim(stack, t, 0, keepdims=False)
+
+
+def _set_row(stack, t, row):
+  """``stack.at[t].set(row)`` for a traced ``t`` (in place inside a loop)."""
+  return jax.lax.dynamic_update_index_in_dim(stack, row, t, 0)
+
+
+def _next_row(stack, t):
+  """``stack[t + 1]`` (the last row at the end), read after the loop step wrote its own row ``t``."""
+  return _row(stack, jnp.minimum(t + 1, stack.shape[0] - 1))
+
+
+def _previous_row(stack, t):
+  """``stack[t - 1]`` (the first row at the start), read after the reverse loop step wrote row ``t``."""
+  return _row(stack, jnp.maximum(t - 1, 0))
+
+
 def _forward(w_h, xp_TxBx4H, c0, h0):
-  def body(carry, xp_t):
-    c, h = carry
+  """The LSTM over the input projections: ``((c_T, h_T), (hs, cs, acts))``. The gate activations
+  overwrite the projections row by row, so the layer's one ``[T, B, 4H]`` buffer serves both (no
+  zero-filled stack of activations). Each step reads the next step's row from the buffer after writing
+  its own: a read before the write would make XLA copy the whole buffer every step."""
+  frames = xp_TxBx4H.shape[0]
+  hs = jnp.zeros(xp_TxBx4H.shape[:-1] + h0.shape[-1:], xp_TxBx4H.dtype)
+
+  def body(t, state):
+    c, h, xp_t, acts, hs, cs = state
     a = lstm_gates(xp_t + h @ w_h)
     c, h = lstm_update(a, c)
-    return (c, h), (h, c, a)
+    acts = _set_row(acts, t, a)
+    return c, h, _next_row(acts, t), acts, _set_row(hs, t, h), _set_row(cs, t, c)
 
-  return jax.lax.scan(body, (c0, h0), xp_TxBx4H)
+  init = (c0, h0, xp_TxBx4H[0], xp_TxBx4H, hs, jnp.zeros_like(hs))
+  c, h, _, acts, hs, cs = jax.lax.fori_loop(0, frames, body, init)
+  return (c, h), (hs, cs, acts)
 
 
 @jax.custom_vjp
@@ -126,18 +159,24 @@ def _lstm_scan_bwd(res, cotangents):
   w_h, c0, h0, hs, cs, acts = res
   (dc_last, dh_last), dhs = cotangents
   w_hT = w_h.T
+  frames = hs.shape[0]
 
-  def body(carry, inputs):
-    dc_next, dh_next = carry
-    dh_out, a, c, cp = inputs
+  # The gate gradients overwrite the activations row by row, as the forward's activations did the
+  # projections; the cell state read at step t is the one step t + 1 read as its predecessor.
+  def body(i, state):
+    dc_next, dh_next, a, c, dz_TxBx4H = state
+    t = frames - 1 - i
+    cp = jnp.where(t == 0, c0, _previous_row(cs, t))
     _, f, _, o = jnp.split(a, 4, axis=-1)
     tc = jnp.tanh(c)
-    dh = dh_out + dh_next
+    dh = _row(dhs, t) + dh_next
     dc = dc_next + dh * o * (1.0 - tc * tc)
     dz = _gate_grads(a, dc, cp, dh * tc)
-    return (dc * f, dz @ w_hT), dz
+    dz_TxBx4H = _set_row(dz_TxBx4H, t, dz)
+    return dc * f, dz @ w_hT, _previous_row(dz_TxBx4H, t), cp, dz_TxBx4H
 
-  (dc0, dh0), dz_TxBx4H = jax.lax.scan(body, (dc_last, dh_last), (dhs, acts, cs, _previous(c0, cs)), reverse=True)
+  init = (dc_last, dh_last, acts[-1], cs[-1], acts)
+  dc0, dh0, _, _, dz_TxBx4H = jax.lax.fori_loop(0, frames, body, init)
   dw_h = jnp.einsum("tbh,tbg->hg", _previous(h0, hs), dz_TxBx4H)
   return dw_h, dz_TxBx4H, dc0, dh0
 
@@ -156,12 +195,23 @@ def lnlstm_step(gain_h, gain_c, bias_c, xp_Bx4H, r_Bx4H, c_BxH):
 
 
 def _ln_forward(w_h, gain_h, gain_c, bias_c, xp_TxBx4H, c0, h0):
-  def body(carry, xp_t):
-    c, h = carry
-    c, h, (a, n_h, rstd_h) = lnlstm_step(gain_h, gain_c, bias_c, xp_t, h @ w_h, c)
-    return (c, h), (h, c, a, n_h, rstd_h)
+  """The LN-LSTM over the normalized input parts, as :func:`_forward` (the activations overwrite the
+  inputs): ``((c_T, h_T), (hs, cs, acts, n_hs, rstd_hs))``."""
+  frames, hidden = xp_TxBx4H.shape[0], h0.shape[-1]
+  hs = jnp.zeros(xp_TxBx4H.shape[:-1] + (hidden,), xp_TxBx4H.dtype)
+  n_hs = jnp.zeros(xp_TxBx4H.shape[:-1] + (4, hidden), xp_TxBx4H.dtype)
+  rstd_hs = jnp.zeros(xp_TxBx4H.shape[:-1] + (4, 1), xp_TxBx4H.dtype)
 
-  return jax.lax.scan(body, (c0, h0), xp_TxBx4H)
+  def body(t, state):
+    c, h, xp_t, acts, *stacks = state
+    c, h, (a, n_h, rstd_h) = lnlstm_step(gain_h, gain_c, bias_c, xp_t, h @ w_h, c)
+    acts = _set_row(acts, t, a)
+    stacks = [_set_row(stack, t, row) for stack, row in zip(stacks, (h, c, n_h, rstd_h), strict=True)]
+    return c, h, _next_row(acts, t), acts, *stacks
+
+  init = (c0, h0, xp_TxBx4H[0], xp_TxBx4H, hs, jnp.zeros_like(hs), n_hs, rstd_hs)
+  c, h, _, acts, hs, cs, n_hs, rstd_hs = jax.lax.fori_loop(0, frames, body, init)
+  return (c, h), (hs, cs, acts, n_hs, rstd_hs)
 
 
 @jax.custom_vjp
@@ -181,10 +231,14 @@ def _lnlstm_scan_bwd(res, cotangents):
   w_h, gain_h, gain_c, bias_c, c0, h0, hs, cs, acts, n_hs, rstd_hs = res
   (dc_last, dh_last), dhs = cotangents
   w_hT = w_h.T
+  frames = hs.shape[0]
 
+  # A scan as before (its per-step inputs), plus the gate gradients overwriting the activations as in
+  # _lstm_scan_bwd. (A loop that also reads the stacks by index runs as fast but rounds the layer-norm
+  # gradients differently: XLA fuses the step's kernels in another way.)
   def body(carry, inputs):
-    dc_next, dh_next = carry
-    dh_out, a, c, cp, n_h, rstd_h = inputs
+    dc_next, dh_next, a, t, dz_TxBx4H = carry
+    dh_out, c, cp, n_h, rstd_h = inputs
     _, f, _, o = jnp.split(a, 4, axis=-1)
     n_c, rstd_c = normalize(c)
     tl = jnp.tanh(n_c * gain_c + bias_c)
@@ -193,10 +247,12 @@ def _lnlstm_scan_bwd(res, cotangents):
     dc = dc_next + _normalize_bwd(dln_c * gain_c, n_c, rstd_c)
     dz = _gate_grads(a, dc, cp, dh * tl)
     dr = _normalize_bwd(dz.reshape(n_h.shape) * gain_h, n_h, rstd_h).reshape(dz.shape)
-    return (dc * f, dr @ w_hT), (dz, dr, dln_c)
+    dz_TxBx4H = _set_row(dz_TxBx4H, t, dz)
+    return (dc * f, dr @ w_hT, _previous_row(dz_TxBx4H, t), t - 1, dz_TxBx4H), (dr, dln_c)
 
-  (dc0, dh0), (dz, dr, dln_c) = jax.lax.scan(
-    body, (dc_last, dh_last), (dhs, acts, cs, _previous(c0, cs), n_hs, rstd_hs), reverse=True
+  init = (dc_last, dh_last, acts[-1], jnp.asarray(frames - 1), acts)
+  (dc0, dh0, _, _, dz), (dr, dln_c) = jax.lax.scan(
+    body, init, (dhs, cs, _previous(c0, cs), n_hs, rstd_hs), reverse=True
   )
   dw_h = jnp.einsum("tbh,tbg->hg", _previous(h0, hs), dr)
   dgain_h = jnp.einsum("tbkh,tbkh->kh", dz.reshape(n_hs.shape), n_hs)
