@@ -113,12 +113,12 @@ def _set_row(stack, t, row):
 
 
 def _next_row(stack, t):
-  """``stack[t + 1]`` (the last row at the end), read after the loop step wrote its own row ``t``."""
+  """``stack[t + 1]`` (the last row for the last ``t``): in a forward loop, read after writing row ``t``."""
   return _row(stack, jnp.minimum(t + 1, stack.shape[0] - 1))
 
 
 def _previous_row(stack, t):
-  """``stack[t - 1]`` (the first row at the start), read after the reverse loop step wrote row ``t``."""
+  """``stack[t - 1]`` (the first row for ``t = 0``): in a reverse loop, read after writing row ``t``."""
   return _row(stack, jnp.maximum(t - 1, 0))
 
 
