@@ -384,11 +384,13 @@ def test_the_cudnn_kernel_computes_what_the_fused_lstm_does(real_batch, monkeypa
     tiny_config("model.cell=lnlstm", "model.lstm_kernel=cudnn")
 
 
+@pytest.mark.parametrize("seeds", [None, 2])
 @pytest.mark.parametrize("cell_name", ["lstm", "lnlstm"])
-def test_the_fused_loops_work_in_place_without_copying_their_buffer(cell_name):
+def test_the_fused_loops_work_in_place_without_copying_their_buffer(cell_name, seeds):
   """The (LN-)LSTM's loops overwrite one [T, B, 4H] buffer row by row (projections -> gate activations ->
   gate gradients); the compiled forward and backward must hold no copy of an array that size, which XLA
-  makes every step when a loop reads a row of the buffer before writing another."""
+  makes every step when a loop reads a row of the buffer before writing another. Also vmapped over seeds,
+  as vectorized training runs them."""
   from chorjax.models.fused import lnlstm_scan, lstm_scan
 
   frames, batch, hidden = 40, 6, 32
@@ -402,8 +404,11 @@ def test_the_fused_loops_work_in_place_without_copying_their_buffer(cell_name):
     "lnlstm": lambda w, x: lnlstm_scan(w, *gains, x, zeros, zeros),
   }[cell_name]
   loss = lambda w, x: jnp.sum(layer(w, 2.0 * x)[1] ** 2)  # the projections made inside the program, as in a model
-  hlo = jax.jit(jax.grad(loss, argnums=(0, 1))).lower(w_h, xp).compile().as_text()
+  grad = jax.grad(loss, argnums=(0, 1))
+  if seeds:
+    grad, w_h, xp = jax.vmap(grad), jnp.stack([w_h] * seeds), jnp.stack([xp] * seeds)
+  hlo = jax.jit(grad).lower(w_h, xp).compile().as_text()
   assert " while(" in hlo
-  big = f"f32[{frames},{batch},{4 * hidden}]"
+  big = f"f32[{f'{seeds},' if seeds else ''}{frames},{batch},{4 * hidden}]"
   copies = [line for line in hlo.splitlines() if f"= {big}" in line and " copy(" in line]
   assert not copies, copies[:3]
