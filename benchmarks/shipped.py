@@ -56,10 +56,9 @@ def parted_step(head: str, shape: str, parts: int = 2):
   cfg, basis = _config(head, shape, f"train.batch_parts={parts}")
   state, spec = create_train_state(cfg, D, 10, basis)
   batch, key, box = random_batch(np.random.default_rng(0), b, t, D), jax.random.key(0), {"state": state}
-  step = parted_train_step(parts)
 
   def run():
-    box["state"], m = step(box["state"], batch, key, spec)
+    box["state"], m = parted_train_step(box["state"], batch, key, spec)
     return m["loss"]
 
   return run

@@ -343,7 +343,9 @@ class TrainConfig:
       "On a CPU one program runs a time loop's small kernels one after another on one core; shares in threads "
       "run their loops on a core each. 2 on 2 cores: the LSTM step 11-20% less time (benchmarks.shipped), the "
       "quick start's 11-12%. The same loss in exact arithmetic, not in its last bits: each share draws its own "
-      "noise and dropout. Must divide train.batch_size; not with parallel.data_parallel or a list of seeds."
+      "noise and dropout. Must divide train.batch_size; not with parallel.data_parallel. Seeds trained as one "
+      "vectorized program compute each point's shares one after another inside it (each share's own cut, "
+      "noise and dropout, as alone)."
     ),
   )
   num_steps: int = _field(1000, "total optimizer steps", minimum=0, resumable=True)

@@ -9,7 +9,9 @@ run leave most of the machine idle, and K runs fill it.
 What each point gets is exactly what it would get alone: its own initialization (``train.seed``), its
 own window sampler and RNG stream, its own input noise (a traced value), and its own learning rate (the
 optimizer's update computed at the first point's rate and scaled by ``lr_k / lr_0``: every optimizer
-chorjax offers is linear in the rate after clipping, so this differs from a lone run by rounding only).
+chorjax offers is linear in the rate after clipping, so this differs from a lone run by rounding only),
+and its batch in its own shares where ``train.batch_parts`` asks (one after another inside the program,
+where a lone run computes them in threads).
 Each point is written as an ordinary run directory (config.json, metrics.jsonl, TensorBoard events,
 checkpoints with their own meta, the end sample), so ``sample``, ``eval``, ``compare`` and resuming
 work unchanged. Points resume together when their latest checkpoints are at one step
@@ -112,8 +114,6 @@ def train_vectorized(cfgs, workdirs, *, force: bool = False) -> list[dict]:
   """
   cfgs, workdirs = list(cfgs), [Path(w).absolute() for w in workdirs]
   check_group(cfgs)
-  if any(c.train.batch_parts > 1 for c in cfgs):
-    raise UserError("train.batch_parts: not with several seeds in one program; train them apart or in one share")
   if any(c.train.patience for c in cfgs):
     raise UserError("train.patience: not with several seeds in one program (each would end apart); train them apart")
   with contextlib.ExitStack() as stack:

@@ -110,7 +110,9 @@ def test_a_few_steps_lower_the_loss_and_the_step_compiles_once(tiny_setup, head)
 def test_a_batch_in_shares_side_by_side_makes_the_update_of_the_whole_batch(tiny_setup, head):
   """``train.batch_parts``: without noise or dropout, the mean of the shares' gradients is the whole batch's (to
   float rounding), so one step of each lands on the same parameters and metrics; ``min_`` metrics take the
-  least of the shares'."""
+  least of the shares'. The shares in threads and in one program (as vectorized training runs them) land on
+  the same parameters (the same bits where programs compile as a user's do: the suite's quick compiling fuses
+  them otherwise)."""
   _, ds = tiny_setup
   cfg = load_config(None, [*TINY, f"model.head={head}", "model.dropout=0", "train.input_noise=0"])
   state, spec = create_train_state(cfg, 48, ds.num_motions)
@@ -118,8 +120,12 @@ def test_a_batch_in_shares_side_by_side_makes_the_update_of_the_whole_batch(tiny
   copy = jax.tree.map(jnp.array, state)
   whole, m_whole = train_step(state, batch, jax.random.key(0), spec)
   for parts in (2, 4):
-    parted, m_parted = parted_train_step(parts)(jax.tree.map(jnp.array, copy), batch, jax.random.key(0), spec)
+    spec_p = dataclasses.replace(spec, parts=parts)
+    parted, m_parted = parted_train_step(jax.tree.map(jnp.array, copy), batch, jax.random.key(0), spec_p)
     assert int(parted["step"]) == 1
+    one = train_step(jax.tree.map(jnp.array, copy), batch, jax.random.key(0), spec_p)[0]  # the shares in one program
+    for a, b in zip(jax.tree.leaves(one), jax.tree.leaves(parted), strict=True):
+      np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-7)  # the bits, but for the suite's quick compiling
     for a, b in zip(jax.tree.leaves(parted["params"]), jax.tree.leaves(whole["params"]), strict=True):
       np.testing.assert_allclose(a, b, rtol=2e-4, atol=2e-6)
     for k in m_whole:

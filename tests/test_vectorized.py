@@ -40,6 +40,21 @@ def test_points_trained_together_match_points_trained_alone(tmp_path):
   assert cli.main(["sample", str(tmp_path / "v1"), "--frames", "10", "-o", str(tmp_path / "s1.csv")]) == 0
 
 
+def test_points_trained_together_in_shares_match_points_trained_alone_in_shares(tmp_path):
+  """``train.batch_parts``: a vectorized program computes each point's shares one after another, a lone run in
+  threads; each share keeps its own cut of the batch, key, noise and dropout either way."""
+  shares = ["train.batch_parts=2", "model.dropout=0.3", "train.log_every=1", "sample.frames=1"]
+  cfgs = [tiny_config(*BASE, *shares, *p) for p in POINTS]
+  together = train_vectorized(cfgs, [tmp_path / "v0", tmp_path / "v1"])
+  for k, cfg in enumerate(cfgs):
+    alone = train_and_evaluate(cfg, tmp_path / f"a{k}")
+    whole = train_and_evaluate(tiny_config(*BASE, *shares[1:], *POINTS[k]), tmp_path / f"w{k}")
+    got, want, other = (r["train_losses"] for r in (together[k], alone, whole))
+    assert got[1] == pytest.approx(want[1], rel=1e-4)
+    assert abs(other[1] - want[1]) > 1e-3 * abs(want[1])  # one share's noise and dropout would not do
+    np.testing.assert_allclose([got[s] for s in sorted(got)], [want[s] for s in sorted(want)], rtol=1e-3)
+
+
 def test_train_with_a_list_of_seeds_resumes_exactly(tmp_path, capsys):
   (tmp_path / "base.toml").write_text("")  # the defaults
   args = ["train", str(tmp_path / "base.toml"), *TINY, "log.tensorboard=false", "train.checkpoint_every=2"]

@@ -35,7 +35,7 @@ class Recurrent(Family):
 
     sampler = WindowSampler(ds.train, cfg.data.seq_length, cfg.train.batch_size, cfg.train.seed)
     val = eval_windows(ds.val, cfg.data.seq_length, cfg.train.val_windows)
-    step = train_step if cfg.train.batch_parts == 1 else parted_train_step(cfg.train.batch_parts)
+    step = train_step if cfg.train.batch_parts == 1 else parted_train_step
     return step, sampler, val, lambda params, val, spec: eval_step(params, val, spec.graphdef)
 
   def window_loss(self, graphdef, params, windows: dict) -> float:

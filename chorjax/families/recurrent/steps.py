@@ -67,6 +67,8 @@ class StepSpec:
     input_noise: std of Gaussian noise added to the inputs (normalized units).
     dropout: the model's dropout rate (0 = no dropout key is drawn).
     feedback: own outputs fed back as inputs (None = teacher forcing only).
+    parts: the batch's equal shares (``train.batch_parts``), each with its own key; their gradients' mean
+      makes the update.
   """
 
   graphdef: Any
@@ -75,6 +77,7 @@ class StepSpec:
   input_noise: float
   dropout: float
   feedback: Feedback | None = None
+  parts: int = 1
 
 
 def create_train_state(cfg: Config, dim: int, num_motions: int, basis=None) -> tuple[dict, StepSpec]:
@@ -92,7 +95,8 @@ def create_train_state(cfg: Config, dim: int, num_motions: int, basis=None) -> t
     params["head"]["basis"] = jnp.asarray(basis, jnp.float32)
   tx, schedule = create_optimizer(cfg)
   state = {"params": params, "opt_state": tx.init(params), "step": jnp.zeros((), jnp.int32)}
-  return state, StepSpec(graphdef, tx, schedule, cfg.train.input_noise, cfg.model.dropout, Feedback.of(cfg))
+  t = cfg.train
+  return state, StepSpec(graphdef, tx, schedule, t.input_noise, cfg.model.dropout, Feedback.of(cfg), t.batch_parts)
 
 
 def _loss_fn(params, batch, key, spec: StepSpec, noise=None):
@@ -176,7 +180,17 @@ def _train_step(state, batch, key, spec: StepSpec, lr_scale=None, noise=None):
 
 
 def _gradients(params, batch, key, step, spec: StepSpec, noise=None):
-  """``((loss, aux), gradients)`` of ``batch`` at ``step`` (``key``: the step's)."""
+  """``((loss, aux), gradients)`` of ``batch`` at ``step`` (``key``: the step's); with ``spec.parts`` shares,
+  the mean of theirs, one share after another (the program vectorized training vmaps; a lone run computes
+  its shares side by side in threads instead, ``parted_train_step``)."""
+  if spec.parts > 1:
+    shares = [_share(batch, key, i, spec.parts) for i in range(spec.parts)]
+    return _mean_of_shares([_batch_gradients(params, part, k, step, spec, noise) for part, k in shares])
+  return _batch_gradients(params, batch, key, step, spec, noise)
+
+
+def _batch_gradients(params, batch, key, step, spec: StepSpec, noise=None):
+  """``((loss, aux), gradients)`` of ``batch`` as one share."""
   if spec.feedback is None:  # teacher forcing: the fused layers over whole windows
     return jax.value_and_grad(_loss_fn, has_aux=True)(params, batch, key, spec, noise)
   return jax.value_and_grad(_feedback_loss_fn, has_aux=True)(params, batch, key, step, spec)
@@ -204,39 +218,45 @@ train_step.__doc__ = """``train_step(state, batch, key, spec) -> (state, metrics
 ``spec`` (a :class:`chorjax.run.StepSpec`) is static."""
 
 
-@functools.partial(jax.jit, static_argnums=(4, 5, 6))
-def _share_gradients(params, batch, key, step, spec: StepSpec, share: int, parts: int):
-  """``_gradients`` of share ``share`` of ``parts`` equal shares of ``batch``'s windows, with that share's key
-  (the batch's cut and the keys' split inside the program: a step dispatches one program per share and the
-  update, no small operations between them)."""
+def _share(batch, key, share: int, parts: int):
+  """Share ``share`` of ``parts`` equal shares of ``batch``'s windows and its key (``key``: the step's)."""
   rows = len(batch["inputs"]) // parts
-  part = {k: v[share * rows : (share + 1) * rows] for k, v in batch.items()}
-  return _gradients(params, part, jax.random.split(step_key(key, step), parts)[share], step, spec)
+  return {k: v[share * rows : (share + 1) * rows] for k, v in batch.items()}, jax.random.split(key, parts)[share]
+
+
+def _mean_of_shares(shares):
+  """``((loss, aux), gradients)`` of a batch from its equal shares': their mean (a ``min_`` metric: their
+  least)."""
+  mean = lambda *xs: sum(xs) / len(xs)
+  least = lambda *xs: functools.reduce(jnp.minimum, xs)
+  losses, auxes, grads = [p[0][0] for p in shares], [p[0][1] for p in shares], [p[1] for p in shares]
+  aux = {k: (least if k.startswith("min_") else mean)(*(a[k] for a in auxes)) for k in auxes[0]}
+  return (mean(*losses), aux), jax.tree.map(mean, *grads)
+
+
+@functools.partial(jax.jit, static_argnums=(4, 5))
+def _share_gradients(params, batch, key, step, spec: StepSpec, share: int):
+  """``_batch_gradients`` of share ``share`` of ``spec.parts`` (the batch's cut and the keys' split inside the
+  program: a step dispatches one program per share and the update, no small operations between them)."""
+  part, share_key = _share(batch, step_key(key, step), share, spec.parts)
+  return _batch_gradients(params, part, share_key, step, spec)
 
 
 @functools.partial(jax.jit, static_argnums=2, donate_argnums=0)
-def _update_with_parts(state, parts, spec: StepSpec):
-  """The update with ``parts`` (``((loss, aux), gradients)`` of equal shares of one batch): their mean (a
-  ``min_`` metric: their least)."""
-  mean = lambda *xs: sum(xs) / len(xs)
-  least = lambda *xs: functools.reduce(jnp.minimum, xs)
-  losses, auxes, grads = [p[0][0] for p in parts], [p[0][1] for p in parts], [p[1] for p in parts]
-  aux = {k: (least if k.startswith("min_") else mean)(*(a[k] for a in auxes)) for k in auxes[0]}
-  return _update(state, mean(*losses), aux, jax.tree.map(mean, *grads), spec)
+def _update_with_parts(state, shares, spec: StepSpec):
+  """The update with ``shares`` (``((loss, aux), gradients)`` of a batch's equal shares): their mean."""
+  (loss, aux), grads = _mean_of_shares(shares)
+  return _update(state, loss, aux, grads, spec)
 
 
-def parted_train_step(parts: int):
-  """``train_step`` with each batch in ``parts`` equal shares of its windows (``train.batch_parts``), their
+def parted_train_step(state, batch, key, spec: StepSpec):
+  """``train_step`` with each batch in ``spec.parts`` equal shares of its windows (``train.batch_parts``), their
   gradients computed side by side in threads (one program each: on a CPU each share's time loops run on
   a core of their own, where one program runs a loop's small kernels one after another), then one update
   with their mean. The same loss in exact arithmetic; each share draws its own noise and dropout."""
-
-  def step(state, batch, key, spec: StepSpec):
-    params, at = state["params"], state["step"]
-    share = lambda i: jax.block_until_ready(_share_gradients(params, batch, key, at, spec, i, parts))
-    return _update_with_parts(state, list(side_by_side(share, range(parts), at_once=parts)), spec)
-
-  return step
+  params, at = state["params"], state["step"]
+  share = lambda i: jax.block_until_ready(_share_gradients(params, batch, key, at, spec, i))
+  return _update_with_parts(state, list(side_by_side(share, range(spec.parts), at_once=spec.parts)), spec)
 
 
 def sharded_train_step(parallel):
