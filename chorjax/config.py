@@ -345,7 +345,7 @@ class TrainConfig:
       "quick start's 11-12%. The same loss in exact arithmetic, not in its last bits: each share draws its own "
       "noise and dropout. Must divide train.batch_size; not with parallel.data_parallel. Seeds trained as one "
       "vectorized program compute each point's shares one after another inside it (each share's own cut, "
-      "noise and dropout, as alone)."
+      "noise and dropout, as in threads)."
     ),
   )
   num_steps: int = _field(1000, "total optimizer steps", minimum=0, resumable=True)

@@ -33,9 +33,9 @@ once the governor also let go of the component off pace: the quickstart since) a
 session 28: runs/dancers_pool/* (copies of runs/dancers_hold calibrated again once calibration pooled speed and
 root travel over the reference's frames as eval does) and runs/dancers_obj/* (calibrated again once the
 objective counted the farthest rate twice: the quickstart since) and runs/dancers_cpu/* (cpu_martial.toml and
-cpu_others.toml: martial, cmu94 and salsa trained here with the quickstart as shipped, training seeds 3-5) and
-runs/dancers_parts/* (parts.toml and parts_more.toml: the quickstart trained with train.batch_parts = 2 on CPU,
-seeds 0-2 and 3-5).
+cpu_others.toml: martial, cmu94 and salsa trained here with the quickstart as shipped, training seeds 3-5;
+cpu_martial_more.toml: martial's 6-8) and runs/dancers_parts/* (parts.toml, parts_more.toml and
+parts_martial.toml: the quickstart trained with train.batch_parts = 2 on CPU, seeds 0-2, 3-5 and martial's 6-8).
 Each evaluated run's small files (config, calibration, metrics log, eval metrics) are copied to results/, and
 the table falls back to them where a variant's runs are not on this machine.
 """
@@ -79,8 +79,10 @@ VARIANTS = {
   ),
   "the H100 runs as shipped, calibration pooling speed and root travel as eval does": Path("runs/dancers_pool"),
   "the same, the farthest rate counted twice in the objective": Path("runs/dancers_obj"),
-  "the quickstart as shipped, trained on CPU, training seeds 3-5 (cpu_*.toml)": Path("runs/dancers_cpu"),
-  "the quickstart trained with train.batch_parts = 2 on CPU, seeds 0-5 (parts.toml, parts_more.toml)": Path("runs/dancers_parts"),
+  "the quickstart as shipped, trained on CPU, training seeds 3-5, martial 3-8 (cpu_*.toml)": Path("runs/dancers_cpu"),
+  "the quickstart trained with train.batch_parts = 2 on CPU, seeds 0-5, martial 0-8 (parts*.toml)": Path(
+    "runs/dancers_parts"
+  ),
 }
 SLUG = dict(
   zip(
@@ -152,9 +154,11 @@ def save_results() -> None:
 
 
 def evaluations(root: Path, dataset: str) -> list[tuple[Path, dict]]:
-  if not root.is_dir():
-    root = RESULTS / root.name
-  runs = sorted(d for d in root.glob(f"*-{dataset}-seed=*") if (d / "eval" / "metrics.json").exists())
+  """A variant's evaluated runs of ``dataset``: those on this machine, and the kept small files of the others."""
+  found = {}
+  for where in (RESULTS / root.name, root):  # a run on this machine before its kept copy
+    found.update({d.name: d for d in where.glob(f"*-{dataset}-seed=*") if (d / "eval" / "metrics.json").exists()})
+  runs = [found[name] for name in sorted(found)]
   if root == VARIANTS["train.keep best + train.calibrate (2 controls)"]:
     runs = [d for d in runs if _two_controls(d)]
   return [(d, json.loads((d / "eval" / "metrics.json").read_text())) for d in runs]
@@ -299,7 +303,8 @@ def table() -> list[str]:
 
 def strips() -> list[str]:
   """Per dataset: the end of the first evaluated dancer of seed 0 (of each variant in ``STRIPS`` run here)
-  beside a held-out take, as training read it."""
+  beside a held-out take, as training read it; drawn where the run's sample is on this machine, else the
+  pictures drawn before."""
   out = []
   for dataset in DATASETS:
     runs = {
@@ -307,17 +312,15 @@ def strips() -> list[str]:
       for v, r in VARIANTS.items()
       if v in STRIPS
     }
-    runs = {v: r for v, r in runs.items() if (r / "eval" / "sample.npz").exists()}
-    if not runs:
-      continue
-    out += [f"### {dataset}", ""]
-    for variant, run in runs.items():
-      png = HERE / f"strip_{dataset}_{SLUG[variant]}.png"
-      end_strip(run / "eval" / "sample.npz", png, f"{dataset} {variant}")
-      out += [f"![{dataset} {variant}]({png.name})", ""]
-    png = HERE / f"strip_{dataset}_real.png"
-    real_strip(next(iter(runs.values())), png, dataset)
-    out += [f"![{dataset} real]({png.name})", ""]
+    here = {v: r for v, r in runs.items() if (r / "eval" / "sample.npz").exists()}
+    pictures = [(f"{dataset} {v}", HERE / f"strip_{dataset}_{SLUG[v]}.png") for v in runs]
+    pictures.append((f"{dataset} real", HERE / f"strip_{dataset}_real.png"))
+    for variant, run in here.items():
+      end_strip(run / "eval" / "sample.npz", HERE / f"strip_{dataset}_{SLUG[variant]}.png", f"{dataset} {variant}")
+    if here:
+      real_strip(next(iter(here.values())), pictures[-1][1], dataset)
+    if all(png.exists() for _, png in pictures):
+      out += [f"### {dataset}", ""] + [line for alt, png in pictures for line in (f"![{alt}]({png.name})", "")]
   return out
 
 
