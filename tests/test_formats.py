@@ -349,25 +349,19 @@ def test_a_bvh_of_joint_names_with_spaces_braces_or_markup_reads_back(tmp_path):
 def test_readers_work_under_an_address_space_limit_of_4_gb(shared_data):
   """Clusters cap a job's address space: the C3D reader's child once raised its own limit above the inherited
   one and failed on every file; under 4 GB a C3D, a BVH and an AMC read as without the limit."""
-  import resource
   import subprocess
   import sys
 
-  limit = 4 * 10**9
-
-  def capped():
-    resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
-
+  # the limit set in the child before chorjax loads (a preexec_fn would fork this multithreaded process)
+  capped = (
+    "import resource, runpy, sys; resource.setrlimit(resource.RLIMIT_AS, (4 * 10**9, 4 * 10**9)); "
+    "sys.argv = ['chorjax', *sys.argv[1:]]; runpy.run_module('chorjax.cli', run_name='__main__')"
+  )
   for path in (
     shared_data / "c3d" / "ezc3d" / "Qualisys.c3d",
     shared_data / "bvh" / "cmu131" / "131_01.bvh",
     shared_data / "asfamc" / "cmu131" / "131_01.amc",
   ):
-    done = subprocess.run(
-      [sys.executable, "-m", "chorjax.cli", "data", "info", str(path)],
-      capture_output=True,
-      text=True,
-      preexec_fn=capped,
-    )
+    done = subprocess.run([sys.executable, "-c", capped, "data", "info", str(path)], capture_output=True, text=True)
     assert done.returncode == 0, (path.name, done.stderr[-500:])
     assert path.stem in done.stdout
