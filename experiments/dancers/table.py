@@ -34,8 +34,8 @@ session 28: runs/dancers_pool/* (copies of runs/dancers_hold calibrated again on
 root travel over the reference's frames as eval does) and runs/dancers_obj/* (calibrated again once the
 objective counted the farthest rate twice: the quickstart since) and runs/dancers_cpu/* (cpu_martial.toml and
 cpu_others.toml: martial, cmu94 and salsa trained here with the quickstart as shipped, training seeds 3-5;
-cpu_martial_more.toml: martial's 6-8) and runs/dancers_parts/* (parts.toml, parts_more.toml and
-parts_martial.toml: the quickstart trained with train.batch_parts = 2 on CPU, seeds 0-2, 3-5 and martial's 6-8).
+cpu_martial_more.toml: martial's 6-11) and runs/dancers_parts/* (parts.toml, parts_more.toml and
+parts_martial.toml: the quickstart trained with train.batch_parts = 2 on CPU, seeds 0-2, 3-5 and martial's 6-11).
 Each evaluated run's small files (config, calibration, metrics log, eval metrics) are copied to results/, and
 the table falls back to them where a variant's runs are not on this machine.
 """
@@ -79,8 +79,8 @@ VARIANTS = {
   ),
   "the H100 runs as shipped, calibration pooling speed and root travel as eval does": Path("runs/dancers_pool"),
   "the same, the farthest rate counted twice in the objective": Path("runs/dancers_obj"),
-  "the quickstart as shipped, trained on CPU, training seeds 3-5, martial 3-8 (cpu_*.toml)": Path("runs/dancers_cpu"),
-  "the quickstart trained with train.batch_parts = 2 on CPU, seeds 0-5, martial 0-8 (parts*.toml)": Path(
+  "the quickstart as shipped, trained on CPU, training seeds 3-5, martial 3-11 (cpu_*.toml)": Path("runs/dancers_cpu"),
+  "the quickstart trained with train.batch_parts = 2 on CPU, seeds 0-5, martial 0-11 (parts*.toml)": Path(
     "runs/dancers_parts"
   ),
 }
