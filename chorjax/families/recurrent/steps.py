@@ -182,7 +182,7 @@ def _train_step(state, batch, key, spec: StepSpec, lr_scale=None, noise=None):
 def _gradients(params, batch, key, step, spec: StepSpec, noise=None):
   """``((loss, aux), gradients)`` of ``batch`` at ``step`` (``key``: the step's); with ``spec.parts`` shares,
   the mean of theirs, one share after another (the program vectorized training vmaps; a lone run computes
-  its shares side by side in threads instead, ``parted_train_step``, to the same bits)."""
+  its shares side by side in threads instead, ``parted_train_step``: unvmapped, the same bits)."""
   if spec.parts > 1:
     shares = [_share(batch, key, i, spec.parts) for i in range(spec.parts)]
     return _mean_of_shares([_batch_gradients(params, part, k, step, spec, noise) for part, k in shares])
