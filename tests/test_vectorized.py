@@ -43,12 +43,12 @@ def test_points_trained_together_match_points_trained_alone(tmp_path):
 def test_points_trained_together_in_shares_match_points_trained_alone_in_shares(tmp_path):
   """``train.batch_parts``: a vectorized program computes each point's shares one after another, a lone run in
   threads; each share keeps its own cut of the batch, key, noise and dropout either way."""
-  shares = ["train.batch_parts=2", "model.dropout=0.3", "train.log_every=1", "sample.frames=1"]
-  cfgs = [tiny_config(*BASE, *shares, *p) for p in POINTS]
+  same = [*BASE, "model.dropout=0.3", "train.log_every=1", "sample.frames=1"]
+  cfgs = [tiny_config(*same, "train.batch_parts=2", *p) for p in POINTS]
   together = train_vectorized(cfgs, [tmp_path / "v0", tmp_path / "v1"])
   for k, cfg in enumerate(cfgs):
     alone = train_and_evaluate(cfg, tmp_path / f"a{k}")
-    whole = train_and_evaluate(tiny_config(*BASE, *shares[1:], *POINTS[k]), tmp_path / f"w{k}")
+    whole = train_and_evaluate(tiny_config(*same, *POINTS[k]), tmp_path / f"w{k}")
     got, want, other = (r["train_losses"] for r in (together[k], alone, whole))
     assert got[1] == pytest.approx(want[1], rel=1e-4)
     assert abs(other[1] - want[1]) > 1e-3 * abs(want[1])  # one share's noise and dropout would not do

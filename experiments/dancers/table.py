@@ -37,7 +37,7 @@ cpu_others.toml: martial, cmu94 and salsa trained here with the quickstart as sh
 cpu_martial_more.toml: martial's 6-11) and runs/dancers_parts/* (parts.toml, parts_more.toml and
 parts_martial.toml: the quickstart trained with train.batch_parts = 2 on CPU, seeds 0-2, 3-5 and martial's 6-11).
 Each evaluated run's small files (config, calibration, metrics log, eval metrics) are copied to results/, and
-the table falls back to them where a variant's runs are not on this machine.
+the table reads them beside the runs on this machine (a run here before its kept copy).
 """
 
 import json
@@ -312,15 +312,16 @@ def strips() -> list[str]:
       for v, r in VARIANTS.items()
       if v in STRIPS
     }
+    pictures = {v: HERE / f"strip_{dataset}_{SLUG[v]}.png" for v in runs}
+    real = HERE / f"strip_{dataset}_real.png"
     here = {v: r for v, r in runs.items() if (r / "eval" / "sample.npz").exists()}
-    pictures = [(f"{dataset} {v}", HERE / f"strip_{dataset}_{SLUG[v]}.png") for v in runs]
-    pictures.append((f"{dataset} real", HERE / f"strip_{dataset}_real.png"))
     for variant, run in here.items():
-      end_strip(run / "eval" / "sample.npz", HERE / f"strip_{dataset}_{SLUG[variant]}.png", f"{dataset} {variant}")
+      end_strip(run / "eval" / "sample.npz", pictures[variant], f"{dataset} {variant}")
     if here:
-      real_strip(next(iter(here.values())), pictures[-1][1], dataset)
-    if all(png.exists() for _, png in pictures):
-      out += [f"### {dataset}", ""] + [line for alt, png in pictures for line in (f"![{alt}]({png.name})", "")]
+      real_strip(next(iter(here.values())), real, dataset)
+    shown = [*((f"{dataset} {v}", png) for v, png in pictures.items()), (f"{dataset} real", real)]
+    if all(png.exists() for _, png in shown):
+      out += [f"### {dataset}", ""] + [line for alt, png in shown for line in (f"![{alt}]({png.name})", "")]
   return out
 
 
