@@ -35,7 +35,10 @@ from chorjax.config import (  # noqa: F401
   toml_value,
 )
 from chorjax.controls import FLAGS as CONTROL_SWITCHES  # noqa: F401
-from chorjax.controls import Controls  # noqa: F401
+from chorjax.controls import (
+  PLAIN,  # noqa: F401
+  Controls,  # noqa: F401
+)
 from chorjax.convert import convert  # noqa: F401
 from chorjax.data import motion as _motion
 from chorjax.data.features import Features  # noqa: F401

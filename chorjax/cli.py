@@ -200,7 +200,13 @@ def _controls(args) -> dict:
     if value is not None:
       api.check_sample_control(name, value, f"--{name.replace('_', '-')}")
   switches = {k: getattr(args, k) for k in api.CONTROL_SWITCHES}
-  return {**given, **switches, "greedy": True if args.greedy else None}
+  chosen = {**given, **switches, "greedy": True if args.greedy else None}
+  if getattr(args, "plain", False):
+    both = [k for k in api.PLAIN if chosen[k] is not None]
+    if both:
+      raise UserError(f"--plain is the model's own draw: not with --{both[0].replace('_', '-')}")
+    chosen.update(api.PLAIN)
+  return chosen
 
 
 def _add_motion_args(p) -> None:
@@ -272,6 +278,12 @@ def _add_sampling_args(p, seed: bool = True) -> None:
     kind = int if name == "noise_order" else float
     p.add_argument(f"--{name.replace('_', '-')}", type=kind, metavar=metavar, help=_control_help(name))
   p.add_argument("--greedy", action="store_true", help=_control_help("greedy"))
+  p.add_argument(
+    "--plain",
+    action="store_true",
+    help="the model's own draw: temperatures 1 and every draw control off (no smoothing, persistence, crossfade,"
+    " pace, scale cap or clamps); decoding (rigid bones, feet) as the run's",
+  )
   for name in api.CONTROL_SWITCHES:
     if name != "greedy":
       flag = name.replace("_", "-")

@@ -24,6 +24,21 @@ from chorjax.errors import UserError
 
 LABEL_PACE_WIDTH = 0.05  # two label combinations that differ in one value are 2 apart: each its own pace
 FLAGS = ("greedy", "rigid_bones", "foot_lock", "ground", "clamp", "clamp_steps")  # the on/off controls
+# The model's own draw (``--plain``): full temperature, white noise, nothing held, smoothed, governed or clipped;
+# decoding (rigid bones, grounded and locked feet) stays the run's.
+PLAIN = {
+  "pi_temperature": 1.0,
+  "sigma_temperature": 1.0,
+  "greedy": False,
+  "noise_smoothing": 0.0,
+  "noise_order": 1,
+  "persistence": 0.0,
+  "crossfade": 0.0,
+  "pace": 0.0,
+  "scale_cap": 0.0,
+  "clamp": False,
+  "clamp_steps": False,
+}
 
 
 @dataclasses.dataclass(frozen=True)
