@@ -47,7 +47,7 @@ def chorjax_programs():
 
   def no_draw(p, key):
     model = nnx.merge(graphdef, p)
-    carry, x0 = _primed(model, motion, None)
+    carry, x0, _ = _primed(model, motion, None)
 
     def body(c, _):
       carry, out = model.step(*c)

@@ -174,6 +174,17 @@ class ModelConfig:
     ),
     choices=("features", "pca"),
   )
+  mdn_noise: str = _field(
+    "white",
+    "the MDN's noise over frames: 'white' (independent) or 'correlated' (with the previous frame's, learned)",
+    more=(
+      "With 'correlated' each component also predicts a coefficient per coordinate that carries the previous "
+      "frame's residual (the frame minus that component's mean) into this frame's mean; its scale is what "
+      "is left. Still an MDN sampled frame by frame, with an exact likelihood: the draw is smooth because "
+      "the model learned how the dancer's motion continues, not because a filter smooths it afterwards."
+    ),
+    choices=("white", "correlated"),
+  )
   min_scale: float = _field(1e-3, "floor of MDN scales (normalized units)", minimum=0.0)
   dropout: float = _field(0.0, "dropout rate between layers (same mask at every time step)", minimum=0.0, below=1.0)
   forget_bias: float = _field(1.0, "initial forget-gate bias of (LN-)LSTM cells (notebook: 5.0)")
@@ -197,6 +208,11 @@ class ModelConfig:
     ),
     choices=("fused", "cudnn"),
   )
+
+  @property
+  def correlated(self) -> bool:
+    """Whether the MDN's noise is correlated over frames (``model.mdn_noise``; an MSE head has no noise)."""
+    return self.head == "mdn" and self.mdn_noise == "correlated"
 
   @property
   def pca_basis(self) -> bool:

@@ -46,20 +46,38 @@ class MSEHead(nnx.Module):
     del gumbel_BxK, noise_BxD  # nothing to draw
     return out_BxD, state
 
+  def draw_start(self, x_BxTxD, out_BxTxP=None):
+    """The draw's state before the first frame (:meth:`MDNHead.draw_start`'s, which the MSE head keeps)."""
+    del out_BxTxP
+    b = x_BxTxD.shape[0]
+    return jnp.full((b,), -1, jnp.int32), jnp.zeros((b, self.dim), x_BxTxD.dtype)
+
   def mean(self, out_xD):
     return out_xD
 
 
 def mdn_params(out_xP, num_mixtures: int, dim: int, isotropic: bool, min_scale: float):
-  """Raw head outputs -> ``(logpi_xK, mu_xKxD, scale_xKxS)`` with S = 1 (isotropic) or D."""
+  """Raw head outputs -> ``(logpi_xK, mu_xKxD, scale_xKxS)`` with S = 1 (isotropic) or D (a correlated
+  head's coefficients, after these, are :func:`mdn_carry`'s)."""
   k, s = num_mixtures, 1 if isotropic else dim
-  assert out_xP.shape[-1] == k + k * dim + k * s, (out_xP.shape, k, dim, s)
+  assert out_xP.shape[-1] in (k + k * dim + k * s, k + k * dim + k * s + MEMORY * s), (out_xP.shape, k, dim, s)
   lead = out_xP.shape[:-1]
-  logits, mu, scale = jnp.split(out_xP, [k, k + k * dim], axis=-1)
+  logits, mu, scale = jnp.split(out_xP[..., : k + k * dim + k * s], [k, k + k * dim], axis=-1)
   logpi = jax.nn.log_softmax(logits, axis=-1)
   mu = mu.reshape(lead + (k, dim))
   scale = jnp.maximum(jax.nn.softplus(scale.reshape(lead + (k, s))), min_scale)
   return logpi, mu, scale
+
+
+MEMORY = 2  # the residuals a correlated head remembers: the previous frame's and the one before
+
+
+def mdn_carry(out_xP, scales: int):
+  """A correlated head's coefficients ``[..., 2, 1, S]`` in (-1, 1), one pair per coordinate shared by every
+  component: how much of the previous frame's residual (the frame minus a component's mean) and of that
+  residual's change the components carry into this frame's means (:meth:`MDNHead.carried`). Shared, a
+  component the draw switches to continues from where the last frame was, as the one it leaves would."""
+  return jnp.tanh(out_xP[..., -MEMORY * scales :].reshape(out_xP.shape[:-1] + (MEMORY, 1, scales)))
 
 
 def mdn_log_prob(logpi_xK, mu_xKxD, scale_xKxS, x_xD):
@@ -143,9 +161,11 @@ class MDNHead(nnx.Module):
     isotropic: bool = False,
     min_scale: float = 1e-3,
     basis: bool = False,
+    correlated: bool = False,
     rngs: nnx.Rngs,
   ):
     self.dim, self.num_mixtures, self.isotropic, self.min_scale = dim, num_mixtures, isotropic, min_scale
+    self.correlated = correlated
     self.out = nnx.Linear(hidden, self.num_outputs, rngs=rngs)
     self.basis = nnx.Param(jnp.eye(dim)) if basis else None  # a Param so checkpoints carry it; never trained
 
@@ -163,9 +183,13 @@ class MDNHead(nnx.Module):
     return u_xD if b is None else u_xD @ b.T
 
   @property
+  def num_scales(self) -> int:
+    return 1 if self.isotropic else self.dim
+
+  @property
   def num_outputs(self) -> int:
     k = self.num_mixtures
-    return k + k * self.dim + k * (1 if self.isotropic else self.dim)
+    return k + k * self.dim + k * self.num_scales + (MEMORY * self.num_scales if self.correlated else 0)
 
   def __call__(self, h):
     return _linear(self.out, h)
@@ -173,9 +197,38 @@ class MDNHead(nnx.Module):
   def params(self, out):
     return mdn_params(out, self.num_mixtures, self.dim, self.isotropic, self.min_scale)
 
-  def loss(self, out_xP, target_xD):
+  def carried(self, out_xP, residuals):
+    """The mixture with the residuals of the two frames before carried into its means (``correlated``):
+    ``residuals = (previous, the one before)``, each ``[..., K, D]``; with coefficients ``a, b``
+    (:func:`mdn_carry`) the means are ``mu + a * previous + b * (previous - the one before)``: the model's
+    mean plus where its last residual was and where it was heading. Returns ``(logpi, means, scale)``."""
     logpi, mu, scale = self.params(out_xP)
+    a, b = jnp.moveaxis(mdn_carry(out_xP, self.num_scales), -3, 0)
+    previous, before = residuals
+    return logpi, mu + a * previous + b * (previous - before), scale
+
+  def residual(self, out_xP, u_xD):
+    """``u`` (the mixture's coordinates) minus each component's mean: ``[..., K, D]``."""
+    return u_xD[..., None, :] - self.params(out_xP)[1]
+
+  def history(self, out_xTxP, u_xTxD):
+    """What :meth:`carried` takes at every frame of a window whose outputs ``out`` predicted ``u``: the
+    residuals of the frame before and the one before that, ``[..., T, K, D]`` each (zeros before the
+    window's first frame)."""
+    r = self.residual(out_xTxP, u_xTxD)
+    pad = lambda n: jnp.concatenate([jnp.zeros_like(r[..., :n, :, :]), r[..., : r.shape[-3] - n, :, :]], axis=-3)
+    return pad(1), pad(2)
+
+  def loss(self, out_xP, target_xD):
+    """The NLL of every frame (``[..., T, P]`` outputs, ``[..., T, D]`` targets). Correlated: a frame's
+    components carry the previous target's residual from their previous means (none at the window's first
+    frame, the frame before's at the second): the likelihood of the frame given everything before it, as
+    the draw continues."""
     target = self.to_basis(target_xD)
+    if self.correlated:
+      logpi, mu, scale = self.carried(out_xP, self.history(out_xP, target))
+    else:
+      logpi, mu, scale = self.params(out_xP)
     nll = -jnp.mean(mdn_log_prob(logpi, mu, scale, target))
     # The MSE of the mixture mean: comparable with the MSE head (a rotation keeps it).
     mean = jnp.sum(jnp.exp(logpi)[..., None] * mu, axis=-2)
@@ -198,8 +251,9 @@ class MDNHead(nnx.Module):
     crossfade=0.0,
     scale_cap=None,
   ):
-    """A frame drawn with the given random numbers (:func:`frame_numbers`); ``state = (previous component [B]
-    (-1: none), offset [B, D])``.
+    """A frame drawn with the given random numbers (:func:`frame_numbers`); ``state`` (:meth:`draw_start`):
+    ``(previous component [B] (-1: none), offset [B, D])`` and, ``correlated``, the residuals ``[B, K, D]`` of
+    the previous frame and the one before, which :meth:`carried` carries into this frame's means.
 
     ``persistence`` is added to the previous component's log-weight. ``crossfade``: when the component
     changes, the jump between the two components' means is carried into the frame and decays by this
@@ -207,8 +261,8 @@ class MDNHead(nnx.Module):
     the components' scales are held at most at it. ``noise_BxD``, the offset and ``scale_cap`` are in the
     mixture's coordinates (``basis``); the frame is features. Returns ``(frame, state)``.
     """
-    previous_B, offset_BxD = state
-    logpi, mu, scale = self.params(out_BxP)
+    previous_B, offset_BxD, *memory = state
+    logpi, mu, scale = self.carried(out_BxP, memory) if self.correlated else self.params(out_BxP)
     if scale_cap is not None:
       scale = jnp.minimum(scale, scale_cap)
     bias = persistence * jax.nn.one_hot(previous_B, self.num_mixtures)
@@ -216,7 +270,23 @@ class MDNHead(nnx.Module):
     mean_of = lambda c: jnp.take_along_axis(mu, jnp.maximum(c, 0)[:, None, None], axis=1)[:, 0]
     switched = ((comp != previous_B) & (previous_B >= 0))[:, None]
     offset_BxD = crossfade * (offset_BxD + jnp.where(switched, mean_of(previous_B) - mean_of(comp), 0.0))
-    return self.from_basis(x + offset_BxD), (comp, offset_BxD)
+    u = x + offset_BxD
+    memory = [self.residual(out_BxP, u), memory[0]] if self.correlated else []
+    return self.from_basis(u), (comp, offset_BxD, *memory)
+
+  def draw_start(self, x_BxTxD, out_BxTxP=None):
+    """The draw's state before the frame after the frames ``x`` (:meth:`draw`): no component, no offset
+    and, ``correlated``, the residuals of ``x``'s last two frames from ``out`` (the outputs that predicted
+    ``x[:, 1:]``: a prime's), zeros where there are none."""
+    b = x_BxTxD.shape[0]
+    state = (jnp.full((b,), -1, jnp.int32), jnp.zeros((b, self.dim), x_BxTxD.dtype))
+    if not self.correlated:
+      return state
+    if out_BxTxP is None:
+      return (*state, *[jnp.zeros((b, self.num_mixtures, self.dim), x_BxTxD.dtype)] * MEMORY)
+    history = self.history(out_BxTxP, self.to_basis(x_BxTxD[:, 1:]))  # residuals before each frame
+    r = self.residual(out_BxTxP[:, -1], self.to_basis(x_BxTxD[:, -1]))  # the last frame's
+    return (*state, r, history[0][:, -1])
 
   def mean(self, out_xP):
     """The mixture's mean frame."""

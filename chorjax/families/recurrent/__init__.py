@@ -17,6 +17,15 @@ class Recurrent(Family):
   data_parallel = True
   calibrated = True
 
+  def check(self, cfg) -> None:
+    from chorjax.errors import UserError
+
+    if cfg.model.correlated and cfg.train.feedback != "none":
+      raise UserError(
+        "model.mdn_noise = 'correlated' trains teacher forced (its draw carries the residual the loss does): "
+        "set train.feedback = 'none'"
+      )
+
   def build_model(self, cfg, features, num_motions: int):
     from chorjax.families.recurrent.recurrent_model import create_model
 

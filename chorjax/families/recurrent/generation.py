@@ -58,6 +58,7 @@ def generate(graphdef, params, motion, key, *, num_frames: int, draw: Draw | Non
   """
   draw = (draw or Draw()).for_motion(motion)
   unroll = UNROLL if num_frames * np.shape(motion)[0] >= UNROLL_FROM else 1
+  plain = draw.plain and not nnx.merge(graphdef, params).remembers  # a correlated draw carries its residual
   return _generate(
     graphdef,
     params,
@@ -66,7 +67,7 @@ def generate(graphdef, params, motion, key, *, num_frames: int, draw: Draw | Non
     draw,
     num_frames=num_frames,
     prime_BxPxD=prime_BxPxD,
-    plain=draw.plain,
+    plain=plain,
     unroll=unroll,
   )
 
@@ -88,7 +89,7 @@ def _generate(
   crossfade are still numbers); ``unroll``: frames per iteration of the plain loop (frames within 1.2e-7 either way).
   ``draw``'s static fields are part of what the program is compiled for."""
   model = nnx.merge(graphdef, params)
-  carry, x0 = _primed(model, motion, prime_BxPxD)
+  carry, x0, drawn = _primed(model, motion, prime_BxPxD)
 
   if plain:
     bounds = draw.bounds
@@ -105,31 +106,33 @@ def _generate(
 
   if draw.pace and draw.pacing is None:
     raise ValueError("pace needs draw.pacing (the training pace and its measure): Controls.draw")
-  state = _smooth_start(carry, x0, draw)
+  state = _smooth_start(carry, x0, draw, drawn)
   return _smooth_scan(model, state, key, num_frames, draw)[1]
 
 
 def _primed(model, motion, prime_BxPxD):
-  """``(carry, first input)``: the motion's initial state, teacher forced over the prime if there is one
-  (generation continues after its last frame); without one, the zero frame (the mean pose)."""
+  """``(carry, first input, the head's draw state)``: the motion's initial state, teacher forced over the
+  prime if there is one (generation continues after its last frame, its draw state from the prime's
+  residuals); without one, the zero frame (the mean pose) and a fresh draw state."""
   carry = model.initial_carry(motion)
   if prime_BxPxD is None:
-    return carry, jnp.zeros((jnp.shape(motion)[0], model.dim), jnp.float32)
-  _, carry = model.teacher_force(prime_BxPxD[:, :-1], carry)
-  return carry, prime_BxPxD[:, -1]
+    x0 = jnp.zeros((jnp.shape(motion)[0], model.dim), jnp.float32)
+    return carry, x0, model.draw_start(x0[:, None])
+  out_BxPxP, carry = model.teacher_force(prime_BxPxD[:, :-1], carry)
+  return carry, prime_BxPxD[:, -1], model.draw_start(prime_BxPxD, out_BxPxP)
 
 
-def _smooth_start(carry, x0_BxD, draw: Draw):
+def _smooth_start(carry, x0_BxD, draw: Draw, drawn):
   """The state of :func:`_smooth_scan` before the first frame: ``(carry, previous frame, noise filters
-  [MAX_NOISE_ORDER, B, D], (component, offset), (the governor's recent frames, where the next goes, own pace))``."""
+  [MAX_NOISE_ORDER, B, D], the head's draw state ``drawn`` (``model.draw_start``: component, offset,
+  residuals), (the governor's recent frames, where the next goes, own pace))``."""
   b = x0_BxD.shape[0]
   pacing = draw.pacing if draw.pace else None
   lag, ref = (draw.pace_lag, pacing.ref) if pacing is not None else (1, 1.0)
-  none = (jnp.full((b,), -1, jnp.int32), jnp.zeros_like(x0_BxD))  # no component yet, no offset
   at = jnp.zeros((), jnp.int32)  # an array from the start: a resumed state keeps its type (no retrace)
   governor = (jnp.broadcast_to(x0_BxD, (lag, *x0_BxD.shape)), at, jnp.full((b,), ref, jnp.float32))
   filters = jnp.zeros((MAX_NOISE_ORDER, *x0_BxD.shape), x0_BxD.dtype)
-  return (carry, x0_BxD, filters, none, governor)
+  return (carry, x0_BxD, filters, drawn, governor)
 
 
 def _smooth_scan(model, state, key, num_frames: int, draw: Draw):
@@ -180,7 +183,8 @@ def frame_program(graphdef, params, draw: Draw, batch: int):
   inputs (the state zeros) and the names of the inputs and outputs (``state.carry.0.1``, ``state.filters`` ...)."""
   model = nnx.merge(graphdef, params)
   b, d = batch, model.dim
-  fresh = lambda weights, draw: _smooth_start(model.initial_carry(weights), jnp.zeros((b, d), jnp.float32), draw)
+  x0 = jnp.zeros((b, d), jnp.float32)
+  fresh = lambda w, draw: _smooth_start(model.initial_carry(w), x0, draw, model.draw_start(x0[:, None]))
   weights_like = jax.ShapeDtypeStruct((b, model.num_motions), jnp.float32)
   template = jax.eval_shape(lambda w: fresh(w, draw.for_motion(w)), weights_like)
   top = ("carry", "previous", "filters", "drawn", "governor")
@@ -280,8 +284,8 @@ def start_stream(graphdef, params, motion, draw: Draw, prime_BxPxD=None):
   ``motion`` and, with a prime, after its last frame (teacher forced over the phrase as :func:`generate`
   primes); ``draw``: the draw the stream will continue with (its governor's lag and training pace)."""
   model = nnx.merge(graphdef, params)
-  carry, x0 = _primed(model, motion, prime_BxPxD)
-  return _smooth_start(carry, x0, draw)
+  carry, x0, drawn = _primed(model, motion, prime_BxPxD)
+  return _smooth_start(carry, x0, draw, drawn)
 
 
 @functools.partial(jax.jit, static_argnames=("graphdef", "num_frames"))

@@ -43,6 +43,7 @@ class ChorModel(nnx.Module):
         isotropic=cfg.mdn_scale == "isotropic",
         min_scale=cfg.min_scale,
         basis=cfg.pca_basis,
+        correlated=cfg.correlated,
         rngs=rngs,
       )
     else:
@@ -76,6 +77,16 @@ class ChorModel(nnx.Module):
   def draw(self, out_BxP, gumbel_BxK, noise_BxD, state, **controls):
     """A frame drawn with given random numbers and the sampler's state: ``(frame, state)`` (``heads``)."""
     return self.head.draw(out_BxP, gumbel_BxK, noise_BxD, state, **controls)
+
+  def draw_start(self, x_BxTxD, out_BxTxP=None):
+    """The head's draw state before the frame after the frames ``x`` (``out``: the outputs that predicted
+    ``x[:, 1:]``, a prime's; None: nothing before ``x``)."""
+    return self.head.draw_start(x_BxTxD, out_BxTxP)
+
+  @property
+  def remembers(self) -> bool:
+    """Whether a frame's draw depends on the previous frame's residual (``model.mdn_noise = "correlated"``)."""
+    return bool(getattr(self.head, "correlated", False))
 
   @property
   def num_mixtures(self) -> int:

@@ -1,0 +1,129 @@
+"""``model.mdn_noise = "correlated"``: the MDN carries the residuals of the frames before into each frame's
+means. The loss conditions every frame on what the draw carries, a prime hands its residuals to the draw,
+and the model's own draw (``--plain``) of such a run is smoother than a white-noise run's."""
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from flax import nnx
+from helpers import TINY, tiny_config
+
+from chorjax import cli
+from chorjax.controls import PLAIN
+from chorjax.data.dataset import load_dataset
+from chorjax.families.recurrent.recurrent_model import create_model
+from chorjax.metrics import roughness
+from chorjax.models.heads import mdn_log_prob
+from chorjax.training import train_and_evaluate
+
+
+def _model_and_window(frames: int = 20):
+  """A tiny correlated model (random weights, PCA-free) and a real window of cmu94 (normalized features)."""
+  cfg = tiny_config("model.mdn_noise=correlated", "data.representation=canonical")
+  ds = load_dataset(cfg.data)
+  model = create_model(cfg.model, ds.features.dim, ds.num_motions, seed=0)
+  _, z = ds.train[0]
+  return model, jnp.asarray(z[None, : frames + 1], jnp.float32)
+
+
+def test_the_loss_conditions_each_frame_on_the_residuals_the_draw_carries():
+  """The window's NLL equals the frames' log-likelihoods taken one after another, each under the mixture
+  ``carried`` with the residuals of the two targets before (none before the first), as the draw steps."""
+  model, window = _model_and_window()
+  out = model(window[:, :-1], jnp.zeros((1,), jnp.int32))
+  head, u = model.head, model.head.to_basis(window[:, 1:])
+  memory = model.draw_start(window[:, :1])[2:]
+  assert all(float(jnp.abs(m).max()) == 0 for m in memory)  # nothing before the first frame
+  per_frame = []
+  for t in range(u.shape[1]):
+    per_frame.append(mdn_log_prob(*head.carried(out[:, t], memory), u[:, t]))
+    memory = (head.residual(out[:, t], u[:, t]), memory[0])
+  loss = float(model.loss(out, window[:, 1:])[0])
+  np.testing.assert_allclose(loss, -float(jnp.mean(jnp.stack(per_frame))), rtol=1e-5)
+  # the residuals matter: the same outputs read as white noise are another likelihood
+  white = -float(jnp.mean(mdn_log_prob(*head.params(out), u)))
+  assert abs(white - loss) > 1e-3 * abs(loss)
+
+
+def test_a_drawn_frame_is_the_carried_mean_plus_its_scale_and_its_residual_is_remembered():
+  """One draw step: the frame is the drawn component's carried mean plus scale x noise, and the state keeps
+  its residual and the one before."""
+  model, window = _model_and_window(4)
+  out = model(window[:, :-1], jnp.zeros((1,), jnp.int32))
+  head = model.head
+  state = model.draw_start(window[:, :3], out[:, :2])  # after a three-frame prime
+  gumbel = jnp.array([[50.0, 0.0, 0.0]])  # component 0
+  noise = jax.random.normal(jax.random.key(1), (1, model.dim))
+  x, (comp, _, r1, r2) = head.draw(out[:, 2], gumbel, noise, state)
+  _, mu, scale = head.carried(out[:, 2], state[2:])
+  np.testing.assert_allclose(head.to_basis(x), mu[:, 0] + scale[:, 0] * noise, atol=1e-5)
+  assert int(comp[0]) == 0
+  np.testing.assert_allclose(r1, head.residual(out[:, 2], head.to_basis(x)), atol=1e-5)
+  np.testing.assert_array_equal(r2, state[2])
+  # a prime's residuals are those the loss carries into the frame after it
+  hist = head.history(out, head.to_basis(window[:, 1:]))
+  np.testing.assert_allclose(state[2], hist[0][:, 2], atol=1e-6)
+  np.testing.assert_allclose(state[3], hist[1][:, 2], atol=1e-6)
+
+
+def _plain_jitter(run_dir, tmp_path, name: str) -> float:
+  """The jitter of 400 frames of ``chorjax sample RUN --plain``, whose settings say every draw control is off."""
+  out = tmp_path / f"{name}.npz"
+  assert cli.main(["sample", str(run_dir), "--plain", "--frames", "400", "-o", str(out), "--seed", "1"]) == 0
+  with np.load(out) as f:
+    settings, pos = json.loads(str(f["meta"]))["settings"], f["positions"][0]
+  assert {k: settings[k] for k in PLAIN} == PLAIN
+  return roughness(pos)
+
+
+def test_the_plain_draw_of_a_correlated_run_is_smoother_than_a_white_runs(tmp_path):
+  """Trained alike for 150 steps on cmu94, the model's own draw (temperatures 1, every control off) trembles
+  less than half as much when the MDN's noise is correlated as when it is white."""
+  common = [*TINY, "train.num_steps=150", "model.hidden_size=32", "data.seq_length=24", "train.batch_size=8"]
+  common += ["data.representation=canonical", "train.calibrate=false", "log.tensorboard=false"]
+  for noise in ("white", "correlated"):
+    train_and_evaluate(tiny_config(*common, f"model.mdn_noise={noise}"), tmp_path / noise)
+  white, correlated = (_plain_jitter(tmp_path / n, tmp_path, n) for n in ("white", "correlated"))
+  assert correlated < 0.5 * white, (correlated, white)
+
+
+def test_what_a_correlated_draw_cannot_be_given_is_refused_in_one_line(tmp_path, capsys):
+  """Training with own outputs fed back (the draw there carries no residuals) and ``--plain`` beside a draw
+  flag are refused, exit 2, one line, nothing written."""
+  code = cli.main(
+    [
+      "train",
+      "configs/quickstart.toml",
+      "model.mdn_noise=correlated",
+      "train.feedback=auto",
+      "--workdir",
+      str(tmp_path / "r"),
+    ]
+  )
+  err = capsys.readouterr().err
+  assert code == 2 and "train.feedback" in err and len(err.strip().splitlines()) == 1
+  assert not (tmp_path / "r").exists()
+  code = cli.main(["sample", str(tmp_path / "r"), "-o", str(tmp_path / "s.csv"), "--plain", "--noise-smoothing", "0.5"])
+  err = capsys.readouterr().err
+  assert code == 2 and "--plain" in err and "--noise-smoothing" in err
+
+
+@pytest.mark.parametrize("prime", [False, True])
+def test_a_correlated_run_samples_live_streams_and_primes(tmp_path, prime):
+  """The generator's draw equals the stream's draw chunk by chunk (the residuals carried across chunks)."""
+  from chorjax.controls import Draw
+  from chorjax.families.recurrent.generation import continue_stream, generate, start_stream
+
+  model, window = _model_and_window(8)
+  graphdef, params = nnx.split(model, nnx.Param)
+  motion = jnp.zeros((1,), jnp.int32)
+  p = window if prime else None
+  draw = Draw(noise_order=1)
+  whole = generate(graphdef, params, motion, jax.random.key(0), num_frames=6, draw=draw, prime_BxPxD=p)
+  state = start_stream(graphdef, params, motion, draw, p)
+  state, first = continue_stream(graphdef, params, state, jax.random.key(0), draw, num_frames=6)
+  assert np.abs(np.asarray(first) - np.asarray(whole)).max() < 1e-5
+  assert len(state[3]) == 4 and float(jnp.abs(state[3][2]).max()) > 0  # the residuals ride in the state
