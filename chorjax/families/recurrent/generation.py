@@ -58,7 +58,7 @@ def generate(graphdef, params, motion, key, *, num_frames: int, draw: Draw | Non
   """
   draw = (draw or Draw()).for_motion(motion)
   unroll = UNROLL if num_frames * np.shape(motion)[0] >= UNROLL_FROM else 1
-  plain = draw.plain and not nnx.merge(graphdef, params).remembers  # a correlated draw carries its residual
+  plain = draw.plain and not getattr(nnx.merge(graphdef, params), "remembers", False)  # correlated: residuals
   return _generate(
     graphdef,
     params,
@@ -89,7 +89,7 @@ def _generate(
   crossfade are still numbers); ``unroll``: frames per iteration of the plain loop (frames within 1.2e-7 either way).
   ``draw``'s static fields are part of what the program is compiled for."""
   model = nnx.merge(graphdef, params)
-  carry, x0, drawn = _primed(model, motion, prime_BxPxD)
+  carry, x0, before = _primed(model, motion, prime_BxPxD)
 
   if plain:
     bounds = draw.bounds
@@ -106,20 +106,21 @@ def _generate(
 
   if draw.pace and draw.pacing is None:
     raise ValueError("pace needs draw.pacing (the training pace and its measure): Controls.draw")
-  state = _smooth_start(carry, x0, draw, drawn)
+  state = _smooth_start(carry, x0, draw, model.draw_start(*before))
   return _smooth_scan(model, state, key, num_frames, draw)[1]
 
 
 def _primed(model, motion, prime_BxPxD):
-  """``(carry, first input, the head's draw state)``: the motion's initial state, teacher forced over the
-  prime if there is one (generation continues after its last frame, its draw state from the prime's
-  residuals); without one, the zero frame (the mean pose) and a fresh draw state."""
+  """``(carry, first input, (frames so far, the outputs that predicted them)))``: the motion's initial state,
+  teacher forced over the prime if there is one (generation continues after its last frame; the head's draw
+  state starts from the prime's residuals: ``model.draw_start(*before)``); without one, the zero frame (the
+  mean pose) and no outputs."""
   carry = model.initial_carry(motion)
   if prime_BxPxD is None:
     x0 = jnp.zeros((jnp.shape(motion)[0], model.dim), jnp.float32)
-    return carry, x0, model.draw_start(x0[:, None])
+    return carry, x0, (x0[:, None], None)
   out_BxPxP, carry = model.teacher_force(prime_BxPxD[:, :-1], carry)
-  return carry, prime_BxPxD[:, -1], model.draw_start(prime_BxPxD, out_BxPxP)
+  return carry, prime_BxPxD[:, -1], (prime_BxPxD, out_BxPxP)
 
 
 def _smooth_start(carry, x0_BxD, draw: Draw, drawn):
@@ -284,8 +285,8 @@ def start_stream(graphdef, params, motion, draw: Draw, prime_BxPxD=None):
   ``motion`` and, with a prime, after its last frame (teacher forced over the phrase as :func:`generate`
   primes); ``draw``: the draw the stream will continue with (its governor's lag and training pace)."""
   model = nnx.merge(graphdef, params)
-  carry, x0, drawn = _primed(model, motion, prime_BxPxD)
-  return _smooth_start(carry, x0, draw, drawn)
+  carry, x0, before = _primed(model, motion, prime_BxPxD)
+  return _smooth_start(carry, x0, draw, model.draw_start(*before))
 
 
 @functools.partial(jax.jit, static_argnames=("graphdef", "num_frames"))
