@@ -1,0 +1,120 @@
+"""The draw's controls, each off in turn, and the model's own draw (``--plain``), on runs of the dancers
+benchmark: every run given is evaluated on its held-out takes (``chorjax eval --data held-out``) once per
+variant, and the figures that judge a dance go to ``results.json`` beside this file (merged with what is
+there: a run and variant already measured is skipped).
+
+  python experiments/draw/ablate.py RUN [RUN ...] [--variants plain shipped ...] [--frames 10000]
+  python experiments/draw/ablate.py --table > experiments/draw/table.md
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+RESULTS = HERE / "results.json"
+VARIANTS = {
+  "shipped": [],
+  "plain": ["--plain"],
+  # the own draw, but always the most likely component: what switching components costs
+  "plain, most likely component": [
+    "--pi-temperature",
+    "0",
+    "--sigma-temperature",
+    "1",
+    "--noise-smoothing",
+    "0",
+    "--noise-order",
+    "1",
+    "--persistence",
+    "0",
+    "--crossfade",
+    "0",
+    "--pace",
+    "0",
+    "--scale-cap",
+    "0",
+    "--no-clamp",
+    "--no-clamp-steps",
+  ],
+  "no noise filter": ["--noise-smoothing", "0", "--noise-order", "1"],
+  "no pace governor": ["--pace", "0"],
+  "no persistence, crossfade": ["--persistence", "0", "--crossfade", "0"],
+  "no clamps, scale cap": ["--no-clamp", "--no-clamp-steps", "--scale-cap", "0"],
+}
+# ratios to the held-out takes' own figures, and FIDs over the training takes' own distance
+COLUMNS = ("jitter", "speed", "root_travel", "movement_min", "movement_max", "fid_k", "fid_g", "root_step_max")
+
+
+def figures(metrics: dict) -> dict:
+  mean = lambda k: metrics[k]["mean"] if isinstance(metrics[k], dict) else metrics[k]
+  out = {k: mean(k) for k in COLUMNS}
+  out["fid_k"] /= mean("fid_k_train")
+  out["fid_g"] /= mean("fid_g_train")
+  out["heldout_loss"] = metrics["heldout_loss"]
+  return out
+
+
+def measure(run: Path, variant: str, frames: int, seeds: list[int]) -> dict:
+  with tempfile.TemporaryDirectory() as tmp:
+    out = Path(tmp) / "metrics.json"
+    cmd = [
+      str(Path(sys.executable).parent / "chorjax"),
+      "eval",
+      str(run),
+      "--data",
+      "held-out",
+      "--frames",
+      str(frames),
+    ]
+    cmd += ["--num", "1", "--seeds", *map(str, seeds), "-o", str(out), *VARIANTS[variant]]
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    return figures(json.loads(out.read_text()))
+
+
+def table(results: dict) -> str:
+  lines = [
+    "| run | draw | jitter | speed | root travel | calmest / busiest 1,000 frames | FID_k / train | FID_g / train "
+    "| largest root step | held-out NLL |",
+    "|---|---|---|---|---|---|---|---|---|---|",
+  ]
+  for run, variants in sorted(results.items()):
+    for variant, f in variants.items():
+      lines.append(
+        f"| {run} | {variant} | {f['jitter']:.2f} | {f['speed']:.2f} | {f['root_travel']:.2f} | "
+        f"{f['movement_min']:.2f} / {f['movement_max']:.2f} | {f['fid_k']:.2f} | {f['fid_g']:.2f} | "
+        f"{f['root_step_max']:.2f} | {f['heldout_loss']:.1f} |"
+      )
+  return "\n".join(lines)
+
+
+def main() -> None:
+  p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+  p.add_argument("runs", nargs="*", type=Path)
+  p.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
+  p.add_argument("--frames", type=int, default=10_000)
+  p.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
+  p.add_argument("--name", help="the name a run is recorded under (default: its folder's parent/name)")
+  p.add_argument("--table", action="store_true", help="print the table of results.json as markdown")
+  args = p.parse_args()
+  results = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
+  if args.table:
+    print(table(results))
+    return
+  for run in args.runs:
+    name = args.name or f"{run.parent.name}/{run.name}"
+    for variant in args.variants:
+      if variant in results.get(name, {}):
+        continue
+      results.setdefault(name, {})[variant] = measure(run, variant, args.frames, args.seeds)
+      RESULTS.write_text(json.dumps(results, indent=1) + "\n")
+      print(name, variant, results[name][variant], flush=True)
+
+
+if __name__ == "__main__":
+  main()
