@@ -632,6 +632,8 @@ def train_command(config, overrides=(), *, workdir=None, force: bool = False, lo
   from chorjax.vectorized import train_vectorized
 
   overrides, points = expand_overrides(list(overrides))
+  if len(points) == 1:  # a one-element list is that value, checked as the value alone is
+    overrides += [f"{k}={v!r}" for k, v in points[0]]
   cfg = load_config(config, overrides)
   workdir = Path(workdir) if workdir else default_workdir(cfg)
   if len(points) > 1:

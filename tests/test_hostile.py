@@ -558,3 +558,16 @@ def test_saved_state_nested_too_deep_is_one_line(tmp_path, capsys):
   _one_line(capsys, "deep.npz: not a chorjax sample .npz (JSONDecodeError)")
   reply = json.loads(asyncio.run(Live.handle(None, deep)))  # type: ignore[arg-type]  (refused before self is used)
   assert "nested too deeply" in reply["error"]
+
+
+def test_a_one_element_list_of_seeds_is_that_seed_checked_as_the_seed_alone(tmp_path, capsys):
+  """``train.seed=[5]`` trained seed 0 and recorded 0; ``[-1]``, ``["a"]``, ``[1.5]``, ``[true]`` trained seed 0
+  too. A one-element list is its value: trained and recorded, or refused in one line as the scalar is."""
+  (tmp_path / "base.toml").write_text("")  # the defaults
+  args = ["train", str(tmp_path / "base.toml"), *TINY, "log.tensorboard=false", "train.calibrate=false"]
+  assert cli.main([*args, "train.seed=[5]", "--workdir", str(tmp_path / "w")]) == 0
+  assert json.loads((tmp_path / "w" / "config.json").read_text())["train"]["seed"] == 5
+  for bad in ("[-1]", '["a"]', "[1.5]", "[true]"):
+    assert cli.main([*args, f"train.seed={bad}", "--workdir", str(tmp_path / "x")]) == 2, bad
+    _one_line(capsys, "train.seed")
+  assert not (tmp_path / "x").exists()
