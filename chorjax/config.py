@@ -174,16 +174,16 @@ class ModelConfig:
     ),
     choices=("features", "pca"),
   )
-  mdn_noise: str = _field(
-    "white",
-    "the MDN's noise over frames: 'white' (independent) or 'correlated' (with the previous frame's, learned)",
+  mdn_memory: int = _field(
+    0,
+    "frames of residuals (frame minus a component's mean) the MDN carries into each frame's means: 0 = white noise",
     more=(
-      "With 'correlated' each component also predicts a coefficient per coordinate that carries the previous "
-      "frame's residual (the frame minus that component's mean) into this frame's mean; its scale is what "
-      "is left. Still an MDN sampled frame by frame, with an exact likelihood: the draw is smooth because "
-      "the model learned how the dancer's motion continues, not because a filter smooths it afterwards."
+      "With 1 the previous frame's residual is carried, with 2 also its change, with 3 the change's change, each "
+      "through a coefficient per coordinate the network predicts and every component shares; the scales are what "
+      "is left. Still an MDN sampled frame by frame, with an exact likelihood: the noise continues over frames "
+      "as the model learned it does, not as a filter set afterwards (`experiments/draw/`)."
     ),
-    choices=("white", "correlated"),
+    minimum=0,
   )
   min_scale: float = _field(1e-3, "floor of MDN scales (normalized units)", minimum=0.0)
   dropout: float = _field(0.0, "dropout rate between layers (same mask at every time step)", minimum=0.0, below=1.0)
@@ -210,9 +210,9 @@ class ModelConfig:
   )
 
   @property
-  def correlated(self) -> bool:
-    """Whether the MDN's noise is correlated over frames (``model.mdn_noise``; an MSE head has no noise)."""
-    return self.head == "mdn" and self.mdn_noise == "correlated"
+  def memory(self) -> int:
+    """Frames of residuals the MDN carries into each frame (``model.mdn_memory``; an MSE head has no noise)."""
+    return self.mdn_memory if self.head == "mdn" else 0
 
   @property
   def pca_basis(self) -> bool:

@@ -1,6 +1,6 @@
-"""``model.mdn_noise = "correlated"``: the MDN carries the residuals of the frames before into each frame's
-means. The loss conditions every frame on what the draw carries, a prime hands its residuals to the draw,
-and the model's own draw (``--plain``) of such a run is smoother than a white-noise run's."""
+"""``model.mdn_memory``: the MDN carries the residuals of the frames before into each frame's means. The loss
+conditions every frame on what the draw carries, a prime hands its residuals to the draw, and the model's own
+draw (``--plain``) of such a run is smoother than a white-noise run's."""
 
 import json
 
@@ -20,19 +20,21 @@ from chorjax.models.heads import mdn_log_prob
 from chorjax.training import train_and_evaluate
 
 
-def _model_and_window(frames: int = 20):
-  """A tiny correlated model (random weights, PCA-free) and a real window of cmu94 (normalized features)."""
-  cfg = tiny_config("model.mdn_noise=correlated", "data.representation=canonical")
+def _model_and_window(frames: int = 20, memory: int = 2):
+  """A tiny model carrying ``memory`` residuals (random weights, PCA-free) and a real window of cmu94
+  (normalized features)."""
+  cfg = tiny_config(f"model.mdn_memory={memory}", "data.representation=canonical")
   ds = load_dataset(cfg.data)
   model = create_model(cfg.model, ds.features.dim, ds.num_motions, seed=0)
   _, z = ds.train[0]
   return model, jnp.asarray(z[None, : frames + 1], jnp.float32)
 
 
-def test_the_loss_conditions_each_frame_on_the_residuals_the_draw_carries():
+@pytest.mark.parametrize("memory", [1, 2, 3])
+def test_the_loss_conditions_each_frame_on_the_residuals_the_draw_carries(memory):
   """The window's NLL equals the frames' log-likelihoods taken one after another, each under the mixture
-  ``carried`` with the residuals of the two targets before (none before the first), as the draw steps."""
-  model, window = _model_and_window()
+  ``carried`` with the residuals of the targets before (none before the first), as the draw steps."""
+  model, window = _model_and_window(memory=memory)
   out = model(window[:, :-1], jnp.zeros((1,), jnp.int32))
   head, u = model.head, model.head.to_basis(window[:, 1:])
   memory = model.draw_start(window[:, :1])[2:]
@@ -40,7 +42,7 @@ def test_the_loss_conditions_each_frame_on_the_residuals_the_draw_carries():
   per_frame = []
   for t in range(u.shape[1]):
     per_frame.append(mdn_log_prob(*head.carried(out[:, t], memory), u[:, t]))
-    memory = (head.residual(out[:, t], u[:, t]), memory[0])
+    memory = (head.residual(out[:, t], u[:, t]), *memory[:-1])
   loss = float(model.loss(out, window[:, 1:])[0])
   np.testing.assert_allclose(loss, -float(jnp.mean(jnp.stack(per_frame))), rtol=1e-5)
   # the residuals matter: the same outputs read as white noise are another likelihood
@@ -48,25 +50,27 @@ def test_the_loss_conditions_each_frame_on_the_residuals_the_draw_carries():
   assert abs(white - loss) > 1e-3 * abs(loss)
 
 
-def test_a_drawn_frame_is_the_carried_mean_plus_its_scale_and_its_residual_is_remembered():
+@pytest.mark.parametrize("memory", [1, 3])
+def test_a_drawn_frame_is_the_carried_mean_plus_its_scale_and_its_residual_is_remembered(memory):
   """One draw step: the frame is the drawn component's carried mean plus scale x noise, and the state keeps
-  its residual and the one before."""
-  model, window = _model_and_window(4)
+  its residual and the ones before."""
+  model, window = _model_and_window(4, memory)
   out = model(window[:, :-1], jnp.zeros((1,), jnp.int32))
   head = model.head
-  state = model.draw_start(window[:, :3], out[:, :2])  # after a three-frame prime
+  state = model.draw_start(window[:, :4], out[:, :3])  # after a four-frame prime
   gumbel = jnp.array([[50.0, 0.0, 0.0]])  # component 0
   noise = jax.random.normal(jax.random.key(1), (1, model.dim))
-  x, (comp, _, r1, r2) = head.draw(out[:, 2], gumbel, noise, state)
-  _, mu, scale = head.carried(out[:, 2], state[2:])
+  x, (comp, _, *memory) = head.draw(out[:, 3], gumbel, noise, state)
+  _, mu, scale = head.carried(out[:, 3], state[2:])
   np.testing.assert_allclose(head.to_basis(x), mu[:, 0] + scale[:, 0] * noise, atol=1e-5)
   assert int(comp[0]) == 0
-  np.testing.assert_allclose(r1, head.residual(out[:, 2], head.to_basis(x)), atol=1e-5)
-  np.testing.assert_array_equal(r2, state[2])
+  np.testing.assert_allclose(memory[0], head.residual(out[:, 3], head.to_basis(x)), atol=1e-5)
+  for newer, older in zip(memory[1:], state[2:]):  # the others move one place back
+    np.testing.assert_array_equal(newer, older)
   # a prime's residuals are those the loss carries into the frame after it
   hist = head.history(out, head.to_basis(window[:, 1:]))
-  np.testing.assert_allclose(state[2], hist[0][:, 2], atol=1e-6)
-  np.testing.assert_allclose(state[3], hist[1][:, 2], atol=1e-6)
+  for held, carried in zip(state[2:], hist):
+    np.testing.assert_allclose(held, carried[:, 3], atol=1e-6)
 
 
 def _plain_jitter(run_dir, tmp_path, name: str) -> float:
@@ -81,11 +85,11 @@ def _plain_jitter(run_dir, tmp_path, name: str) -> float:
 
 def test_the_plain_draw_of_a_correlated_run_is_smoother_than_a_white_runs(tmp_path):
   """Trained alike for 150 steps on cmu94, the model's own draw (temperatures 1, every control off) trembles
-  less than half as much when the MDN's noise is correlated as when it is white."""
+  less than half as much when the MDN carries two residuals as when its noise is white."""
   common = [*TINY, "train.num_steps=150", "model.hidden_size=32", "data.seq_length=24", "train.batch_size=8"]
   common += ["data.representation=canonical", "train.calibrate=false", "log.tensorboard=false"]
-  for noise in ("white", "correlated"):
-    train_and_evaluate(tiny_config(*common, f"model.mdn_noise={noise}"), tmp_path / noise)
+  for noise, memory in (("white", 0), ("correlated", 2)):
+    train_and_evaluate(tiny_config(*common, f"model.mdn_memory={memory}"), tmp_path / noise)
   white, correlated = (_plain_jitter(tmp_path / n, tmp_path, n) for n in ("white", "correlated"))
   assert correlated < 0.5 * white, (correlated, white)
 
@@ -97,7 +101,7 @@ def test_what_a_correlated_draw_cannot_be_given_is_refused_in_one_line(tmp_path,
     [
       "train",
       "configs/quickstart.toml",
-      "model.mdn_noise=correlated",
+      "model.mdn_memory=2",
       "train.feedback=auto",
       "--workdir",
       str(tmp_path / "r"),
@@ -125,5 +129,5 @@ def test_a_correlated_run_samples_live_streams_and_primes(tmp_path, prime):
   whole = generate(graphdef, params, motion, jax.random.key(0), num_frames=6, draw=draw, prime_BxPxD=p)
   state = start_stream(graphdef, params, motion, draw, p)
   state, first = continue_stream(graphdef, params, state, jax.random.key(0), draw, num_frames=6)
-  assert np.abs(np.asarray(first) - np.asarray(whole)).max() < 1e-5
-  assert len(state[3]) == 4 and float(jnp.abs(state[3][2]).max()) > 0  # the residuals ride in the state
+  assert np.abs(np.asarray(first) - np.asarray(whole)).max() < 1e-4  # the same program, compiled apart
+  assert len(state[3]) == 2 + 2 and float(jnp.abs(state[3][2]).max()) > 0  # the residuals ride in the state

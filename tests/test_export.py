@@ -126,19 +126,19 @@ def test_a_batch_of_dancers_each_on_its_own_motion_and_a_restart_mid_dance(quick
 
 
 @pytest.mark.parametrize(
-  "cell,head,every_frame,noise",
-  [("lnlstm", "mdn", False, "white"), ("gru", "mse", True, "white"), ("lstm", "mdn", False, "correlated")],
+  "cell,head,every_frame,memory",
+  [("lnlstm", "mdn", False, 0), ("gru", "mse", True, 0), ("lstm", "mdn", False, 3)],
 )
-def test_other_cells_and_heads_export_with_the_same_draw(cell, head, every_frame, noise, tmp_path):
+def test_other_cells_and_heads_export_with_the_same_draw(cell, head, every_frame, memory, tmp_path):
   """The LN-LSTM and the GRU, the MSE head, the plain draw (white noise, nothing held), the motion weights
   beside every frame's input (``model.condition_every_frame``: they ride in the graph's state), and an MDN
-  whose noise is correlated (the residuals it carries ride in the state)."""
+  that carries three residuals (``model.mdn_memory``: they ride in the state)."""
   run_dir = trained(
     tmp_path / "run",
     f"model.cell={cell}",
     f"model.head={head}",
     f"model.condition_every_frame={str(every_frame).lower()}",
-    f"model.mdn_noise={noise}",
+    f"model.mdn_memory={memory}",
   )
   assert cli.main(["export", str(run_dir), "-o", str(tmp_path / "d.onnx"), "--noise-smoothing", "0.5"]) == 0
   dancer = OnnxDancer(tmp_path / "d.onnx")

@@ -8,6 +8,7 @@ scales pass through softplus and are floored at ``min_scale`` so the likelihood 
 
 from __future__ import annotations
 
+import itertools
 import math
 from typing import Any
 
@@ -60,7 +61,7 @@ def mdn_params(out_xP, num_mixtures: int, dim: int, isotropic: bool, min_scale: 
   """Raw head outputs -> ``(logpi_xK, mu_xKxD, scale_xKxS)`` with S = 1 (isotropic) or D (a correlated
   head's coefficients, after these, are :func:`mdn_carry`'s)."""
   k, s = num_mixtures, 1 if isotropic else dim
-  assert out_xP.shape[-1] in (k + k * dim + k * s, k + k * dim + k * s + MEMORY * s), (out_xP.shape, k, dim, s)
+  assert (out_xP.shape[-1] - (k + k * dim + k * s)) % s == 0, (out_xP.shape, k, dim, s)  # + the carry's
   lead = out_xP.shape[:-1]
   logits, mu, scale = jnp.split(out_xP[..., : k + k * dim + k * s], [k, k + k * dim], axis=-1)
   logpi = jax.nn.log_softmax(logits, axis=-1)
@@ -69,15 +70,16 @@ def mdn_params(out_xP, num_mixtures: int, dim: int, isotropic: bool, min_scale: 
   return logpi, mu, scale
 
 
-MEMORY = 2  # the residuals a correlated head remembers: the previous frame's and the one before
+MAX_MEMORY = 3  # model.mdn_memory's largest: a residual, its change and the change's change
 
 
-def mdn_carry(out_xP, scales: int):
-  """A correlated head's coefficients ``[..., 2, 1, S]`` in (-1, 1), one pair per coordinate shared by every
-  component: how much of the previous frame's residual (the frame minus a component's mean) and of that
-  residual's change the components carry into this frame's means (:meth:`MDNHead.carried`). Shared, a
-  component the draw switches to continues from where the last frame was, as the one it leaves would."""
-  return jnp.tanh(out_xP[..., -MEMORY * scales :].reshape(out_xP.shape[:-1] + (MEMORY, 1, scales)))
+def mdn_carry(out_xP, scales: int, memory: int):
+  """A head's carry coefficients ``[..., M, 1, S]`` in (-1, 1) (``M = memory``), M per coordinate shared by
+  every component: how much of the previous frame's residual (the frame minus a component's mean), of its
+  change, and of the change's change the components carry into this frame's means (:meth:`MDNHead.carried`).
+  Shared, a component the draw switches to continues from where the last frame was, as the one it leaves
+  would."""
+  return jnp.tanh(out_xP[..., -memory * scales :].reshape(out_xP.shape[:-1] + (memory, 1, scales)))
 
 
 def mdn_log_prob(logpi_xK, mu_xKxD, scale_xKxS, x_xD):
@@ -161,11 +163,11 @@ class MDNHead(nnx.Module):
     isotropic: bool = False,
     min_scale: float = 1e-3,
     basis: bool = False,
-    correlated: bool = False,
+    memory: int = 0,
     rngs: nnx.Rngs,
   ):
     self.dim, self.num_mixtures, self.isotropic, self.min_scale = dim, num_mixtures, isotropic, min_scale
-    self.correlated = correlated
+    self.memory = memory
     self.out = nnx.Linear(hidden, self.num_outputs, rngs=rngs)
     self.basis = nnx.Param(jnp.eye(dim)) if basis else None  # a Param so checkpoints carry it; never trained
 
@@ -189,7 +191,12 @@ class MDNHead(nnx.Module):
   @property
   def num_outputs(self) -> int:
     k = self.num_mixtures
-    return k + k * self.dim + k * self.num_scales + (MEMORY * self.num_scales if self.correlated else 0)
+    return k + k * self.dim + k * self.num_scales + self.memory * self.num_scales
+
+  @property
+  def correlated(self) -> bool:
+    """Whether a frame's means carry the residuals of the frames before (``memory`` > 0)."""
+    return self.memory > 0
 
   def __call__(self, h):
     return _linear(self.out, h)
@@ -198,14 +205,18 @@ class MDNHead(nnx.Module):
     return mdn_params(out, self.num_mixtures, self.dim, self.isotropic, self.min_scale)
 
   def carried(self, out_xP, residuals):
-    """The mixture with the residuals of the two frames before carried into its means (``correlated``):
-    ``residuals = (previous, the one before)``, each ``[..., K, D]``; with coefficients ``a, b``
-    (:func:`mdn_carry`) the means are ``mu + a * previous + b * (previous - the one before)``: the model's
-    mean plus where its last residual was and where it was heading. Returns ``(logpi, means, scale)``."""
+    """The mixture with the residuals of the frames before carried into its means (``correlated``):
+    ``residuals``, the ``memory`` latest first, each ``[..., K, D]``; with one coefficient per backward
+    difference (:func:`mdn_carry`) the means are ``mu + a * r + b * (r - r') + c * (r - 2 r' + r'') ...``:
+    the model's mean plus where its last residual was, where it was heading and how that was turning.
+    Returns ``(logpi, means, scale)``."""
     logpi, mu, scale = self.params(out_xP)
-    a, b = jnp.moveaxis(mdn_carry(out_xP, self.num_scales), -3, 0)
-    previous, before = residuals
-    return logpi, mu + a * previous + b * (previous - before), scale
+    coefficients = jnp.moveaxis(mdn_carry(out_xP, self.num_scales, self.memory), -3, 0)
+    differences, carried = list(residuals), mu
+    for c in coefficients:
+      carried = carried + c * differences[0]
+      differences = [a - b for a, b in itertools.pairwise(differences)]
+    return logpi, carried, scale
 
   def residual(self, out_xP, u_xD):
     """``u`` (the mixture's coordinates) minus each component's mean: ``[..., K, D]``."""
@@ -213,17 +224,16 @@ class MDNHead(nnx.Module):
 
   def history(self, out_xTxP, u_xTxD):
     """What :meth:`carried` takes at every frame of a window whose outputs ``out`` predicted ``u``: the
-    residuals of the frame before and the one before that, ``[..., T, K, D]`` each (zeros before the
+    residuals of the ``memory`` frames before, latest first, ``[..., T, K, D]`` each (zeros before the
     window's first frame)."""
     r = self.residual(out_xTxP, u_xTxD)
     pad = lambda n: jnp.concatenate([jnp.zeros_like(r[..., :n, :, :]), r[..., : r.shape[-3] - n, :, :]], axis=-3)
-    return pad(1), pad(2)
+    return tuple(pad(n) for n in range(1, self.memory + 1))
 
   def loss(self, out_xP, target_xD):
-    """The NLL of every frame (``[..., T, P]`` outputs, ``[..., T, D]`` targets). Correlated: a frame's
-    components carry the previous target's residual from their previous means (none at the window's first
-    frame, the frame before's at the second): the likelihood of the frame given everything before it, as
-    the draw continues."""
+    """The NLL of every frame (``[..., T, P]`` outputs, ``[..., T, D]`` targets). With ``memory``, a frame's
+    components carry the residuals of the targets before it (:meth:`history`: none before the window's
+    first frame): the likelihood of the frame given everything before it, as the draw continues."""
     target = self.to_basis(target_xD)
     if self.correlated:
       logpi, mu, scale = self.carried(out_xP, self.history(out_xP, target))
@@ -253,7 +263,7 @@ class MDNHead(nnx.Module):
   ):
     """A frame drawn with the given random numbers (:func:`frame_numbers`); ``state`` (:meth:`draw_start`):
     ``(previous component [B] (-1: none), offset [B, D])`` and, ``correlated``, the residuals ``[B, K, D]`` of
-    the previous frame and the one before, which :meth:`carried` carries into this frame's means.
+    the ``memory`` frames before (latest first), which :meth:`carried` carries into this frame's means.
 
     ``persistence`` is added to the previous component's log-weight. ``crossfade``: when the component
     changes, the jump between the two components' means is carried into the frame and decays by this
@@ -271,22 +281,22 @@ class MDNHead(nnx.Module):
     switched = ((comp != previous_B) & (previous_B >= 0))[:, None]
     offset_BxD = crossfade * (offset_BxD + jnp.where(switched, mean_of(previous_B) - mean_of(comp), 0.0))
     u = x + offset_BxD
-    memory = [self.residual(out_BxP, u), memory[0]] if self.correlated else []
+    memory = [self.residual(out_BxP, u), *memory[:-1]] if self.correlated else []
     return self.from_basis(u), (comp, offset_BxD, *memory)
 
   def draw_start(self, x_BxTxD, out_BxTxP=None):
     """The draw's state before the frame after the frames ``x`` (:meth:`draw`): no component, no offset
-    and, ``correlated``, the residuals of ``x``'s last two frames from ``out`` (the outputs that predicted
+    and, ``correlated``, the residuals of ``x``'s last ``memory`` frames from ``out`` (the outputs that predicted
     ``x[:, 1:]``: a prime's), zeros where there are none."""
     b = x_BxTxD.shape[0]
     state = (jnp.full((b,), -1, jnp.int32), jnp.zeros((b, self.dim), x_BxTxD.dtype))
     if not self.correlated:
       return state
     if out_BxTxP is None:
-      return (*state, *[jnp.zeros((b, self.num_mixtures, self.dim), x_BxTxD.dtype)] * MEMORY)
+      return (*state, *[jnp.zeros((b, self.num_mixtures, self.dim), x_BxTxD.dtype)] * self.memory)
     history = self.history(out_BxTxP, self.to_basis(x_BxTxD[:, 1:]))  # residuals before each frame
     r = self.residual(out_BxTxP[:, -1], self.to_basis(x_BxTxD[:, -1]))  # the last frame's
-    return (*state, r, history[0][:, -1])
+    return (*state, r, *[h[:, -1] for h in history[:-1]])
 
   def mean(self, out_xP):
     """The mixture's mean frame."""

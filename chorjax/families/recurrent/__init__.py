@@ -19,11 +19,14 @@ class Recurrent(Family):
 
   def check(self, cfg) -> None:
     from chorjax.errors import UserError
+    from chorjax.models.heads import MAX_MEMORY
 
-    if cfg.model.correlated and cfg.train.feedback != "none":
+    if cfg.model.memory > MAX_MEMORY:
+      raise UserError(f"model.mdn_memory = {cfg.model.memory}: at most {MAX_MEMORY}")
+    if cfg.model.memory and cfg.train.feedback != "none":
       raise UserError(
-        "model.mdn_noise = 'correlated' trains teacher forced (its draw carries the residual the loss does): "
-        "set train.feedback = 'none'"
+        "model.mdn_memory trains teacher forced (its draw carries the residuals the loss does): "
+        "set train.feedback = 'none' or model.mdn_memory = 0"
       )
 
   def build_model(self, cfg, features, num_motions: int):

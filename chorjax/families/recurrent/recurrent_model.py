@@ -43,7 +43,7 @@ class ChorModel(nnx.Module):
         isotropic=cfg.mdn_scale == "isotropic",
         min_scale=cfg.min_scale,
         basis=cfg.pca_basis,
-        correlated=cfg.correlated,
+        memory=cfg.memory,
         rngs=rngs,
       )
     else:
@@ -85,7 +85,7 @@ class ChorModel(nnx.Module):
 
   @property
   def remembers(self) -> bool:
-    """Whether a frame's draw depends on the previous frame's residual (``model.mdn_noise = "correlated"``)."""
+    """Whether a frame's draw depends on the residuals of the frames before (``model.mdn_memory`` > 0)."""
     return bool(getattr(self.head, "correlated", False))
 
   @property
