@@ -62,7 +62,7 @@ from chorjax.scoring import score_to  # noqa: F401
 __all__ = ["Motion", "Player", "Run", "UserError", "load_dataset", "load_run", "read_motion", "score", "train"]
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, repr=False)  # the base's one-line repr
 class Motion(_motion.Motion):
   """One take or one generated dancer: ``positions [T, J, 3]``, ``fps``, ``skeleton``, ``up_axis`` ...
   (see ``chorjax.data.motion.Motion``), with a way to write, watch and draw it."""
@@ -131,6 +131,9 @@ class Player:
   html: str
   height: int = 480
 
+  def __repr__(self) -> str:
+    return f"Player({len(self.html) / 1024:,.0f} KiB page, {self.height} px high)"
+
   def _repr_html_(self) -> str:
     return (
       f'<iframe srcdoc="{html.escape(self.html, quote=True)}" style="width:100%;height:{self.height}px;border:0" '
@@ -143,7 +146,7 @@ class Player:
     return atomic_write(path, lambda p: p.write_text(self.html, encoding="utf-8"))
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, repr=False)  # the base's one-line repr
 class Run(_Run):
   """A trained run (see ``chorjax.run.Run``: ``config``, ``features``, ``id_map``, ``step`` ...) that can dance."""
 

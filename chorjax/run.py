@@ -89,6 +89,14 @@ class Run:
   frame_rate: float | None = None
   labels: Labels | None = None
 
+  def __repr__(self) -> str:
+    m = self.config.model
+    loss = "" if self.val_loss is None else f", val loss {self.val_loss:.4g}"
+    return (
+      f"{type(self).__name__}({str(self.workdir)!r}: {m.family} {m.cell} {m.num_layers}x{m.hidden_size} {m.head}, "
+      f"step {self.step:,}{loss}, {len(self.train_takes)} training takes, {self.features.dim} features)"
+    )
+
   @property
   def num_motions(self) -> int:
     return len(self.id_map)

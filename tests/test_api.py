@@ -23,6 +23,10 @@ def test_train_sample_score_and_write_through_the_api_equal_the_command_line(tmp
   again = chorjax.load_run(tmp_path / "run")
   dance = again.sample(frames=90, seed=3, pi_temperature=0.8)
   assert isinstance(dance, chorjax.Motion) and dance.positions.shape == (90, 16, 3)
+  # what a notebook shows of them: one short line each, not every weight or every frame
+  for obj, says in ((again, "step 3"), (dance, "90 frames"), (dance.show(), "KiB page"), (again.sampling(), "pace=")):
+    text = repr(obj)
+    assert says in text and len(text) < 300 and "\n" not in text, text
   assert (
     cli.main(
       [

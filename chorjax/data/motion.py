@@ -108,6 +108,13 @@ class Motion:
     pos.setflags(write=False)
     object.__setattr__(self, "positions", pos)
 
+  def __repr__(self) -> str:
+    frames, joints = self.positions.shape[:2]
+    return (
+      f"{type(self).__name__}({self.name!r}: {frames:,} frames at {self.fps:g} fps, {joints} joints"
+      f" ({self.skeleton.name}), {self.up_axis} up, {self.units})"
+    )
+
   @property
   def num_frames(self) -> int:
     return self.positions.shape[0]
