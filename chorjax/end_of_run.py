@@ -50,8 +50,14 @@ def calibration(run: Finished) -> dict:
 
 
 def end_sample(run: Finished) -> dict:
-  """The end sample drawn from the final parameters with the run's ``[sample]``."""
-  return write_end_sample(run.workdir, run.graphdef, run.params, run.ds, run.cfg)
+  """The end sample drawn with the run's ``[sample]`` from the checkpoint the run keeps (``train.keep =
+  "best"``: the best validation loss, as ``chorjax sample`` draws; else the final parameters)."""
+  params = run.params
+  if run.cfg.train.keep == "best":
+    from chorjax.run import load_run
+
+    params = load_run(run.workdir).params
+  return write_end_sample(run.workdir, run.graphdef, params, run.ds, run.cfg)
 
 
 def write_end_sample(workdir: Path, graphdef, params, ds, cfg, controls: Controls | None = None) -> dict:

@@ -663,4 +663,7 @@ def train_command(config, overrides=(), *, workdir=None, force: bool = False, lo
 def _losses(summary: dict) -> str:
   """``, train loss X, val loss Y`` of a run's summary (what it has of them)."""
   train = f", train loss {summary['final_train_loss']:.4g}" if "final_train_loss" in summary else ""
-  return train + (f", val loss {summary['final_val_loss']:.4g}" if "final_val_loss" in summary else "")
+  val = f", val loss {summary['final_val_loss']:.4g}" if "final_val_loss" in summary else ""
+  if "kept_step" in summary:  # train.keep = "best": the checkpoint sample, eval and export use
+    val += f"; kept: step {summary['kept_step']} (val loss {summary['kept_val_loss']:.4g})"
+  return train + val

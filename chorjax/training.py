@@ -614,6 +614,11 @@ def _train(
     summary["final_train_loss"] = loop.losses[max(loop.losses)]
   if loop.val_loss is not None:
     summary["final_val_loss"] = loop.val_loss
+  if cfg.train.keep == "best" and val and is_main:  # what sample, eval and export will use
+    kept = ckpt.val_losses(manager)
+    if kept:
+      summary["kept_step"] = min(kept, key=kept.__getitem__)
+      summary["kept_val_loss"] = kept[summary["kept_step"]]
   if samples:
     summary["samples"] = samples
   return summary

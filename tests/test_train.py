@@ -498,3 +498,23 @@ def test_epochs_size_the_run_to_the_data_and_patience_ends_it_when_the_loss_stop
   no_val = tiny_config("train.patience=2", "train.eval_every=1", "data.val_takes=[]", "log.tensorboard=false")
   with pytest.raises(UserError, match=r"train.patience: needs validation passes"):
     train_and_evaluate(no_val, tmp_path / "none")
+
+
+def test_the_end_of_training_names_the_checkpoint_sample_and_eval_will_use(tmp_path, capsys):
+  """With ``train.keep = "best"`` the last line names the kept step and its validation loss (a run whose best
+  was early otherwise samples an earlier step than its log's last loss says, silently), and the end sample
+  is drawn from that checkpoint, as ``chorjax sample`` draws."""
+  from chorjax.run import load_run
+
+  (tmp_path / "base.toml").write_text("")
+  args = [*TINY, "log.tensorboard=false", "train.keep=best", "train.eval_every=1", "train.num_steps=6"]
+  args.append("optim.lr=1.0")  # it diverges after a few steps: the best is not the last
+  assert cli.main(["train", str(tmp_path / "base.toml"), *args, "sample.seed=4", "--workdir", str(tmp_path / "r")]) == 0
+  out = capsys.readouterr().out
+  run = load_run(tmp_path / "r")
+  assert run.step < 6 and f"; kept: step {run.step} (val loss {run.val_loss:.4g})" in out, out
+  again = tmp_path / "again.csv"
+  assert cli.main(["sample", str(tmp_path / "r"), "-o", str(again), "--frames", "20", "--seed", "4"]) == 0
+  np.testing.assert_allclose(
+    read_csv(tmp_path / "r" / "samples" / "sample.csv").positions, read_csv(again).positions, atol=1e-5
+  )
