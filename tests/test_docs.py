@@ -68,8 +68,10 @@ def test_the_readme_has_examples_and_no_bare_chorjax_command():
 
 
 def test_every_readme_command_runs(tmp_path, monkeypatch):
+  """... and writes under runs/ (ignored by git): nothing lands beside the user's own files."""
   monkeypatch.chdir(tmp_path)
   run_documented(readme_commands(), tmp_path)
+  assert {p.name for p in tmp_path.iterdir()} == {"configs", "chorjax", "my_phrase.csv", "runs"}
 
 
 def test_the_guides_sweep_file_is_a_valid_sweep(tmp_path):
