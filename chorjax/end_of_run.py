@@ -8,6 +8,8 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from chorjax.controls import Controls
 from chorjax.families import family_of
 
@@ -24,10 +26,28 @@ class Finished:
 
 
 def standard(cfg) -> list:
-  """The hooks ``chorjax train`` ends a run of ``cfg`` with."""
+  """The hooks ``chorjax train`` ends a run of ``cfg`` with: the scale ceiling its draw needs recorded with
+  it (``sample.scale_cap``), then calibration and the sample drawn with it (``train.calibrate``), else the end
+  sample."""
+  first = [record_ceiling] if cfg.sample.scale_cap and family_of(cfg).calibrated else []
   if calibrates(cfg):
-    return [calibration]
-  return [end_sample] if cfg.sample.frames > 0 else []
+    return [*first, calibration]
+  return [*first, end_sample] if cfg.sample.frames > 0 else first
+
+
+def record_ceiling(run: Finished) -> dict:
+  """``sample.scale_cap``'s ceiling for the kept checkpoint, measured on the training takes and saved in the
+  run (``run.save_ceiling``): the run samples without its training data (moved, deleted, or a relative
+  path read from elsewhere)."""
+  from chorjax.controls import scale_ceiling
+  from chorjax.run import load_run, save_ceiling
+
+  kept = load_run(run.workdir)
+  q = run.cfg.sample.scale_cap
+  ceiling = scale_ceiling(kept.graphdef, kept.params, run.ds.train, run.cfg.data.seq_length, q)
+  if np.all(np.isfinite(ceiling)):  # an MSE head has no scales to hold
+    save_ceiling(run.workdir, kept.step, q, ceiling)
+  return {}
 
 
 def calibrates(cfg) -> bool:

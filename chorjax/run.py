@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import json
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -26,7 +27,7 @@ from chorjax.config import Config, config_from_dict
 from chorjax.controls import Controls, with_ceiling
 from chorjax.data.features import Features
 from chorjax.data.labels import Labels, take_condition
-from chorjax.errors import UserError, check_draw, load_json
+from chorjax.errors import UserError, atomic_write, check_draw, load_json
 from chorjax.families import family_of
 
 if TYPE_CHECKING:  # (the annotation only: a family reads runs back)
@@ -178,6 +179,10 @@ class Run:
     )
     if not needs and not sampling.scale_cap:
       return self
+    if not needs:  # the ceiling alone: recorded with the run at the end of training, for its kept checkpoint
+      ceiling = read_ceiling(self.workdir, self.step, sampling.scale_cap) if self.workdir else None
+      if ceiling is not None and ceiling.shape in ((self.features.dim,), (1,)):
+        return dataclasses.replace(self, features=dataclasses.replace(f, scale_ceiling=ceiling))
     from chorjax.data.dataset import load_dataset
 
     what = "a training range or pace" if needs else "a scale ceiling"
@@ -197,6 +202,28 @@ class Run:
     f = dataclasses.replace(f, **stats)
     f = with_ceiling(f, self.graphdef, self.params, ds.train, self.config.data.seq_length, sampling)
     return dataclasses.replace(self, features=f)
+
+
+CEILING = "scale_ceiling.json"  # sample.scale_cap's ceiling, measured on the training takes at the end of training
+
+
+def save_ceiling(workdir, step: int, quantile: float, ceiling) -> Path:
+  """Records ``sample.scale_cap``'s ceiling ``[S]`` of checkpoint ``step`` at ``quantile`` with the run."""
+  doc = {"step": int(step), "quantile": float(quantile), "ceiling": [float(x) for x in np.asarray(ceiling)]}
+  return atomic_write(Path(workdir) / CEILING, lambda p: p.write_text(json.dumps(doc) + "\n"))
+
+
+def read_ceiling(workdir, step: int, quantile: float) -> np.ndarray | None:
+  """The recorded ceiling of checkpoint ``step`` at ``quantile`` (None: not recorded for those, or unreadable:
+  then it is measured on the training takes again)."""
+  try:
+    doc = load_json((Path(workdir) / CEILING).read_text())
+    if doc["step"] != step or doc["quantile"] != quantile:
+      return None
+    ceiling = np.asarray(doc["ceiling"], np.float32)
+  except (OSError, ValueError, KeyError, TypeError):
+    return None
+  return ceiling if ceiling.ndim == 1 and np.all(np.isfinite(ceiling) & (ceiling > 0)) else None
 
 
 def _keeps_best(workdir: Path) -> bool:

@@ -8,12 +8,13 @@ import jax
 import numpy as np
 import onnx
 import pytest
-from helpers import BLENDER_PYTHON, GAN_NETWORKS, TINY
+from helpers import BLENDER_PYTHON, GAN_NETWORKS, QUICKSTART_SAMPLING, TINY
 
 from chorjax import cli
 from chorjax.api import load_run
 from chorjax.config import load_config
 from chorjax.data.csv import read_csv
+from chorjax.data.dataset import bundled_path
 from chorjax.data.features import Features
 from chorjax.errors import UserError
 from chorjax.export import OnnxDancer, sample_numbers
@@ -322,3 +323,30 @@ def test_blenders_gltf_importer_puts_the_joints_where_chorjax_put_them(tmp_path)
   got = np.stack([z_up[..., 0], z_up[..., 2], -z_up[..., 1]], -1)  # Blender's (x, y, z) is glTF's (x, -z, y)
   want, _ = gltf_positions(take)
   assert got.shape == want.shape and np.abs(got - want).max() <= 1e-4 * body_size(want)
+
+
+def test_a_run_moved_away_from_its_deleted_takes_samples_exports_and_goes_live(tmp_path):
+  """Everything the quick start's draw needs from the training takes (ranges, steps, pace, floor and the scale
+  ceiling of ``sample.scale_cap``) is saved with the run: a run folder moved elsewhere, its takes deleted,
+  still samples, exports and streams; a scale quantile it never recorded names the missing takes in one line."""
+  import shutil
+
+  from chorjax.live import Stream
+
+  takes = tmp_path / "takes"
+  shutil.copytree(bundled_path("cmu94"), takes)
+  sampling = [*QUICKSTART_SAMPLING, "sample.scale_cap=0.97", "model.mdn_basis=pca", "sample.ground=true"]
+  run_dir = trained(tmp_path / "run", "train.num_steps=4", f"data.dataset={takes}", *sampling)
+  moved = tmp_path / "elsewhere" / "run"
+  moved.parent.mkdir()
+  shutil.move(run_dir, moved)
+  shutil.rmtree(takes)
+  assert cli.main(["sample", str(moved), "-o", str(tmp_path / "s.csv"), "--frames", "30"]) == 0
+  assert cli.main(["export", str(moved), "-o", str(tmp_path / "d.onnx")]) == 0
+  run = load_run(moved)
+  controls = run.sampling()
+  assert controls.scale_cap and controls.pace and controls.clamp and controls.ground  # all of them in use
+  stream = Stream(run.ranged(controls), controls, motion_weight_vector(run.num_motions), seed=0, chunk=5)
+  assert np.isfinite(stream.next_chunk()).all()
+  with pytest.raises(UserError, match="training data, which cannot be read"):
+    run.ranged(controls.replace(scale_cap=0.5))
