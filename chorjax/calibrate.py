@@ -42,8 +42,11 @@ the whole library's.
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import json
+import math
+import sys
 from collections.abc import Sequence
 
 import jax
@@ -171,7 +174,7 @@ def search(
   skeleton,
   fps: float,
   grid: dict | None = None,
-  log=None,
+  tick=None,
   beyond: dict | None = None,
   known: Sequence | None = None,
   poses=None,
@@ -183,7 +186,8 @@ def search(
   rows are ``(settings, measures, objective)``, the grid's first, each setting once. The grid's settings are
   drawn side by side (``runtime.side_by_side``: ``draw`` must allow two threads).
   ``known``: ``(settings, measures)`` pairs measured before with the same draws (a calibration table of the same
-  checkpoint, frames, dancers and seed), not drawn again. ``poses``: see :func:`reference_rates`."""
+  checkpoint, frames, dancers and seed), not drawn again. ``poses``: see :func:`reference_rates`. ``tick``:
+  called with the number of settings in the table each time one is added (a progress bar)."""
   grid = grid or GRID
   beyond = BEYOND if beyond is None else beyond
   rates = reference_rates(reference, skeleton, fps, poses)
@@ -198,8 +202,8 @@ def search(
     if key not in drawn:
       found = found or measured(settings)
       drawn[key] = (settings, found, objective(found))
-      if log:
-        log(f"  {settings}: " + ", ".join(f"{k.replace('_', ' ')} {v:.3f}" for k, v in found.items()))
+      if tick:
+        tick(len(drawn))
     return drawn[key]
 
   settings = [dict(zip(grid, values)) for values in itertools.product(*grid.values())]
@@ -248,7 +252,7 @@ def calibrate(
       (``num`` default: ``CALIBRATION_DANCERS``, or ``LABELLED_DANCERS`` for a run conditioned on labels, whose
       dancers are conditioned on takes spread over the reference: ``Run.dancer_conditions``).
     grid: the values tried per control (default ``GRID``; ``foot_lock`` only where the run can lock feet).
-    log: where progress lines go.
+    log: where the summary line goes (a terminal also shows a progress bar).
     known: ``(settings, measures)`` already measured with these draws (see :func:`search`).
     noise_order, pace: the drawn noise's AR(1) filters, the governor's gain (default: the run's ``sample.*``).
 
@@ -280,19 +284,34 @@ def calibrate(
     sampling = run.sampling(**settings)
     return y_up(run.family.dance(ranged.graphdef, ranged.params, ranged.features, motion, key, frames, sampling))
 
-  log(f"calibrating {workdir} on {'the takes given' if data else 'its training takes'} ({len(reference)} takes)")
   positions = [y_up(m.positions) for m in reference]
   poses = None
   if run.labels is not None and not data:  # each dancer against its own labels' training takes
     poses = PosesByLabel(positions, f.skeleton, [run.take_condition(m.name) for m in reference], motion)
-  best, table = search(draw, positions, f.skeleton, run.fps, grid, log, known=known, poses=poses)
+  with _progress(math.prod(len(v) for v in grid.values())) as tick:
+    best, table = search(draw, positions, f.skeleton, run.fps, grid, tick, known=known, poses=poses)
   result = {"settings": best, "reference": list(data) if data else "training takes", "frames": frames, "num": num}
   result |= {"seed": seed, "table": [{"settings": s, **m, "objective": o} for s, m, o in table]}
   atomic_write(calibration_path(workdir), lambda p: p.write_text(json.dumps(result, indent=2)))
   row = min(table, key=lambda r: r[2])
   said = ", ".join(f"{k.replace('_', ' ')} {v:.3f}" for k, v in row[1].items())
-  log(f"calibrated: {best} ({said}); wrote {calibration_path(workdir)}")
+  on = f"{'the takes given' if data else 'its training takes'} ({len(reference)})"
+  log(f"calibrated on {on}: {best} ({said}); wrote {calibration_path(workdir)}")
   return result
+
+
+@contextlib.contextmanager
+def _progress(grid_size: int):
+  """A transient progress bar of the settings drawn on a terminal (the grid's, then the walks past its ends),
+  nothing elsewhere: ``tick(settings drawn so far)``."""
+  if not sys.stdout.isatty():
+    yield None
+    return
+  from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+  with Progress(TextColumn("calibrate"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), transient=True) as bar:
+    task = bar.add_task("calibrate", total=grid_size)
+    yield lambda n: bar.update(task, completed=n, total=max(grid_size, n))
 
 
 def calibrate_run(workdir, data=None, *, force: bool = False, noise_order=None, pace=None, **kw) -> dict:

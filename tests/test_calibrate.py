@@ -141,7 +141,8 @@ def test_calibrate_records_the_settings_and_the_run_uses_them_unless_told(run_di
   assert chosen["noise_order"] == 4 and {r["settings"]["noise_order"] for r in saved["table"]} == {4}
   assert chosen["pace"] == 2 and {r["settings"]["pace"] for r in saved["table"]} == {2}  # the run's own is 0.5
   # the grid's 4 settings, then the walk past the end its best noise smoothing is at (of two values, always one)
-  assert len(saved["table"]) > 4 and "calibrated:" in capsys.readouterr().out
+  out = capsys.readouterr().out
+  assert len(saved["table"]) > 4 and out.count("\n") == 1 and out.startswith("calibrated on its training takes")
   assert saved["table"][4]["settings"]["noise_smoothing"] in (0.5, 0.97)
   assert {"movement", "jitter", "speed", "root_travel", "poses", "objective"} <= set(saved["table"][0])
   row = chosen_calibration_row(run_dir)  # what compare ranks calibrated runs by
