@@ -275,6 +275,11 @@ def test_the_web_page_dances_offline_and_draws_what_onnxruntime_draws(quickstart
   assert cli.main(["export", str(quickstart), "--web", str(site), "--ort-web", str(ort_web)]) == 0
   assert sorted(p.name for p in site.iterdir()) == ["dancer.json", "dancer.onnx", "index.html", "ort"]
   assert "MIT License" in (site / "ort" / "LICENSE").read_text()
+  # takes named as numbers ("10", "9", ... "1" for ids 0, 1, ...): JavaScript lists such keys in numeric order
+  sidecar = json.loads((site / "dancer.json").read_text())
+  count = len(sidecar["motions"])
+  sidecar["motions"] = {str(count - i): i for i in range(count)}
+  (site / "dancer.json").write_text(json.dumps(sidecar))
 
   quiet = type("Quiet", (SimpleHTTPRequestHandler,), {"log_message": lambda *a: None})
   server = ThreadingHTTPServer(("127.0.0.1", 0), functools.partial(quiet, directory=str(site)))
@@ -289,6 +294,7 @@ def test_the_web_page_dances_offline_and_draws_what_onnxruntime_draws(quickstart
   report = json.loads(html.unescape(re.search(r'<pre id="selftest">(.*?)</pre>', dom, re.S).group(1)))
   assert report["errors"] == [] and not report["nan"], report["errors"]
   assert report["seconds"] >= 10 and report["shown"] >= 250 and report["moved"] > 0
+  assert report["menu"] == [f"{i}: {count - i}" for i in range(count)]  # motion i is the take of id i
 
   dancer = OnnxDancer(site / "dancer.onnx")
   gumbel, normal = page_numbers(0, 100, 1, dancer.meta["num_mixtures"], dancer.meta["normal_size"])
