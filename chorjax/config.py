@@ -364,7 +364,7 @@ class TrainConfig:
       "noise and dropout, as in threads)."
     ),
   )
-  num_steps: int = _field(1000, "total optimizer steps", minimum=0, resumable=True)
+  num_steps: int = _field(1000, "total optimizer steps", minimum=0, resumable=True, below=2**31)
   seed: int = _field(0, "seed of parameters, batches, dropout and noise", minimum=0, below=2**32)
   checkpoint_every: int = _field(500, "steps between checkpoints", minimum=1)
   keep_checkpoints: int = _field(3, "latest checkpoints kept (the best by val loss is kept too)", minimum=1)

@@ -370,13 +370,21 @@ def patience_hook(patience: int, save: Callable[[Loop], None], say: Callable[[st
   return check
 
 
+MAX_STEPS = 2**31  # train.num_steps and what train.epochs resolves to stay below it: the step counter is int32
+
+
 def sized_to_data(cfg: Config, ds: Dataset) -> tuple[Config, str | None]:
   """``train.epochs``: the config with ``train.num_steps`` set from the training frames, and a line saying so."""
   t = cfg.train
   if t.epochs <= 0:
     return cfg, None
   frames = sum(len(x) for _, x in ds.train)
-  steps = max(1, math.ceil(t.epochs * frames / (t.batch_size * cfg.data.seq_length)))
+  exact = t.epochs * frames / (t.batch_size * cfg.data.seq_length)
+  if not exact < MAX_STEPS:  # the step counter is a 32-bit integer (and inf or NaN is no count)
+    raise UserError(
+      f"train.epochs = {t.epochs:g}: {exact:,.0f} steps over {frames:,} training frames; at most {MAX_STEPS - 1:,}"
+    )
+  steps = max(1, math.ceil(exact))
   line = (
     f"train.epochs = {t.epochs:g}: {steps:,} steps ({frames:,} training frames, augmentations included, in "
     f"windows of {t.batch_size} x {cfg.data.seq_length})"

@@ -571,3 +571,16 @@ def test_a_one_element_list_of_seeds_is_that_seed_checked_as_the_seed_alone(tmp_
     assert cli.main([*args, f"train.seed={bad}", "--workdir", str(tmp_path / "x")]) == 2, bad
     _one_line(capsys, "train.seed")
   assert not (tmp_path / "x").exists()
+
+
+def test_a_step_count_past_the_32_bit_counter_is_refused_before_anything_is_written(tmp_path, capsys):
+  """``train.epochs=1e9`` became 43,750,000,000 steps and ``1e300`` a 301-digit count (the step counter is
+  int32); they, and such a ``train.num_steps``, are one line naming the key, exit 2, no workdir."""
+  (tmp_path / "base.toml").write_text("")
+  args = ["train", str(tmp_path / "base.toml"), *TINY, "log.tensorboard=false", "--workdir", str(tmp_path / "w")]
+  for bad, key in (("train.epochs=1e9", "train.epochs"), ("train.epochs=1e300", "train.epochs")):
+    assert cli.main([*args, bad]) == 2, bad
+    _one_line(capsys, key)
+  assert cli.main([*args, "train.num_steps=3000000000"]) == 2
+  _one_line(capsys, "train.num_steps")
+  assert not (tmp_path / "w").exists()
