@@ -166,13 +166,16 @@ class ModelConfig:
   )
   mdn_basis: str = _field(
     "features",
-    "the coordinates of the MDN's diagonal Gaussians: 'features' or 'pca' (the training frames' principal axes)",
+    "the coordinates of the MDN's diagonal Gaussians: 'features', 'pca' (the training frames' principal axes)"
+    " or 'acceleration' (the principal axes of their frame-to-frame accelerations)",
     more=(
-      "With 'pca' the basis is fixed at the start of training and saved with the run: a draw varies the "
-      "pose along directions the data varies together. The likelihood is the same quantity (the basis is a "
+      "With 'pca' or 'acceleration' the basis is fixed at the start of training and saved with the run. 'pca': "
+      "a draw varies the pose along directions the data varies together. 'acceleration': for an MDN that "
+      "carries its residuals (`model.mdn_memory`), whose scales are what the frame adds to the motion so far, "
+      "the directions the dancer's motion changes together. The likelihood is the same quantity (the basis is a "
       "rotation); an MSE head ignores the key."
     ),
-    choices=("features", "pca"),
+    choices=("features", "pca", "acceleration"),
   )
   mdn_memory: int = _field(
     0,
@@ -216,8 +219,9 @@ class ModelConfig:
 
   @property
   def pca_basis(self) -> bool:
-    """Whether the MDN lives in the training frames' principal axes (an MSE head has no basis)."""
-    return self.head == "mdn" and self.mdn_basis == "pca"
+    """Whether the MDN lives in a fixed basis of principal axes, the frames' or their accelerations' (an MSE
+    head has no basis)."""
+    return self.head == "mdn" and self.mdn_basis != "features"
 
   def __post_init__(self):
     if self.lstm_kernel == "cudnn" and (self.family, self.cell) != ("rnn", "lstm"):

@@ -107,6 +107,17 @@ def test_a_pca_run_fixes_its_basis_from_its_training_frames_and_never_trains_it(
     np.testing.assert_allclose(grounded[..., [0, 2]], pos[..., [0, 2]], atol=1e-4)  # only heights move
 
 
+def test_an_acceleration_basis_is_the_principal_axes_of_the_frames_second_differences(tmp_path):
+  """``model.mdn_basis = "acceleration"``: the axes of how the training frames change from one frame to the
+  next but one (what an MDN carrying its residuals draws), not of the frames; fixed like the pose axes."""
+  cfg = tiny_config("train.num_steps=3", "log.tensorboard=false", "model.mdn_basis=acceleration", "model.mdn_memory=2")
+  train_and_evaluate(cfg, tmp_path / "run")
+  train = [z for _, z in load_dataset(cfg.data).train]
+  basis = np.asarray(load_run(tmp_path / "run").params["head"]["basis"])
+  np.testing.assert_allclose(basis, principal_axes([np.diff(z, 2, axis=0) for z in train]), atol=1e-6)
+  assert np.abs(basis - principal_axes(train)).max() > 0.1  # another basis than the frames'
+
+
 def test_an_mse_head_ignores_the_quickstarts_basis_and_trains(tmp_path):
   """The quickstart with `model.head=mse` (the MDN-vs-MSE comparison): the basis is the MDN's, so an MSE head
   has none (as it has no mixtures), and trains."""

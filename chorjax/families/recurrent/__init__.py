@@ -35,10 +35,15 @@ class Recurrent(Family):
     return create_model(cfg.model, features.dim, num_motions, cfg.train.seed)
 
   def create_state(self, cfg, ds):
+    import numpy as np
+
     from chorjax.data.features import principal_axes
     from chorjax.families.recurrent.steps import create_train_state
 
-    basis = principal_axes([z for _, z in ds.train]) if cfg.model.pca_basis else None
+    basis = None
+    if cfg.model.pca_basis:  # the frames' principal axes, or their accelerations' (model.mdn_basis)
+      lag = 2 if cfg.model.mdn_basis == "acceleration" else 0
+      basis = principal_axes([np.diff(z, lag, axis=0) for _, z in ds.train])
     return create_train_state(cfg, ds.features.dim, ds.num_motions, basis)
 
   def parts(self, cfg, ds):

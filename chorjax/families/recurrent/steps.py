@@ -82,15 +82,16 @@ class StepSpec:
 
 def create_train_state(cfg: Config, dim: int, num_motions: int, basis=None) -> tuple[dict, StepSpec]:
   """``({params, opt_state, step}, spec)`` for a fresh run of ``cfg`` (the rnn family) on ``dim`` features;
-  ``basis``: the MDN's ``[D, D]`` coordinates where ``model.mdn_basis = "pca"`` (``features.principal_axes``
-  of the training frames)."""
+  ``basis``: the MDN's ``[D, D]`` coordinates where ``model.mdn_basis`` is not "features"
+  (``features.principal_axes`` of the training frames or of their accelerations)."""
   model = create_model(cfg.model, dim, num_motions, cfg.train.seed)
   graphdef, params = nnx.split(model, nnx.Param)
   params = nnx.to_pure_dict(params)
   if cfg.model.pca_basis:
     if basis is None or np.shape(basis) != (dim, dim):
       raise ValueError(
-        f"model.mdn_basis = 'pca' needs a [{dim}, {dim}] basis, got {basis if basis is None else np.shape(basis)}"
+        f"model.mdn_basis = {cfg.model.mdn_basis!r} needs a [{dim}, {dim}] basis, "
+        f"got {basis if basis is None else np.shape(basis)}"
       )
     params["head"]["basis"] = jnp.asarray(basis, jnp.float32)
   tx, schedule = create_optimizer(cfg)
