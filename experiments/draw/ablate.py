@@ -4,17 +4,21 @@ variant, and the figures that judge a dance go to ``results.json`` beside this f
 there: a run and variant already measured is skipped).
 
   python experiments/draw/ablate.py RUN [RUN ...] [--variants plain shipped ...] [--frames 10000]
-  python experiments/draw/ablate.py --table > experiments/draw/table.md
+  python experiments/draw/ablate.py --table      # every run, as markdown
+  python experiments/draw/ablate.py --summary    # over training seeds: mean [least, most]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import re
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
+
+import numpy as np
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results.json"
@@ -77,6 +81,51 @@ def measure(run: Path, variant: str, frames: int, seeds: list[int]) -> dict:
     return figures(json.loads(out.read_text()))
 
 
+def summary(results: dict) -> str:
+  """The table over training seeds: one row a recipe and draw (a run's name less its ", seed N"), each cell
+  the mean and, with several seeds, [the least, the most]."""
+  groups: dict = {}
+  for run, variants in results.items():
+    recipe = re.sub(r", seed \d+$", "", run)
+    for variant, f in variants.items():
+      groups.setdefault((recipe, variant), []).append(f)
+  head = "| recipe | draw | seeds | " + " | ".join(HEADERS) + " |"
+  lines = [head, "|" + "---|" * (3 + len(HEADERS))]
+  for (recipe, variant), rows in sorted(groups.items()):
+    cells = []
+    for k in SUMMARY:
+      v = [r[k] for r in rows]
+      digits = 1 if k == "heldout_loss" else 2
+      spread = f" [{min(v):.{digits}f}, {max(v):.{digits}f}]" if len(v) > 1 else ""
+      cells.append(f"{np.mean(v):.{digits}f}{spread}")
+    lines.append(f"| {recipe} | {variant} | {len(rows)} | " + " | ".join(cells) + " |")
+  return "\n".join(lines)
+
+
+SUMMARY = (
+  "jitter",
+  "speed",
+  "root_travel",
+  "movement_min",
+  "movement_max",
+  "fid_k",
+  "fid_g",
+  "root_step_max",
+  "heldout_loss",
+)
+HEADERS = (
+  "jitter",
+  "speed",
+  "root travel",
+  "calmest 1,000",
+  "busiest 1,000",
+  "FID_k / train",
+  "FID_g / train",
+  "largest root step",
+  "held-out NLL",
+)
+
+
 def table(results: dict) -> str:
   lines = [
     "| run | draw | jitter | speed | root travel | calmest / busiest 1,000 frames | FID_k / train | FID_g / train "
@@ -101,10 +150,11 @@ def main() -> None:
   p.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
   p.add_argument("--name", help="the name a run is recorded under (default: its folder's parent/name)")
   p.add_argument("--table", action="store_true", help="print the table of results.json as markdown")
+  p.add_argument("--summary", action="store_true", help="print it over training seeds (mean and range)")
   args = p.parse_args()
   results = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
-  if args.table:
-    print(table(results))
+  if args.table or args.summary:
+    print(summary(results) if args.summary else table(results))
     return
   for run in args.runs:
     name = args.name or f"{run.parent.name}/{run.name}"

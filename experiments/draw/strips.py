@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from _results import end_strip, real_strip  # noqa: E402
+from _results import end_strip, real_strip
 
 HERE = Path(__file__).resolve().parent
 
