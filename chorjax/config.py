@@ -777,6 +777,45 @@ def parse_override(text: str) -> tuple[str, Any]:
   return key, value
 
 
+MAX_BASES = 16  # configs a file may stand on, one on another (base = "...")
+
+
+def _apply_file(sections: dict[str, dict], path: Path, below: tuple = ()) -> str:
+  """Merges the config file ``path`` into ``sections``: first the file its top-level ``base = "FILE"`` names
+  (a path relative to it; that file's own base first, and so on), then its own keys. Returns its name (its
+  ``name``, else its file name's stem)."""
+  try:
+    text = read_text(path, "config")  # a byte-order mark some editors write is not TOML; pipes refused
+  except OSError as e:
+    raise UserError(f"{path}: cannot read ({type(e).__name__})") from None
+  try:
+    tree = load_toml(text)
+  except tomllib.TOMLDecodeError as e:
+    raise UserError(f"{path}: invalid TOML: {e}") from None
+
+  def where_of(section, key):
+    line = _line_of(text, section, key) if key else _line_of_section(text, section)
+    return f"{path}:{line}" if line else str(path)
+
+  base = tree.pop("base", None)
+  if base is not None:
+    where = f"{path}:{_line_of_section(text, 'base') or 1}"
+    if not isinstance(base, str) or not base:
+      raise UserError(f"{where}: key 'base': expected the path of another config file")
+    below = (*below, path.resolve())
+    target = path.parent / base
+    if target.resolve() in below or len(below) > MAX_BASES:
+      raise UserError(f"{where}: base {base!r} leads back to itself ({' -> '.join(p.name for p in below)})")
+    if not target.is_file():
+      raise UserError(f"{where}: base {base!r}: no such file beside it ({target})")
+    _apply_file(sections, target, below)
+  _apply(sections, tree, where_of)
+  name = tree.get("name", path.stem)
+  if not isinstance(name, str):
+    raise UserError(f"{path}: key 'name': expected str")
+  return name
+
+
 def load_config(path: str | Path | Config | None = None, overrides: Sequence[str] = ()) -> Config:
   """Loads a TOML config file (or the defaults, or a loaded ``Config``) and applies dotted ``KEY=VALUE``
   overrides.
@@ -791,24 +830,7 @@ def load_config(path: str | Path | Config | None = None, overrides: Sequence[str
     _apply(sections, {k: v for k, v in path.to_dict().items() if k != "name"}, lambda s, k: "the given config")
     name = path.name
   elif path is not None:
-    path = Path(path)
-    try:
-      text = read_text(path, "config")  # a byte-order mark some editors write is not TOML; pipes refused
-    except OSError as e:
-      raise UserError(f"{path}: cannot read ({type(e).__name__})") from None
-    try:
-      tree = load_toml(text)
-    except tomllib.TOMLDecodeError as e:
-      raise UserError(f"{path}: invalid TOML: {e}") from None
-
-    def where_of(section, key):
-      line = _line_of(text, section, key) if key else _line_of_section(text, section)
-      return f"{path}:{line}" if line else str(path)
-
-    _apply(sections, tree, where_of)
-    name = tree.get("name", path.stem)
-    if not isinstance(name, str):
-      raise UserError(f"{path}: key 'name': expected str")
+    name = _apply_file(sections, Path(path))
   for item in overrides:
     key, value = parse_override(item)
     if key == "name":

@@ -74,6 +74,35 @@ def test_shipped_configs_load_and_overrides_apply(capsys):
   assert load_config(None, ["model.cell=gru"]).model.cell == "gru"
 
 
+def test_a_config_stands_on_a_base_and_states_only_what_differs(tmp_path, capsys):
+  """``base = "FILE"`` (relative to the config): the base's keys, then the config's own; its name is its own.
+  configs/library.toml is the quickstart and its library keys; ``config show`` prints the resolved whole; a
+  missing base, a base that leads back to itself, or a bad key in the base is one line naming the file."""
+  quick, library = (load_config(ROOT / "configs" / f"{n}.toml") for n in ("quickstart", "library"))
+  assert library.name == "library" and library.model == dataclasses.replace(quick.model, condition_every_frame=True)
+  assert (library.data.dataset, library.train.epochs, library.optim) == ("bandai-motion", 80.0, quick.optim)
+  assert cli.main(["config", "show", str(ROOT / "configs" / "library.toml")]) == 0
+  shown = capsys.readouterr().out
+  assert "base" not in shown and 'name = "library"' in shown and "hidden_size = 192" in shown
+  (tmp_path / "deep").mkdir()
+  (tmp_path / "deep" / "mine.toml").write_text('base = "../parent.toml"\n[optim]\nlr = 1e-4\n')
+  (tmp_path / "parent.toml").write_text('name = "parent"\n[model]\ncell = "gru"\n[optim]\nlr = 5e-3\n')
+  mine = load_config(tmp_path / "deep" / "mine.toml")
+  assert (mine.name, mine.model.cell, mine.optim.lr) == ("mine", "gru", 1e-4)
+  (tmp_path / "parent.toml").write_text('base = "deep/mine.toml"\n')
+  (tmp_path / "lost.toml").write_text('\nbase = "nowhere.toml"\n')
+  (tmp_path / "badbase.toml").write_text('base = "bad.toml"\n')
+  (tmp_path / "bad.toml").write_text("[model]\ncel = 'gru'\n")
+  for path, said in (
+    (tmp_path / "deep" / "mine.toml", "leads back to itself"),
+    (tmp_path / "lost.toml", "lost.toml:2: base 'nowhere.toml': no such file"),
+    (tmp_path / "badbase.toml", "bad.toml:2: unknown key 'model.cel'"),
+  ):
+    assert cli.main(["config", "show", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and said in err, err
+
+
 # ---------------------------------------------------------------- the step
 
 
