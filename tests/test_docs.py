@@ -142,3 +142,14 @@ def test_the_readme_results_table_names_the_command_that_reproduces_it():
   for image in _shown_images(ROOT / "README.md"):
     assert image.exists(), image
   assert len(text.splitlines()) <= 200
+
+
+def test_the_readmes_install_brings_every_extra_its_own_commands_need():
+  """The quick start's one install serves the README's own commands: ``-o dance.glb`` and ``chorjax export``
+  need the export extra, ``chorjax blender-addon`` and ``chorjax live`` the live one, videos and strips viz."""
+  text = (ROOT / "README.md").read_text()
+  extras = set(re.search(r"pip install -e '\.\[([a-z,]+)\]' && \.venv/bin/chorjax train", text).group(1).split(","))
+  needs = {"export": ("chorjax export", ".glb"), "live": ("blender-addon", "chorjax live"), "viz": (".mp4", "--strip")}
+  for extra, marks in needs.items():
+    if any(m in text for m in marks):
+      assert extra in extras, (extra, [m for m in marks if m in text])
