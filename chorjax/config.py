@@ -849,6 +849,8 @@ def load_config(path: str | Path | Config | None = None, overrides: Sequence[str
 def check_combinations(config: Config) -> None:
   """Keys that make sense alone but not together, refused when a config is loaded (before any training;
   runs already saved with them still load: their sampling says so when asked)."""
+  if not config.data.cache.strip():  # an empty path is the working directory: entries among the user's files
+    raise UserError("key 'data.cache': empty; give auto, off, or a folder")
   parts, size, family = config.train.batch_parts, config.train.batch_size, config.model.family
   if parts > 1 and size % parts:
     raise UserError(f"key 'train.batch_parts': {parts} does not divide train.batch_size = {size}")

@@ -584,3 +584,13 @@ def test_a_step_count_past_the_32_bit_counter_is_refused_before_anything_is_writ
   assert cli.main([*args, "train.num_steps=3000000000"]) == 2
   _one_line(capsys, "train.num_steps")
   assert not (tmp_path / "w").exists()
+
+
+def test_an_empty_cache_path_is_refused_not_the_working_directory(tmp_path, capsys, monkeypatch):
+  """``data.cache=""`` was the working directory: cache entries among the user's files. It is one line."""
+  monkeypatch.chdir(tmp_path)
+  (tmp_path / "base.toml").write_text("")
+  for empty in ('data.cache=""', "data.cache=' '"):
+    assert cli.main(["train", "base.toml", *TINY, empty, "--workdir", "w"]) == 2
+    _one_line(capsys, "data.cache")
+  assert sorted(p.name for p in tmp_path.iterdir()) == ["base.toml"]
