@@ -13,6 +13,10 @@ from chorjax.errors import UserError, refuse_existing
 from chorjax.output import load_character
 
 
+# Names that say a file of another format: refused as -o (they would become a folder of CSVs)
+FILE_SUFFIXES = (".csv", ".npz", ".glb", ".gltf", ".html", ".png", ".gif", ".mp4", ".c3d", ".amc", ".asf", ".json")
+
+
 def convert(
   inputs: Sequence[str],
   output,
@@ -38,6 +42,11 @@ def convert(
   from chorjax.data.dataset import read_motions, resolve_files
 
   out = Path(output)
+  if out.suffix.lower() in FILE_SUFFIXES and not out.is_dir():  # a file's name, not a folder for the CSVs
+    raise UserError(
+      f"-o {out}: data convert writes a folder of CSVs or one .bvh file; for {out.suffix} read the takes and "
+      "write them with chorjax sample's or Motion.write's formats"
+    )
   character = load_character(skeleton, out)
   if joint_map is not None and joints != "mpii16" and character is None:
     raise UserError(f"{joint_map}: a joint map places the 16 training joints: give --joints mpii16 with it")

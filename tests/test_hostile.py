@@ -594,3 +594,17 @@ def test_an_empty_cache_path_is_refused_not_the_working_directory(tmp_path, caps
     assert cli.main(["train", "base.toml", *TINY, empty, "--workdir", "w"]) == 2
     _one_line(capsys, "data.cache")
   assert sorted(p.name for p in tmp_path.iterdir()) == ["base.toml"]
+
+
+def test_data_convert_to_a_file_name_it_cannot_write_is_refused_not_a_folder(tmp_path, capsys):
+  """``data convert X -o conv.glb`` made a folder named conv.glb holding a CSV; a name that says another
+  format is one line now, and nothing is made."""
+  from chorjax.data.dataset import bundled_path
+
+  take = str(bundled_path("cmu94") / "94_01_skeleton_3d.csv")
+  for name in ("conv.glb", "conv.CSV", "conv.npz"):
+    assert cli.main(["data", "convert", take, "-o", str(tmp_path / name)]) == 2, name
+    _one_line(capsys, name)
+  assert not list(tmp_path.iterdir())
+  assert cli.main(["data", "convert", take, "-o", str(tmp_path / "takes.v2")]) == 0  # a folder with a dot
+  assert (tmp_path / "takes.v2" / "94_01_skeleton_3d.csv").is_file()
