@@ -12,7 +12,6 @@ import numpy as np
 from chorjax.errors import UserError, refuse_existing
 from chorjax.output import load_character
 
-
 # Names that say a file of another format: refused as -o (they would become a folder of CSVs)
 FILE_SUFFIXES = (".csv", ".npz", ".glb", ".gltf", ".html", ".png", ".gif", ".mp4", ".c3d", ".amc", ".asf", ".json")
 
