@@ -16,7 +16,7 @@ from helpers import headless, tiny_config
 
 from chorjax import cli
 from chorjax.controls import Bounds, Draw, Pacing
-from chorjax.data.csv import read_csv
+from chorjax.data.csv import read_csv, write_csv
 from chorjax.data.dataset import bundled_path, load_dataset
 from chorjax.data.npz import read_npz
 from chorjax.families.recurrent import generation
@@ -577,3 +577,22 @@ def test_hostile_take_names_and_titles_run_no_script_in_the_player(tmp_path):
   assert report["changed"] and report["frames"][1] > report["frames"][0] and len(report["boxes"]) == 2
   assert "&lt;img src=x onerror" in dom and "<img src=" not in dom  # the name shown as text in its caption
   assert dom.count("__DATA__") == 2  # the title, as text (in <title> and the heading)
+
+
+def test_the_players_camera_follows_a_dancer_who_travels(tmp_path):
+  """A dancer who travels ten body heights away (as a free-running sample can) stays on the player's canvas:
+  the camera follows it. With the camera fixed at the take's centre, the figure left the canvas."""
+  from helpers import headless
+
+  take = read_csv(TAKE)
+  pos = take.positions.copy()
+  height = float(np.ptp(pos[..., 1]))
+  pos[..., 0] += np.linspace(0, 10 * height, len(pos))[:, None]  # walks off along x
+  path = tmp_path / "travels.csv"
+  write_csv(take.replace(positions=pos), path)
+  html = tmp_path / "player.html"
+  assert cli.main(["render", str(path), "-o", str(html)]) == 0
+  for frame in (0, len(pos) - 40):
+    dom = headless(tmp_path / "profile", f"file://{html}#selftest@{frame}", "--virtual-time-budget=3000", "--dump-dom")
+    report = json.loads(dom.stdout.split('<pre id="selftest">')[1].split("</pre>")[0])
+    assert report["errors"] == [] and report["inside"] == [1.0], (frame, report)

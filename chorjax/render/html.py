@@ -117,8 +117,9 @@ _FIGURE = r"""  var view = { yaw: 0.6, pitch: 0.25, zoom: 1.5 };
       p.cv.width = Math.round(p.cv.clientWidth * dpr); p.cv.height = Math.round(h * dpr); p.dpr = dpr;
     });
   }
-  function draw(p, t) {  // frame t of p.pos
+  function draw(p, t) {  // frame t of p.pos (a camera that follows: p.camx / p.camz, its centre at each frame)
     var ctx = p.ctx, W = p.cv.width, H = p.cv.height, J = p.m.joints, px = p.dpr || 1;
+    if (p.camx) { p.cx = p.camx[t]; p.cz = p.camz[t]; }
     ctx.fillStyle = '#ffffff'; ctx.fillRect(0, 0, W, H);
     ctx.strokeStyle = '#e4e4e4'; ctx.lineWidth = px;  // floor grid
     for (var g = -4; g <= 4; g++) {
@@ -132,8 +133,9 @@ _FIGURE = r"""  var view = { yaw: 0.6, pitch: 0.25, zoom: 1.5 };
     ctx.fillStyle = '#c0392b';
     pts.forEach(function (q) { ctx.beginPath(); ctx.arc(q[0], q[1], 3 * px, 0, 2 * Math.PI); ctx.fill(); });
   }
-  function proj3(p, gx, gy, gz) {  // grid points are in viewer units around the take's centre
-    return project(p, p.cx + gx / (p.m.scale * 2), p.y0, p.cz + gz / (p.m.scale * 2));
+  function proj3(p, gx, gy, gz) {  // grid lines in viewer units, fixed on the floor, around the camera's centre
+    var cell = 1 / (p.m.scale * 2);
+    return project(p, Math.round(p.cx / cell) * cell + gx * cell, p.y0, Math.round(p.cz / cell) * cell + gz * cell);
   }
   function line(ctx, a, b) { ctx.beginPath(); ctx.moveTo(a[0], a[1]); ctx.lineTo(b[0], b[1]); ctx.stroke(); }
   function orbit(players, render) {  // mouse drag orbits, the wheel zooms
@@ -178,12 +180,17 @@ __STYLE__</head><body>
     var cap = document.createElement('figcaption'); cap.textContent = m.title + ' (' + m.frames + ' frames, ' + m.fps + ' fps)';
     var cv = document.createElement('canvas');
     fig.appendChild(cap); fig.appendChild(cv); document.getElementById('grid').appendChild(fig);
-    var pos = decode(m.data), J = m.joints, cx = 0, cz = 0, ymin = Infinity;
-    for (var t = 0; t < m.frames; t++) {  // fixed camera: centre of the whole take on the floor
-      cx += pos[(t * J) * 3]; cz += pos[(t * J) * 3 + 2];
+    var pos = decode(m.data), J = m.joints, ymin = Infinity, T = m.frames, half = Math.round(m.fps);
+    var sx = new Float64Array(T + 1), sz = new Float64Array(T + 1), camx = new Float32Array(T), camz = new Float32Array(T);
+    for (var t = 0; t < T; t++) {  // the camera follows the dancer: the first joint's mean over about 2 s around t
+      sx[t + 1] = sx[t] + pos[(t * J) * 3]; sz[t + 1] = sz[t] + pos[(t * J) * 3 + 2];
       for (var j = 0; j < J; j++) ymin = Math.min(ymin, pos[(t * J + j) * 3 + 1]);
     }
-    return { m: m, cv: cv, ctx: cv.getContext('2d'), pos: pos, cx: cx / m.frames, cz: cz / m.frames, y0: ymin };
+    for (var u = 0; u < T; u++) {
+      var a = Math.max(0, u - half), b = Math.min(T, u + half + 1);
+      camx[u] = (sx[b] - sx[a]) / (b - a); camz[u] = (sz[b] - sz[a]) / (b - a);
+    }
+    return { m: m, cv: cv, ctx: cv.getContext('2d'), pos: pos, cx: camx[0], cz: camz[0], camx: camx, camz: camz, y0: ymin };
   });
   var maxFrames = Math.max.apply(null, MOTIONS.map(function (m) { return m.frames; }));
   var fps = MOTIONS.length ? MOTIONS[0].fps : 30;
@@ -208,7 +215,9 @@ __FIGURE__
   window.addEventListener('resize', function () { fit(players); render(); });
   setPlaying(true);  // autoplay, looped
 
-  if (location.hash === '#selftest') {
+  var at = /^#selftest(?:@(\d+))?$/.exec(location.hash);  // #selftest@N: from frame N
+  if (at) {
+    if (at[1]) { state.frame = Math.min(parseInt(at[1], 10), maxFrames - 1); render(); }
     var signature = function () {
       var sig = 0, nonblank = 0;
       players.forEach(function (p) {
@@ -227,7 +236,16 @@ __FIGURE__
         errors: window.__errors, nonblank: before[1], changed: before[0] !== after[0], frames: [f0, state.frame],
         viewport: [window.innerWidth, window.innerHeight],
         boxes: players.map(function (p) { var r = p.cv.getBoundingClientRect(); return [r.left, r.top, r.right, r.bottom]; }),
-        pixels: players.map(function (p) { return [p.cv.width, p.cv.height]; })
+        pixels: players.map(function (p) { return [p.cv.width, p.cv.height]; }),
+        inside: players.map(function (p) {  // the share of the figure's joints on its canvas at the last frame
+          var t = Math.min(state.frame, p.m.frames - 1), J = p.m.joints, n = 0;
+          if (p.camx) { p.cx = p.camx[t]; p.cz = p.camz[t]; }
+          for (var j = 0; j < J; j++) {
+            var q = project(p, p.pos[(t * J + j) * 3], p.pos[(t * J + j) * 3 + 1], p.pos[(t * J + j) * 3 + 2]);
+            if (q[0] >= 0 && q[0] <= p.cv.width && q[1] >= 0 && q[1] <= p.cv.height) n++;
+          }
+          return n / J;
+        })
       });
     }, 700);
   }
