@@ -6,6 +6,7 @@ User errors print one line (``chorjax: error: ...``) and exit with code 2, witho
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import math
 import os
@@ -105,13 +106,37 @@ def _sample(args) -> int:
   return 0
 
 
+def _serve(site, port: int) -> int:
+  """Serves the folder ``site`` on this machine only (127.0.0.1) until interrupted."""
+  import functools
+  from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
+
+  quiet = type("Quiet", (SimpleHTTPRequestHandler,), {"log_message": lambda *a: None})
+  try:
+    server = ThreadingHTTPServer(("127.0.0.1", port), functools.partial(quiet, directory=str(site)))
+  except OSError as e:
+    raise api.UserError(f"--serve {port}: cannot listen on 127.0.0.1:{port} ({e.strerror or e})") from None
+  print(f"wrote {site}; serving it at http://127.0.0.1:{server.server_address[1]}/ (Ctrl-C stops)", flush=True)
+  with server, contextlib.suppress(KeyboardInterrupt):
+    server.serve_forever()
+  return 0
+
+
 def _export(args) -> int:
   common = {"controls": _controls(args), "checkpoint": args.checkpoint, "force": args.force}
   if args.web is not None:
     if args.output is not None or args.batch != 1:
       raise api.UserError("--web writes a folder with one dancer: no -o or --batch with it")
-    print(f"wrote {api.write_web(args.workdir, args.web, ort_web=args.ort_web, **common)} (open index.html)")
-    return 0
+    site = api.write_web(args.workdir, args.web, ort_web=args.ort_web, **common)
+    if args.serve is None:
+      print(
+        f"wrote {site}: a browser loads its dancer only from a server, not from disk: serve it with "
+        f"--serve, or python3 -m http.server --directory {site}"
+      )
+      return 0
+    return _serve(site, args.serve)
+  if args.serve is not None:
+    raise api.UserError("--serve serves the page --web DIR writes: give --web DIR")
   if args.output is None:
     raise api.UserError("export: give -o DANCER.onnx or --web DIR")
   print("wrote " + ", ".join(map(str, api.write_onnx(args.workdir, args.output, batch=args.batch, **common))))
@@ -460,6 +485,14 @@ def _add_export_command(sub) -> None:
   )
   p.add_argument(
     "--web", metavar="DIR", help="instead: a static folder (index.html, the dancer, onnxruntime-web) to serve"
+  )
+  p.add_argument(
+    "--serve",
+    type=_in_range(0, 65535),
+    nargs="?",
+    const=8000,
+    metavar="PORT",
+    help="--web: then serve the folder at http://127.0.0.1:PORT/ until Ctrl-C (default 8000; 0: any free port)",
   )
   p.add_argument(
     "--ort-web",

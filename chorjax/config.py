@@ -166,8 +166,8 @@ class ModelConfig:
   )
   mdn_basis: str = _field(
     "features",
-    "the coordinates of the MDN's diagonal Gaussians: 'features', 'pca' (the training frames' principal axes)"
-    " or 'acceleration' (the principal axes of their frame-to-frame accelerations)",
+    "the MDN's coordinates: 'features', 'pca' (the training frames' principal axes) or 'acceleration' (their"
+    " accelerations')",
     more=(
       "With 'pca' or 'acceleration' the basis is fixed at the start of training and saved with the run. 'pca': "
       "a draw varies the pose along directions the data varies together. 'acceleration': for an MDN that "

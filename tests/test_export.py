@@ -356,3 +356,34 @@ def test_a_run_moved_away_from_its_deleted_takes_samples_exports_and_goes_live(t
   assert np.isfinite(stream.next_chunk()).all()
   with pytest.raises(UserError, match="training data, which cannot be read"):
     run.ranged(controls.replace(scale_cap=0.5))
+
+
+def test_the_web_export_says_it_needs_a_server_and_serves_itself(quickstart, tmp_path, capsys):
+  """Opened from disk the page cannot fetch its dancer: ``--web DIR`` says so and how to serve it, and
+  ``--web DIR --serve PORT`` serves it on 127.0.0.1 (index, dancer and sidecar) until interrupted."""
+  import signal
+  import subprocess
+  import sys
+  import urllib.request
+
+  ort_web = NODE_MODULES / "node_modules" / "onnxruntime-web" / "dist"
+  if not ort_web.is_dir():
+    pytest.fail(f"onnxruntime-web is missing: .ci/run installs it (npm install --prefix {NODE_MODULES} ...)")
+  assert cli.main(["export", str(quickstart), "--web", str(tmp_path / "a"), "--ort-web", str(ort_web)]) == 0
+  said = capsys.readouterr().out
+  assert "not from disk" in said and "--serve" in said and "http.server" in said
+  assert cli.main(["export", str(quickstart), "-o", str(tmp_path / "d.onnx"), "--serve"]) == 2
+  assert "--web" in capsys.readouterr().err
+  site = tmp_path / "b"
+  args = ["export", str(quickstart), "--web", str(site), "--ort-web", str(ort_web), "--serve", "0"]
+  code = f"import sys; from chorjax import cli; sys.exit(cli.main({args!r}))"
+  proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+  try:
+    line = proc.stdout.readline()
+    url = line.split("serving it at ")[1].split()[0]
+    for name in ("index.html", "dancer.json", "dancer.onnx"):
+      with urllib.request.urlopen(url + name, timeout=30) as r:
+        assert r.read() == (site / name).read_bytes()
+  finally:
+    proc.send_signal(signal.SIGINT)
+    assert proc.wait(timeout=30) == 0
