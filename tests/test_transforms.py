@@ -265,3 +265,27 @@ def test_paced_grounding_moves_the_root_no_faster_than_the_take_does(take):
   touching = (contacts[late] > 0.5).any(-1)
   err = np.abs(paced[late] - eased[late])[..., SK.root, 1][touching]
   assert touching.mean() > 0.5 and np.median(err) < 1e-3 * leg, (late, np.median(err))
+
+
+def test_a_grounded_decode_lets_no_foot_sink_below_the_floor():
+  """``decode(ground=True)``: a dance carried half a leg down for two seconds, swings and jumps included, has
+  no foot more than 2% of the leg below the training floor (the quickstart's own samples sank a third of a
+  thigh where no foot was in contact), and the take as it is stays where it was."""
+  from helpers import tiny_config
+
+  from chorjax.data.dataset import load_dataset
+  from chorjax.data.features import leg_length
+
+  ds = load_dataset(tiny_config("data.representation=canonical").data)
+  f, (_, z) = ds.features, ds.train[0]
+  real = np.asarray(f.canonical(f.decode(z)))
+  leg = leg_length(real, f.skeleton)
+  down = np.array(z, copy=True)
+  heights = [3, *range(5, 4 + 3 * (f.skeleton.num_joints - 1), 3)]  # the root's and every joint's height
+  down[100:160, heights] -= 0.5 * leg / f.std[heights]  # half a leg lower
+  feet = list(f.skeleton.feet)
+  for frames, most in ((down, 0.02 * leg), (z, 0.02 * leg)):
+    grounded = np.asarray(f.canonical(f.decode(frames, ground=True)))
+    assert (f.floor - grounded[:, feet, 1].min(-1)).max() <= most
+  unlifted = np.asarray(f.canonical(f.decode(down, ground=False)))
+  assert (f.floor - unlifted[:, feet, 1].min(-1)).max() > 0.3 * leg  # it did sink before grounding

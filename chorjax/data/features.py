@@ -413,6 +413,9 @@ def _represent(pos, skeleton: Skeleton, representation: str):
 _STATIC = ("representation", "skeleton", "up_axis")
 
 
+SINK = 0.015  # decode(ground=True): no foot further below the training floor than this share of the leg
+
+
 @functools.partial(jax.jit, static_argnames=(*_STATIC, "rigid", "ground", "finish"))
 def _decoded(
   z, mean, std, place, lengths, floor, inv_scale, max_rise, *, representation, skeleton, up_axis, rigid, ground, finish
@@ -424,7 +427,8 @@ def _decoded(
     pos = transforms.rigid_bones(pos, skeleton.parents, lengths)
   if ground:
     contacts = rep[..., -len(skeleton.feet) :]  # canonical features end with the feet's contacts
-    pos = transforms.ground_feet(pos, contacts, skeleton.feet, floor, root=skeleton.root, max_rise=max_rise)
+    sink = None if lengths is None else SINK * chain_length(lengths, skeleton, skeleton.feet[0])
+    pos = transforms.ground_feet(pos, contacts, skeleton.feet, floor, root=skeleton.root, max_rise=max_rise, sink=sink)
   return _uncanonical(pos, up_axis, inv_scale) if finish else pos
 
 

@@ -331,22 +331,24 @@ def ground_feet(
   width: int = 2,
   root: int | None = None,
   max_rise: float | None = None,
+  sink: float | None = None,
 ):
   """The dance moved up or down so that a foot in contact stands on the floor (y-up positions): at each frame
   where feet are in contact (> 0.5) the body is shifted by ``floor`` minus the lowest such foot's height;
   frames without contact (a jump, a swing) keep the last shift, fading by ``hold`` per frame, and the shift
   is averaged over ``2 * width + 1`` frames so that it never jumps. Poses, bone lengths and the horizontal
   path are unchanged. A model whose feet float above (or sink into) the floor where it says they touch it
-  dances on the floor. With ``root`` and ``max_rise`` (the training takes' largest vertical root step per
+  dances on the floor. With ``sink``, no foot ends more than that below the floor, contact or not (a frame
+  where one would is lifted). With ``root`` and ``max_rise`` (the training takes' largest vertical root step per
   frame) the shift follows at the pace the dancer could: no frame moves the root up or down by more than
   ``max_rise`` (where the shift alone would, it catches up over the next frames instead)."""
-  return _ground_feet(pos_xTxJx3, contacts_xTxF, tuple(feet), floor, hold, width, root, max_rise)
+  return _ground_feet(pos_xTxJx3, contacts_xTxF, tuple(feet), floor, hold, width, root, max_rise, sink)
 
 
 # Compiled once per shape: called eagerly, each call's scan bodies (new closures) compiled anew, and
 # calibration, which grounds 180 drawn dances, spent most of its time compiling them.
 @functools.partial(jax.jit, static_argnames=("feet", "width", "root"))
-def _ground_feet(pos_xTxJx3, contacts_xTxF, feet, floor, hold, width, root, max_rise):
+def _ground_feet(pos_xTxJx3, contacts_xTxF, feet, floor, hold, width, root, max_rise, sink):
   y = pos_xTxJx3[..., jnp.asarray(feet), 1]
   on = contacts_xTxF > 0.5
   touching = on.any(-1)
@@ -374,6 +376,8 @@ def _ground_feet(pos_xTxJx3, contacts_xTxF, feet, floor, hold, width, root, max_
     first = own[..., 0] + eased[..., 0]
     _, eased = jax.lax.scan(paced, first, (time_first(eased), time_first(own)))
     eased = jnp.moveaxis(eased, 0, -1)
+  if sink is not None:  # and no foot further below the floor than that, wherever the shift left it
+    eased = eased + jnp.maximum(floor - sink - (jnp.min(y, -1) + eased), 0.0)
   return pos_xTxJx3 + eased[..., None, None] * jnp.array([0.0, 1.0, 0.0])
 
 
