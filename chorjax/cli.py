@@ -106,8 +106,14 @@ def _sample(args) -> int:
   return 0
 
 
-def _serve(site, port: int) -> int:
-  """Serves the folder ``site`` on this machine only (127.0.0.1) until interrupted."""
+def _serve(site, port: int | None) -> int:
+  """Serves the folder ``site`` on this machine only (127.0.0.1) until interrupted; ``port`` None: says how."""
+  if port is None:
+    print(
+      f"wrote {site}: a browser loads its dancer only from a server, not from disk: serve it with "
+      f"--serve, or python3 -m http.server --directory {site}"
+    )
+    return 0
   import functools
   from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
 
@@ -127,14 +133,7 @@ def _export(args) -> int:
   if args.web is not None:
     if args.output is not None or args.batch != 1:
       raise api.UserError("--web writes a folder with one dancer: no -o or --batch with it")
-    site = api.write_web(args.workdir, args.web, ort_web=args.ort_web, **common)
-    if args.serve is None:
-      print(
-        f"wrote {site}: a browser loads its dancer only from a server, not from disk: serve it with "
-        f"--serve, or python3 -m http.server --directory {site}"
-      )
-      return 0
-    return _serve(site, args.serve)
+    return _serve(api.write_web(args.workdir, args.web, ort_web=args.ort_web, **common), args.serve)
   if args.serve is not None:
     raise api.UserError("--serve serves the page --web DIR writes: give --web DIR")
   if args.output is None:

@@ -12,8 +12,9 @@ import numpy as np
 from chorjax.errors import UserError, refuse_existing
 from chorjax.output import load_character
 
-# Names that say a file of another format: refused as -o (they would become a folder of CSVs)
-FILE_SUFFIXES = (".csv", ".npz", ".glb", ".gltf", ".html", ".png", ".gif", ".mp4", ".c3d", ".amc", ".asf", ".json")
+# Names that say a file of a format data convert does not write: refused as -o (they would become a folder of
+# CSVs; a folder named like a take, x.csv, still holds the converted take)
+FILE_SUFFIXES = (".glb", ".gltf", ".html", ".png", ".gif", ".mp4", ".c3d", ".amc", ".asf", ".json")
 
 
 def convert(

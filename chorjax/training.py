@@ -611,22 +611,32 @@ def _train(
     finished = end_of_run.Finished(workdir, ds, cfg, spec.graphdef, host_params(loop.state["params"]))
     for hook in end_of_run.standard(cfg) if finish is None else finish:
       samples.update(hook(finished))
+  summary = _summary(loop, start, time.time() - t_start, samples)
+  if cfg.train.keep == "best" and val and is_main:  # what sample, eval and export will use
+    summary |= _kept(manager)
+  return summary
+
+
+def _summary(loop: Loop, start: int, seconds: float, samples: dict) -> dict:
+  """What training returns: steps, losses, time, and the end samples written."""
   summary = {
     "start_step": start,
     "final_step": loop.step,
     "train_losses": loop.losses,
-    "seconds": time.time() - t_start,
+    "seconds": seconds,
     "compile_s": loop.compile_s,
   }
   if loop.losses:
     summary["final_train_loss"] = loop.losses[max(loop.losses)]
   if loop.val_loss is not None:
     summary["final_val_loss"] = loop.val_loss
-  if cfg.train.keep == "best" and val and is_main:  # what sample, eval and export will use
-    kept = ckpt.val_losses(manager)
-    if kept:
-      summary["kept_step"] = min(kept, key=kept.__getitem__)
-      summary["kept_val_loss"] = kept[summary["kept_step"]]
-  if samples:
-    summary["samples"] = samples
-  return summary
+  return summary | ({"samples": samples} if samples else {})
+
+
+def _kept(manager) -> dict:
+  """``train.keep = "best"``: the kept step and its validation loss (none without one)."""
+  kept = ckpt.val_losses(manager)
+  if not kept:
+    return {}
+  step = min(kept, key=kept.__getitem__)
+  return {"kept_step": step, "kept_val_loss": kept[step]}

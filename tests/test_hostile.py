@@ -602,7 +602,7 @@ def test_data_convert_to_a_file_name_it_cannot_write_is_refused_not_a_folder(tmp
   from chorjax.data.dataset import bundled_path
 
   take = str(bundled_path("cmu94") / "94_01_skeleton_3d.csv")
-  for name in ("conv.glb", "conv.CSV", "conv.npz"):
+  for name in ("conv.glb", "conv.HTML", "conv.mp4"):
     assert cli.main(["data", "convert", take, "-o", str(tmp_path / name)]) == 2, name
     _one_line(capsys, name)
   assert not list(tmp_path.iterdir())
