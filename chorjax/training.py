@@ -464,13 +464,7 @@ def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=No
   every process trains its share and only process 0 writes anything but checkpoints.
   """
   workdir = Path(workdir).absolute()
-  if workdir.exists() and not workdir.is_dir():
-    raise UserError(f"{workdir}: is a file, not a run directory (--workdir names a folder)")
-  if workdir.is_dir() and not force and not _is_run(workdir):
-    raise UserError(
-      f"{workdir}: holds files and is not a chorjax run (no config.json or checkpoints/); training would "
-      "write into it: choose another --workdir, or --force"
-    )
+  check_workdir(workdir, force)
   family = family_of(cfg)
   family.check(cfg)  # before anything is written
   if parallel is not None and not family.data_parallel:
@@ -515,6 +509,18 @@ def _locked_train(cfg: Config, workdir: Path, force: bool, parallel, is_main: bo
     with contextlib.ExitStack() as cleanup:
       cleanup.callback(ckpt.close_quietly, manager)
       return _train(cfg, workdir, ds, manager, parallel, cleanup, keep_old_config, finish)
+
+
+def check_workdir(workdir: Path, force: bool) -> None:
+  """Refuses a ``workdir`` that is a file, or a folder of other files than a run's (unless ``force``):
+  training would write among them."""
+  if workdir.exists() and not workdir.is_dir():
+    raise UserError(f"{workdir}: is a file, not a run directory (--workdir names a folder)")
+  if workdir.is_dir() and not force and not _is_run(workdir):
+    raise UserError(
+      f"{workdir}: holds files and is not a chorjax run (no config.json or checkpoints/); training would "
+      "write into it: choose another --workdir, or --force"
+    )
 
 
 def _is_run(workdir: Path) -> bool:

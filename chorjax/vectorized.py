@@ -50,6 +50,7 @@ from chorjax.training import (
   _truncate_metrics,
   _write_config,
   best_checkpoint_hook,
+  check_workdir,
   sized_to_data,
   stop_on_signals,
   workdir_lock,
@@ -116,10 +117,10 @@ def train_vectorized(cfgs, workdirs, *, force: bool = False) -> list[dict]:
   check_group(cfgs)
   if any(c.train.patience for c in cfgs):
     raise UserError("train.patience: not with several seeds in one program (each would end apart); train them apart")
+  for w in workdirs:  # every point's folder, before any is locked or written
+    check_workdir(w, force)
   with contextlib.ExitStack() as stack:
     for w in workdirs:
-      if w.exists() and not w.is_dir():
-        raise UserError(f"{w}: is a file, not a run directory")
       stack.enter_context(workdir_lock(w))
     keep_old = [_check_saved_config(w, c, force) for w, c in zip(workdirs, cfgs)]
     ds = load_dataset(cfgs[0].data)

@@ -608,3 +608,18 @@ def test_data_convert_to_a_file_name_it_cannot_write_is_refused_not_a_folder(tmp
   assert not list(tmp_path.iterdir())
   assert cli.main(["data", "convert", take, "-o", str(tmp_path / "takes.v2")]) == 0  # a folder with a dot
   assert (tmp_path / "takes.v2" / "94_01_skeleton_3d.csv").is_file()
+
+
+def test_several_seeds_do_not_write_into_a_seeds_folder_of_the_users_files(tmp_path, capsys):
+  """``train.seed=[0,1] --workdir DIR`` replaced ``DIR/seed=1/samples/sample.csv`` the user had put there (a
+  single run refuses a folder that is not a run; the per-seed folders were not checked). Now refused, one line,
+  nothing written, the file as it was."""
+  (tmp_path / "base.toml").write_text("")
+  mine = tmp_path / "w" / "seed=1" / "samples" / "sample.csv"
+  mine.parent.mkdir(parents=True)
+  mine.write_text("my own\n")
+  args = ["train", str(tmp_path / "base.toml"), *TINY, "log.tensorboard=false", "train.seed=[0, 1]"]
+  assert cli.main([*args, "--workdir", str(tmp_path / "w")]) == 2
+  _one_line(capsys, "seed=1")
+  assert mine.read_text() == "my own\n" and sorted(p.name for p in (tmp_path / "w").iterdir()) == ["seed=1"]
+  assert sorted(p.name for p in (tmp_path / "w" / "seed=1").iterdir()) == ["samples"]
