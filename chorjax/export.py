@@ -68,15 +68,23 @@ def export_onnx(run, output, *, batch: int = 1, controls: dict | None = None, fo
     raise UserError(f"--batch {batch!r}: must be a whole number within 1-{MAX_BATCH}")
   side = sidecar_path(out)
   refuse_existing([out, side], force)
+  for p in (out, side):  # --force replaces files, never a folder (the .onnx would be left without its sidecar)
+    if p.is_dir():
+      raise UserError(f"{p}: is a folder; the dancer and its sidecar are files: give another -o")
   run = run.serving("export")
   sampling = run.sampling(**(controls or {}))
   if sampling.greedy:
     raise UserError(f"{run.workdir}: sample.greedy is not exported (a host wanting the mean frame passes zero noise)")
   run = run.ranged(sampling)
   model, contract = _program(run, sampling, batch)
-  meta = _sidecar(run, sampling, batch, contract)
+  try:  # strict JSON: a host's parser takes no bare NaN or Infinity
+    text = json.dumps(_sidecar(run, sampling, batch, contract), indent=1, allow_nan=False)
+  except ValueError:
+    raise UserError(
+      f"{run.workdir}: its saved meta holds a value that is no number (NaN or infinity, e.g. its fps)"
+    ) from None
   atomic_write(out, lambda tmp: Path(tmp).write_bytes(model.SerializeToString()), overwrite=True)
-  atomic_write(side, lambda tmp: Path(tmp).write_text(json.dumps(meta, indent=1)), overwrite=True)
+  atomic_write(side, lambda tmp: Path(tmp).write_text(text), overwrite=True)
   return [out, side]
 
 

@@ -201,6 +201,25 @@ def test_what_cannot_be_exported_is_refused_in_one_line_and_nothing_is_written(q
   assert cli.main(["export", str(quickstart), *out]) == 2
   assert "d.json: already exists" in capsys.readouterr().err and (tmp_path / "d.json").read_text() == "mine"
   assert not (tmp_path / "d.onnx").exists()
+  (tmp_path / "d.json").unlink()
+  (tmp_path / "d.json").mkdir()  # --force replaces files, not a folder (the dancer would lack its sidecar)
+  assert cli.main(["export", str(quickstart), *out, "--force"]) == 2
+  assert "is a folder" in capsys.readouterr().err and not (tmp_path / "d.onnx").exists()
+
+
+def test_a_run_whose_meta_holds_no_number_is_not_exported_as_bare_nan(quickstart, tmp_path, capsys):
+  """A run whose saved fps is NaN was exported with a bare ``NaN`` in its sidecar, which no JSON parser of a
+  host reads; it is one line now, nothing written."""
+  import shutil
+
+  run = tmp_path / "run"
+  shutil.copytree(quickstart, run)
+  for path in run.glob("checkpoints/*/meta/metadata"):
+    meta = json.loads(path.read_text())
+    meta["fps"] = float("nan")  # the takes' frame rate (the config's data.fps is checked when read)
+    path.write_text(json.dumps(meta))
+  assert cli.main(["export", str(run), "-o", str(tmp_path / "d.onnx")]) == 2
+  assert "NaN" in capsys.readouterr().err and not (tmp_path / "d.onnx").exists()
 
 
 def khronos_validator(path: Path) -> dict:
