@@ -331,8 +331,9 @@ COVARIANCE_IN_ONE = 1 << 25
 
 def principal_axes(frames) -> np.ndarray:
   """``[D, D]`` orthogonal: the principal axes of the frames (columns, most variance first, each signed so
-  that its largest entry is positive): the MDN's coordinates under ``model.mdn_basis = "pca"``. ``frames``:
-  one ``[N, D]`` array or a sequence of them (a run's training takes)."""
+  that its largest entry is positive): the MDN's coordinates under ``model.mdn_basis = "pca"`` (of the frames)
+  and ``"acceleration"`` (of their second differences). ``frames``: one ``[N, D]`` array or a sequence of them
+  (a run's training takes)."""
   takes = [np.asarray(frames)] if isinstance(frames, np.ndarray) else [np.asarray(t) for t in frames]
   n = sum(len(t) for t in takes)
   if any(t.ndim != 2 for t in takes) or n < 2:

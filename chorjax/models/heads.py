@@ -146,9 +146,10 @@ class MDNHead(nnx.Module):
 
   Loss = negative log-likelihood per frame (summed over the D coordinates, averaged over frames).
 
-  With ``basis`` (``model.mdn_basis = "pca"``) the mixture lives in rotated coordinates ``u = x @ B``
-  (``B``: ``[D, D]`` orthogonal, the training frames' principal axes, set once before training by
-  ``run.create_train_state`` and never trained): each component is still diagonal there, so a full
+  With ``basis`` (``model.mdn_basis = "pca"`` or ``"acceleration"``) the mixture lives in rotated coordinates
+  ``u = x @ B`` (``B``: ``[D, D]`` orthogonal, the principal axes of the training frames or of their second
+  differences, set once before training by ``create_train_state`` and never trained): each component is still
+  diagonal there, so a full
   covariance in feature space with the data's own axes. ``params`` and the scales ``scale_cap`` holds are
   in those coordinates; what ``loss``, ``sample``, ``draw`` and ``mean`` take and return are features, as
   without it. A rotation keeps the likelihood: the NLL is the same quantity either way.
