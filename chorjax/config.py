@@ -187,6 +187,7 @@ class ModelConfig:
       "as the model learned it does, not as a filter set afterwards (`experiments/draw/`)."
     ),
     minimum=0,
+    below=4,  # a residual, its change and the change's change
   )
   min_scale: float = _field(1e-3, "floor of MDN scales (normalized units)", minimum=0.0)
   dropout: float = _field(0.0, "dropout rate between layers (same mask at every time step)", minimum=0.0, below=1.0)

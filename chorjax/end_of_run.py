@@ -5,6 +5,7 @@ they hand it: calibration and the sample drawn with it (``train.calibrate``), el
 from __future__ import annotations
 
 import dataclasses
+import functools
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +25,13 @@ class Finished:
   graphdef: Any
   params: Any
 
+  @functools.cached_property
+  def kept(self):
+    """The run as sample, eval and export load it (its kept checkpoint), read once for every hook."""
+    from chorjax.run import load_run
+
+    return load_run(self.workdir)
+
 
 def standard(cfg) -> list:
   """The hooks ``chorjax train`` ends a run of ``cfg`` with: the scale ceiling its draw needs recorded with
@@ -40,9 +48,9 @@ def record_ceiling(run: Finished) -> dict:
   run (``run.save_ceiling``): the run samples without its training data (moved, deleted, or a relative
   path read from elsewhere)."""
   from chorjax.controls import scale_ceiling
-  from chorjax.run import load_run, save_ceiling
+  from chorjax.run import save_ceiling
 
-  kept = load_run(run.workdir)
+  kept = run.kept
   q = run.cfg.sample.scale_cap
   ceiling = scale_ceiling(kept.graphdef, kept.params, run.ds.train, run.cfg.data.seq_length, q)
   if np.all(np.isfinite(ceiling)):  # an MSE head has no scales to hold
@@ -60,23 +68,18 @@ def calibrates(cfg) -> bool:
 def calibration(run: Finished) -> dict:
   """``train.calibrate``: ``chorjax calibrate`` on the kept checkpoint, then the end sample drawn with it."""
   from chorjax.calibrate import calibrate
-  from chorjax.run import load_run
 
   calibrate(run.workdir, log=lambda line: print(line, flush=True))
   if run.cfg.sample.frames <= 0:
     return {}
-  kept = load_run(run.workdir)
+  kept = run.kept  # its sampling reads the calibration just written
   return write_end_sample(run.workdir, kept.graphdef, kept.params, run.ds, run.cfg, kept.sampling())
 
 
 def end_sample(run: Finished) -> dict:
   """The end sample drawn with the run's ``[sample]`` from the checkpoint the run keeps (``train.keep =
   "best"``: the best validation loss, as ``chorjax sample`` draws; else the final parameters)."""
-  params = run.params
-  if run.cfg.train.keep == "best":
-    from chorjax.run import load_run
-
-    params = load_run(run.workdir).params
+  params = run.kept.params if run.cfg.train.keep == "best" else run.params
   return write_end_sample(run.workdir, run.graphdef, params, run.ds, run.cfg)
 
 

@@ -70,9 +70,6 @@ def mdn_params(out_xP, num_mixtures: int, dim: int, isotropic: bool, min_scale: 
   return logpi, mu, scale
 
 
-MAX_MEMORY = 3  # model.mdn_memory's largest: a residual, its change and the change's change
-
-
 def mdn_carry(out_xP, scales: int, memory: int):
   """A head's carry coefficients ``[..., M, 1, S]`` in (-1, 1) (``M = memory``), M per coordinate shared by
   every component: how much of the previous frame's residual (the frame minus a component's mean), of its
@@ -293,11 +290,10 @@ class MDNHead(nnx.Module):
     state = (jnp.full((b,), -1, jnp.int32), jnp.zeros((b, self.dim), x_BxTxD.dtype))
     if not self.correlated:
       return state
-    if out_BxTxP is None:
-      return (*state, *[jnp.zeros((b, self.num_mixtures, self.dim), x_BxTxD.dtype)] * self.memory)
-    history = self.history(out_BxTxP, self.to_basis(x_BxTxD[:, 1:]))  # residuals before each frame
-    r = self.residual(out_BxTxP[:, -1], self.to_basis(x_BxTxD[:, -1]))  # the last frame's
-    return (*state, r, *[h[:, -1] for h in history[:-1]])
+    none = jnp.zeros((b, self.memory, self.num_mixtures, self.dim), x_BxTxD.dtype)
+    r = none if out_BxTxP is None else self.residual(out_BxTxP, self.to_basis(x_BxTxD[:, 1:]))
+    r = jnp.concatenate([none, r], axis=1)  # the frames' residuals, zeros before the first
+    return (*state, *[r[:, -1 - i] for i in range(self.memory)])
 
   def mean(self, out_xP):
     """The mixture's mean frame."""

@@ -119,7 +119,7 @@ _FIGURE = r"""  var view = { yaw: 0.6, pitch: 0.25, zoom: 1.5 };
   }
   function draw(p, t) {  // frame t of p.pos (a camera that follows: p.camx / p.camz, its centre at each frame)
     var ctx = p.ctx, W = p.cv.width, H = p.cv.height, J = p.m.joints, px = p.dpr || 1;
-    if (p.camx) { p.cx = p.camx[t]; p.cz = p.camz[t]; }
+    aim(p, t);
     ctx.fillStyle = '#ffffff'; ctx.fillRect(0, 0, W, H);
     ctx.strokeStyle = '#e4e4e4'; ctx.lineWidth = px;  // floor grid
     for (var g = -4; g <= 4; g++) {
@@ -133,6 +133,7 @@ _FIGURE = r"""  var view = { yaw: 0.6, pitch: 0.25, zoom: 1.5 };
     ctx.fillStyle = '#c0392b';
     pts.forEach(function (q) { ctx.beginPath(); ctx.arc(q[0], q[1], 3 * px, 0, 2 * Math.PI); ctx.fill(); });
   }
+  function aim(p, t) { if (p.camx) { p.cx = p.camx[t]; p.cz = p.camz[t]; } }  // a following camera, at frame t
   function proj3(p, gx, gy, gz) {  // grid lines in viewer units, fixed on the floor, around the camera's centre
     var cell = 1 / (p.m.scale * 2);
     return project(p, Math.round(p.cx / cell) * cell + gx * cell, p.y0, Math.round(p.cz / cell) * cell + gz * cell);
@@ -239,7 +240,7 @@ __FIGURE__
         pixels: players.map(function (p) { return [p.cv.width, p.cv.height]; }),
         inside: players.map(function (p) {  // the share of the figure's joints on its canvas at the last frame
           var t = Math.min(state.frame, p.m.frames - 1), J = p.m.joints, n = 0;
-          if (p.camx) { p.cx = p.camx[t]; p.cz = p.camz[t]; }
+          aim(p, t);
           for (var j = 0; j < J; j++) {
             var q = project(p, p.pos[(t * J + j) * 3], p.pos[(t * J + j) * 3 + 1], p.pos[(t * J + j) * 3 + 2]);
             if (q[0] >= 0 && q[0] <= p.cv.width && q[1] >= 0 && q[1] <= p.cv.height) n++;

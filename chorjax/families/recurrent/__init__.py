@@ -19,10 +19,7 @@ class Recurrent(Family):
 
   def check(self, cfg) -> None:
     from chorjax.errors import UserError
-    from chorjax.models.heads import MAX_MEMORY
 
-    if cfg.model.memory > MAX_MEMORY:
-      raise UserError(f"model.mdn_memory = {cfg.model.memory}: at most {MAX_MEMORY}")
     if cfg.model.memory and cfg.train.feedback != "none":
       raise UserError(
         "model.mdn_memory trains teacher forced (its draw carries the residuals the loss does): "

@@ -58,7 +58,6 @@ def generate(graphdef, params, motion, key, *, num_frames: int, draw: Draw | Non
   """
   draw = (draw or Draw()).for_motion(motion)
   unroll = UNROLL if num_frames * np.shape(motion)[0] >= UNROLL_FROM else 1
-  plain = draw.plain and not getattr(nnx.merge(graphdef, params), "remembers", False)  # correlated: residuals
   return _generate(
     graphdef,
     params,
@@ -67,7 +66,7 @@ def generate(graphdef, params, motion, key, *, num_frames: int, draw: Draw | Non
     draw,
     num_frames=num_frames,
     prime_BxPxD=prime_BxPxD,
-    plain=plain,
+    plain=draw.plain,
     unroll=unroll,
   )
 
@@ -91,7 +90,7 @@ def _generate(
   model = nnx.merge(graphdef, params)
   carry, x0, before = _primed(model, motion, prime_BxPxD)
 
-  if plain:
+  if plain and not getattr(model, "remembers", False):  # a draw that carries residuals keeps its state
     bounds = draw.bounds
 
     def body(c, k):
