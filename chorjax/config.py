@@ -181,13 +181,14 @@ class ModelConfig:
     0,
     "frames of residuals (frame minus a component's mean) the MDN carries into each frame's means: 0 = white noise",
     more=(
-      "With 1 the previous frame's residual is carried, with 2 also its change, with 3 the change's change, each "
-      "through a coefficient per coordinate the network predicts and every component shares; the scales are what "
-      "is left. Still an MDN sampled frame by frame, with an exact likelihood: the noise continues over frames "
-      "as the model learned it does, not as a filter set afterwards (`experiments/draw/`)."
+      "The residuals follow an autoregression of that order whose partial autocorrelations (one per lag and "
+      "coordinate, in (-1, 1)) the network predicts and every component shares, so a draw's residuals may wander "
+      "(with 2, as a velocity that keeps on) but never grow without bound; the scales are what is left. Still an "
+      "MDN sampled frame by frame, with an exact likelihood: the noise continues over frames as the model learned "
+      "it does, not as a filter set afterwards (`experiments/draw/`)."
     ),
     minimum=0,
-    below=4,  # a residual, its change and the change's change
+    below=4,  # lags 1-3: where the residual was, where it was heading and how that was turning
   )
   min_scale: float = _field(1e-3, "floor of MDN scales (normalized units)", minimum=0.0)
   dropout: float = _field(0.0, "dropout rate between layers (same mask at every time step)", minimum=0.0, below=1.0)
@@ -499,14 +500,18 @@ class SampleConfig:
   foot_lock: bool = _field(
     False,
     "canonical runs: a foot in contact with the floor does not slide",
-    more=("The body travels by what its legs do."),
+    more=(
+      "The body travels by what its legs do: the slide of the feet in contact, averaged over 17 frames, is taken "
+      "back, so a slide that lasts is gone while a foot's tremble does not shake the whole body."
+    ),
     resumable=True,
   )
   ground: bool = _field(
     False,
     "canonical runs: feet in contact with the floor stand on the training floor, no floating",
     more=(
-      "The body is moved up or down to the floor smoothly, never faster than the takes' fastest vertical root step."
+      "The body is moved up or down to the floor smoothly (averaged over 17 frames), never faster than the takes' "
+      "fastest vertical root step."
     ),
     resumable=True,
   )

@@ -68,7 +68,7 @@ def test_calibration_recovers_the_settings_that_drew_the_reference(run_dir, true
   best, table = search(_drawer(run, 0), reference, run.features.skeleton, run.fps, GRID)
   assert best == true
   assert [s for s, *_ in table[:24]] == [dict(zip(GRID, v)) for v in itertools.product(*GRID.values())]
-  assert min(o for *_, o in table) < 0.2  # four measures within ~5% of the reference's
+  assert min(o for *_, o in table) < 0.3  # four measures within ~8% of the reference's
 
 
 def test_the_grid_drawn_two_at_a_time_is_the_grid_drawn_one_at_a_time(run_dir, monkeypatch):

@@ -187,18 +187,21 @@ def test_locked_feet_do_not_slide_and_poses_are_kept(take):
   contacts = np.asarray(tf.foot_contacts(canon, SK.feet, leg_length(canon, SK)))
   # a dancer sliding across the floor: every frame moved on by a constant drift
   drift = np.arange(len(canon))[:, None, None] * np.array([0.1, 0.0, 0.05])
-  locked = np.asarray(tf.lock_feet(canon + drift, contacts, SK.feet))
+  exact = np.asarray(tf.lock_feet(canon + drift, contacts, SK.feet, width=0))  # every frame's slide taken back
+  locked = np.asarray(tf.lock_feet(canon + drift, contacts, SK.feet))  # the slide averaged over 17 frames
   root = SK.root
-  np.testing.assert_allclose(locked - locked[:, root : root + 1], canon - canon[:, root : root + 1], atol=1e-4)
-  np.testing.assert_allclose(locked[..., 1], canon[..., 1], atol=1e-5)  # heights untouched
-  feet = locked[:, SK.feet][..., [0, 2]]
+  for out in (exact, locked):
+    np.testing.assert_allclose(out - out[:, root : root + 1], canon - canon[:, root : root + 1], atol=1e-4)
+    np.testing.assert_allclose(out[..., 1], canon[..., 1], atol=1e-5)  # heights untouched
   held = (contacts[1:] > 0.5) & (contacts[:-1] > 0.5)
-  one = held.sum(-1) == 1  # frames with one foot held: it stays exactly where it was
-  step = np.linalg.norm(feet[1:] - feet[:-1], axis=-1)
-  assert one.sum() > 50 and step[one][held[one]].max() < 1e-4
-  own = np.linalg.norm(np.diff(canon[:, SK.feet][..., [0, 2]], axis=0), axis=-1)  # the take's own, undrifted
-  drifted = np.linalg.norm(np.diff((canon + drift)[:, SK.feet][..., [0, 2]], axis=0), axis=-1)
-  assert step[held].mean() <= own[held].mean() < 0.5 * drifted[held].mean()  # the drift is gone, and more
+  one = held.sum(-1) == 1  # frames with one foot held: exactly locked, it stays exactly where it was
+  steps = lambda p: np.linalg.norm(np.diff(p[:, SK.feet][..., [0, 2]], axis=0), axis=-1)
+  assert one.sum() > 50 and steps(exact)[one][held[one]].max() < 1e-4
+  own, drifted = steps(canon), steps(canon + drift)  # the take's own, undrifted
+  assert steps(locked)[held].mean() <= own[held].mean() < 0.5 * drifted[held].mean()  # the drift is gone, and more
+  # taken back frame by frame, the feet's tremble shakes the whole body; averaged, the body is as calm as the take
+  rough = lambda p: np.linalg.norm(p[2:] - 2 * p[1:-1] + p[:-2], axis=-1).mean()
+  assert rough(locked) < 1.05 * rough(canon) < rough(exact)
 
 
 def test_a_swinging_foot_called_planted_does_not_drag_the_body():
@@ -228,9 +231,11 @@ def test_grounded_feet_stand_on_the_floor_and_a_jump_keeps_its_height(take):
   grounded = np.asarray(tf.ground_feet(up, contacts, SK.feet, floor))
   touching = (contacts[100:300] > 0.5).any(-1)
   assert touching.mean() > 0.5
-  inner = slice(103, 297)  # the smoothing window blends the first and last frames of the lift
+  ease = tf.GROUND_EASE + 1
+  inner = slice(100 + ease, 300 - ease)  # the smoothing window blends the first and last frames of the lift
   err = np.abs(grounded[inner] - same[inner])[..., 1].max(-1)[(contacts[inner] > 0.5).any(-1)]
-  assert np.mean(err < 1e-4 * leg) > 0.9 and err.max() < 0.05 * leg  # back on the floor (eased near a lift-off)
+  # on the floor, eased near lift-offs
+  assert np.median(err) < 1e-4 * leg and np.mean(err < 0.01 * leg) > 0.9 and err.max() < 0.05 * leg
   poses = lambda p: p - p[:, SK.root : SK.root + 1]
   np.testing.assert_allclose(poses(grounded), poses(up), atol=1e-5)  # poses and bones untouched
   assert np.abs(np.diff(grounded[:, SK.root, 1] - up[:, SK.root, 1])).max() < 0.25 * leg  # eased, not a jump cut

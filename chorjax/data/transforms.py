@@ -307,18 +307,40 @@ def rigid_bones(pos_xTxJx3, parents: Sequence[int], lengths_J):
   return _build(pos_xTxJx3[..., root, :], bones, parents, lengths_J)
 
 
-def lock_feet(pos_xTxJx3, contacts_xTxF, feet: Sequence[int], max_step: float = float("inf")):
-  """The dance moved on the floor so that no foot in contact slides: at each frame where feet are in
+LOCK_EASE = 8  # frames either side over which lock_feet averages the slide it takes back
+GROUND_EASE = 8  # frames either side over which ground_feet averages its shift
+
+
+def ease(a_xT, width: int):
+  """``a`` averaged over time (the last axis) through a Hann window of ``2 * width + 1`` frames, the ends
+  held (edge padded): a constant stays as it was; a one-frame spike spreads out."""
+  if width == 0:
+    return a_xT
+  w = np.hanning(2 * width + 3)[1:-1]
+  w = w / w.sum()
+  n = a_xT.shape[-1]
+  padded = jnp.pad(a_xT, [(0, 0)] * (a_xT.ndim - 1) + [(width, width)], mode="edge")
+  out = jnp.zeros_like(padded[..., :n])
+  for i in range(2 * width + 1):
+    out = out + float(w[i]) * padded[..., i : i + n]
+  return out
+
+
+def lock_feet(pos_xTxJx3, contacts_xTxF, feet: Sequence[int], max_step: float = float("inf"), width: int = LOCK_EASE):
+  """The dance moved on the floor so that feet in contact do not drift: at each frame where feet are in
   contact (> 0.5) both then and one frame before, and moved less than ``max_step`` horizontally (a
-  faster foot is swinging, whatever the contact says), their mean horizontal step is taken back from
-  every joint, accumulated over time. Poses and bone lengths are unchanged; the body then travels by
-  what its legs do (frames without contact keep their own root motion)."""
+  faster foot is swinging, whatever the contact says), their mean horizontal step is their slide; the slide,
+  averaged over ``2 * width + 1`` frames (:func:`ease`), is taken back from every joint, accumulated over
+  time. Averaged, a foot's tremble stays its own instead of shaking the whole body (taken back frame by
+  frame, the real takes' own decode trembles at 1.3x their jitter), while a slide that lasts is taken back
+  whole. Poses and bone lengths are unchanged; the body then travels by what its legs do (frames without
+  contact keep their own root motion); ``width = 0``: every frame's slide exactly."""
   f = pos_xTxJx3[..., jnp.asarray(feet), :]
   step = (f[..., 1:, :, :] - f[..., :-1, :, :]) * jnp.array([1.0, 0.0, 1.0])
   held = (contacts_xTxF[..., 1:, :] > 0.5) & (contacts_xTxF[..., :-1, :] > 0.5)
   held = jnp.where(held & (jnp.linalg.norm(step, axis=-1) < max_step), 1.0, 0.0)
   slide = jnp.sum(held[..., None] * step, -2) / jnp.maximum(jnp.sum(held, -1), 1.0)[..., None]
-  back = -jnp.cumsum(slide, -2)
+  back = -jnp.cumsum(jnp.moveaxis(ease(jnp.moveaxis(slide, -1, -2), width), -1, -2), -2)
   return pos_xTxJx3 + jnp.concatenate([jnp.zeros_like(back[..., :1, :]), back], -2)[..., None, :]
 
 
@@ -328,7 +350,7 @@ def ground_feet(
   feet: Sequence[int],
   floor: float,
   hold: float = 0.9,
-  width: int = 2,
+  width: int = GROUND_EASE,
   root: int | None = None,
   max_rise: float | None = None,
   sink: float | None = None,
@@ -336,12 +358,14 @@ def ground_feet(
   """The dance moved up or down so that a foot in contact stands on the floor (y-up positions): at each frame
   where feet are in contact (> 0.5) the body is shifted by ``floor`` minus the lowest such foot's height;
   frames without contact (a jump, a swing) keep the last shift, fading by ``hold`` per frame, and the shift
-  is averaged over ``2 * width + 1`` frames so that it never jumps. Poses, bone lengths and the horizontal
-  path are unchanged. A model whose feet float above (or sink into) the floor where it says they touch it
-  dances on the floor. With ``sink``, no foot ends more than that below the floor, contact or not (a frame
-  where one would is lifted). With ``root`` and ``max_rise`` (the training takes' largest vertical root step per
-  frame) the shift follows at the pace the dancer could: no frame moves the root up or down by more than
-  ``max_rise`` (where the shift alone would, it catches up over the next frames instead)."""
+  is averaged over ``2 * width + 1`` frames (:func:`ease`) so that it neither jumps nor passes a foot's
+  tremble to the body. Poses, bone lengths and the horizontal path are unchanged. A model whose feet float
+  above (or sink into) the floor where it says they touch it dances on the floor. With ``sink``, no foot ends
+  more than that below the floor, contact or not (where one would, the body is lifted by the most any frame
+  within ``width // 2`` needs, averaged over as many). With ``root`` and ``max_rise`` (the training takes'
+  largest vertical root step per frame) the shift follows at the pace the dancer could: no frame moves the
+  root up or down by more than ``max_rise`` (where the shift alone would, it catches up over the next frames
+  instead)."""
   return _ground_feet(pos_xTxJx3, contacts_xTxF, tuple(feet), floor, hold, width, root, max_rise, sink)
 
 
@@ -362,9 +386,7 @@ def _ground_feet(pos_xTxJx3, contacts_xTxF, feet, floor, hold, width, root, max_
   time_first = lambda a: jnp.moveaxis(a, -1, 0)
   _, shift = jax.lax.scan(step, jnp.zeros(target.shape[:-1], target.dtype), (time_first(target), time_first(touching)))
   shift = jnp.moveaxis(shift, 0, -1)
-  n = shift.shape[-1]
-  padded = jnp.pad(shift, [(0, 0)] * (shift.ndim - 1) + [(width, width)], mode="edge")
-  eased = jnp.mean(jnp.stack([padded[..., i : i + n] for i in range(2 * width + 1)]), 0)
+  eased = ease(shift, width)
   if root is not None and max_rise is not None:
     own = pos_xTxJx3[..., root, 1]
 
@@ -377,8 +399,16 @@ def _ground_feet(pos_xTxJx3, contacts_xTxF, feet, floor, hold, width, root, max_
     _, eased = jax.lax.scan(paced, first, (time_first(eased), time_first(own)))
     eased = jnp.moveaxis(eased, 0, -1)
   if sink is not None:  # and no foot further below the floor than that, wherever the shift left it
-    eased = eased + jnp.maximum(floor - sink - (jnp.min(y, -1) + eased), 0.0)
+    lift = jnp.maximum(floor - sink - (jnp.min(y, -1) + eased), 0.0)
+    eased = eased + _box(_box(lift, width // 2, jnp.max), width // 2, jnp.mean)  # >= every frame's own lift
   return pos_xTxJx3 + eased[..., None, None] * jnp.array([0.0, 1.0, 0.0])
+
+
+def _box(a_xT, width: int, reduce):
+  """``reduce`` over the ``2 * width + 1`` frames around each (the last axis; ends edge padded)."""
+  n = a_xT.shape[-1]
+  padded = jnp.pad(a_xT, [(0, 0)] * (a_xT.ndim - 1) + [(width, width)], mode="edge")
+  return reduce(jnp.stack([padded[..., i : i + n] for i in range(2 * width + 1)]), 0)
 
 
 def _build(root_pos, dirs_xJx3, parents: Sequence[int], lengths_J):

@@ -8,7 +8,6 @@ scales pass through softplus and are floored at ``min_scale`` so the likelihood 
 
 from __future__ import annotations
 
-import itertools
 import math
 from typing import Any
 
@@ -72,11 +71,22 @@ def mdn_params(out_xP, num_mixtures: int, dim: int, isotropic: bool, min_scale: 
 
 def mdn_carry(out_xP, scales: int, memory: int):
   """A head's carry coefficients ``[..., M, 1, S]`` in (-1, 1) (``M = memory``), M per coordinate shared by
-  every component: how much of the previous frame's residual (the frame minus a component's mean), of its
-  change, and of the change's change the components carry into this frame's means (:meth:`MDNHead.carried`).
-  Shared, a component the draw switches to continues from where the last frame was, as the one it leaves
-  would."""
+  every component: the partial autocorrelations of the residuals (the frame minus a component's mean) at lags
+  1 to M, which :func:`ar_coefficients` turns into how much of each earlier frame's residual the components
+  carry into this frame's means (:meth:`MDNHead.carried`). Shared, a component the draw switches to continues
+  from where the last frame was, as the one it leaves would."""
   return jnp.tanh(out_xP[..., -memory * scales :].reshape(out_xP.shape[:-1] + (memory, 1, scales)))
+
+
+def ar_coefficients(partial):
+  """Partial autocorrelations ``kappa_1..kappa_M`` (each in (-1, 1)) -> the coefficients ``phi_1..phi_M`` of the
+  autoregression ``r_t = sum_k phi_k r_(t-k) + noise`` they describe (the Durbin-Levinson recursion). Whatever
+  the network predicts, that autoregression is stationary: a draw's residuals can wander (``phi = (2, -1)``,
+  a random walk of the velocity, is the limit ``kappa = (1, -1)``) but never grow without bound."""
+  phi: list = []
+  for kappa in partial:
+    phi = [p - kappa * q for p, q in zip(phi, reversed(phi))] + [kappa]
+  return phi
 
 
 def mdn_log_prob(logpi_xK, mu_xKxD, scale_xKxS, x_xD):
@@ -204,16 +214,15 @@ class MDNHead(nnx.Module):
 
   def carried(self, out_xP, residuals):
     """The mixture with the residuals of the frames before carried into its means (``correlated``):
-    ``residuals``, the ``memory`` latest first, each ``[..., K, D]``; with one coefficient per backward
-    difference (:func:`mdn_carry`) the means are ``mu + a * r + b * (r - r') + c * (r - 2 r' + r'') ...``:
-    the model's mean plus where its last residual was, where it was heading and how that was turning.
-    Returns ``(logpi, means, scale)``."""
+    ``residuals``, the ``memory`` latest first, each ``[..., K, D]``; the means are ``mu + phi_1 r + phi_2 r'
+    + ...``, a stationary autoregression of the residuals (:func:`ar_coefficients` of the partial
+    autocorrelations :func:`mdn_carry` predicts): the model's mean plus where its last residuals were, where
+    they were heading and how that was turning. Returns ``(logpi, means, scale)``."""
     logpi, mu, scale = self.params(out_xP)
-    coefficients = jnp.moveaxis(mdn_carry(out_xP, self.num_scales, self.memory), -3, 0)
-    differences, carried = list(residuals), mu
-    for c in coefficients:
-      carried = carried + c * differences[0]
-      differences = [a - b for a, b in itertools.pairwise(differences)]
+    partial = jnp.moveaxis(mdn_carry(out_xP, self.num_scales, self.memory), -3, 0)
+    carried = mu
+    for phi, r in zip(ar_coefficients(list(partial)), residuals):
+      carried = carried + phi * r
     return logpi, carried, scale
 
   def residual(self, out_xP, u_xD):
