@@ -112,7 +112,7 @@ def like_reference(motions, like: str) -> list:
 
 def _write(motions, out: Path, character, joint_map, rigid: bool, force: bool) -> list:
   """One BVH (``out.bvh``, onto ``character`` where given) or one CSV a take in the folder ``out``."""
-  from chorjax.data.csv import write_csv
+  from chorjax.data.csv import write_csv, written_paths
 
   if out.suffix.lower() == ".bvh":
     if len(motions) != 1:
@@ -134,5 +134,5 @@ def _write(motions, out: Path, character, joint_map, rigid: bool, force: bool) -
         "convert them into different folders"
       )
     first[t] = m
-  refuse_existing(targets, force)
+  refuse_existing([p for m, t in zip(motions, targets) for p in written_paths(m, t)], force)  # sidecars too
   return [(write_csv(m, t), m) for m, t in zip(motions, targets)]

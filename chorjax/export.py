@@ -118,8 +118,10 @@ def write_web(workdir, folder, *, ort_web=None, controls=None, checkpoint="kept"
 
   _needs_onnx()
   out = as_path(folder, "--web")
-  if out.exists() and (not out.is_dir() or any(out.iterdir())) and not force:
-    raise UserError(f"{out}: already exists and is not an empty folder (use --force to replace it)")
+  if out.exists() and (not out.is_dir() or any(out.iterdir())):
+    if not force:
+      raise UserError(f"{out}: already exists and is not an empty folder (use --force to replace it)")
+    _check_web_folder(out)
   ort = find_ort_web(ort_web)
   run = load_run(workdir, checkpoint)
   out.parent.mkdir(parents=True, exist_ok=True)
@@ -143,6 +145,29 @@ def write_web(workdir, folder, *, ort_web=None, controls=None, checkpoint="kept"
   finally:
     shutil.rmtree(staging, ignore_errors=True)
   return out
+
+
+WEB_FILES = ("index.html", "dancer.onnx", "dancer.json", "ort")  # what write_web puts in its folder
+
+
+def _check_web_folder(out: Path) -> None:
+  """A UserError unless ``out`` is a folder that ``--force`` may replace: one that holds only what ``--web``
+  writes (a page written before), and neither the working directory nor a folder above it."""
+  here = Path.cwd().resolve()
+  where = out.resolve()
+  if where == here or where in here.parents:
+    raise UserError(f"{out}: is the working directory or holds it; --web --force replaces only a page it wrote")
+  if not out.is_dir():
+    raise UserError(f"{out}: is a file, not a page --web wrote; --force replaces only such a folder")
+  ort_files = {*ORT_WEB_FILES, "LICENSE"}
+  foreign = sorted(p.name for p in out.iterdir() if p.name not in WEB_FILES)
+  if (out / "ort").is_dir():
+    foreign += sorted(f"ort/{p.name}" for p in (out / "ort").iterdir() if p.name not in ort_files)
+  elif (out / "ort").exists():
+    foreign.append("ort")
+  if foreign:
+    listed = ", ".join(foreign[:3]) + (", ..." if len(foreign) > 3 else "")
+    raise UserError(f"{out}: holds files --web did not write ({listed}); --force replaces only a page it wrote")
 
 
 def write_blender_addon(output, *, force: bool = False) -> Path:

@@ -406,3 +406,29 @@ def test_the_web_export_says_it_needs_a_server_and_serves_itself(quickstart, tmp
   finally:
     proc.send_signal(signal.SIGINT)
     assert proc.wait(timeout=30) == 0
+
+
+def test_web_force_replaces_only_a_page_it_wrote(quickstart, tmp_path, capsys, monkeypatch):
+  """``--web DIR --force`` replaces a page written before, and refuses (exit 2, nothing touched) a folder
+  holding anything else: the run itself, the working directory, a folder above it, a user's files."""
+  ort_web = NODE_MODULES / "node_modules" / "onnxruntime-web" / "dist"
+  if not ort_web.is_dir():
+    pytest.fail(f"onnxruntime-web is missing: .ci/run installs it (npm install --prefix {NODE_MODULES} ...)")
+  web = lambda folder: ["export", str(quickstart), "--web", str(folder), "--ort-web", str(ort_web), "--force"]
+  site = tmp_path / "site"
+  assert cli.main(web(site)) == 0
+  (site / "index.html").write_text("old")
+  assert cli.main(web(site)) == 0 and (site / "index.html").read_text() != "old"
+  capsys.readouterr()
+  mine = tmp_path / "mine"
+  (mine / "inner").mkdir(parents=True)
+  (mine / "notes.txt").write_text("keep")
+  monkeypatch.chdir(mine)
+  before = sorted(p.name for p in quickstart.iterdir())
+  for folder in (quickstart, ".", mine / "inner" / "..", "inner/..", mine.parent):
+    assert cli.main(web(folder)) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "--force replaces only a page it wrote" in err, err
+  (site / "ort" / "user.js").write_text("mine")
+  assert cli.main(web(site)) == 2 and "ort/user.js" in capsys.readouterr().err
+  assert (mine / "notes.txt").read_text() == "keep" and sorted(p.name for p in quickstart.iterdir()) == before

@@ -623,3 +623,39 @@ def test_several_seeds_do_not_write_into_a_seeds_folder_of_the_users_files(tmp_p
   _one_line(capsys, "seed=1")
   assert mine.read_text() == "my own\n" and sorted(p.name for p in (tmp_path / "w").iterdir()) == ["seed=1"]
   assert sorted(p.name for p in (tmp_path / "w" / "seed=1").iterdir()) == ["samples"]
+
+
+def test_data_convert_keeps_a_skeleton_sidecar_the_user_had(shared_data, tmp_path, capsys):
+  """``data convert t.bvh -o out/`` rewrote the user's ``out/t.skeleton.json`` when ``out/t.csv`` did not exist
+  yet: the sidecar is an output too, refused unless ``--force``, and nothing is written."""
+  take = shared_data / "bvh" / "cmu131" / "131_01.bvh"
+  mine = tmp_path / "out" / "131_01.skeleton.json"
+  mine.parent.mkdir()
+  mine.write_text("my own\n")
+  assert cli.main(["data", "convert", str(take), "-o", str(tmp_path / "out")]) == 2
+  _one_line(capsys, "131_01.skeleton.json")
+  assert mine.read_text() == "my own\n" and sorted(p.name for p in mine.parent.iterdir()) == [mine.name]
+  assert cli.main(["data", "convert", str(take), "-o", str(tmp_path / "out"), "--force"]) == 0
+  assert (tmp_path / "out" / "131_01.csv").is_file() and mine.read_text() != "my own\n"
+
+
+def test_a_pattern_that_backtracks_without_end_is_refused_not_run_forever(tmp_path, capsys):
+  """``data.labels = '^(?P<x>(a+)+)$'`` (or ``data.val_pattern``) on a take named ``aaaa...a!`` ran until killed,
+  leaving a workdir with only ``.lock``. Matching a take's name now has a second: then one line, nothing left."""
+  import shutil
+
+  from chorjax.data.dataset import bundled_path
+
+  data = tmp_path / "takes"
+  data.mkdir()
+  for name in ("a" * 40 + "!", "aa"):
+    shutil.copy(bundled_path("cmu94") / "94_01_skeleton_3d.csv", data / f"{name}.csv")
+  (tmp_path / "base.toml").write_text("")
+  args = ["train", str(tmp_path / "base.toml"), *TINY, f"data.dataset={str(data)!r}", "--workdir", str(tmp_path / "w")]
+  # the regex package sees through (a+)+ (the take is then said not to match); (a|aa)+ it cannot
+  cases = [("data.labels", "^(?P<x>(a+)+)$", "does not match"), ("data.labels", "^(?P<x>(a|aa)+)$", "simplify the")]
+  cases.append(("data.val_pattern", "^(a|aa)+$", "simplify the pattern"))
+  for key, pattern, said in cases:
+    assert cli.main([*args, f"{key}='{pattern}'"]) == 2
+    _one_line(capsys, key, said)
+    assert not (tmp_path / "w").exists()

@@ -66,6 +66,13 @@ def sidecar_path(csv_path) -> Path:
   return path.with_name(path.stem + ".skeleton.json")
 
 
+def written_paths(motion_or_positions, path) -> list[Path]:
+  """What :func:`write_csv` writes for it at ``path``: the CSV, and the sidecar beside it where it needs one."""
+  m = motion_or_positions
+  own = isinstance(m, Motion) and m.skeleton.joint_names != MPII16.joint_names
+  return [Path(path), *([sidecar_path(path)] if own else [])]
+
+
 def write_csv(motion_or_positions, path, *, overwrite: bool = True) -> Path:
   """Writes ``[T, J, 3]`` positions (or a Motion) in the CSV layout, atomically; a Motion of any
   skeleton but the 16-joint one also gets its sidecar (see the module docstring)."""
@@ -73,7 +80,8 @@ def write_csv(motion_or_positions, path, *, overwrite: bool = True) -> Path:
   pos = np.asarray(pos, dtype=np.float32)
   flat = pos.reshape(pos.shape[0], -1)
   m = motion_or_positions
-  if isinstance(m, Motion) and m.skeleton.joint_names != MPII16.joint_names:
+  if len(written_paths(m, path)) > 1:
+    assert isinstance(m, Motion)
     side = {"skeleton": m.skeleton.to_dict(), "fps": m.fps, "up_axis": m.up_axis, "units": m.units}
     atomic_write(sidecar_path(path), lambda tmp: tmp.write_text(json.dumps(side, indent=1)), overwrite=overwrite)
   return atomic_write(path, lambda tmp: np.savetxt(tmp, flat, delimiter=",", fmt="%.7g"), overwrite=overwrite)

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import re
 from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
@@ -20,7 +19,7 @@ from chorjax.data import transforms
 from chorjax.data.cache import Cache, cache_root, in_processes, workers_for
 from chorjax.data.csv import read_csv
 from chorjax.data.features import Features, feature_dim, floor_height, takes_joint_pace
-from chorjax.data.labels import Labels, read_labels, take_condition
+from chorjax.data.labels import Labels, read_labels, search_name, take_condition
 from chorjax.data.motion import Motion, bone_lengths
 from chorjax.data.skeletons import get_skeleton
 from chorjax.errors import UserError
@@ -217,11 +216,7 @@ def _val_names(names: list[str], val_takes: Sequence, val_pattern: str = "") -> 
   if val_pattern:
     if tuple(val_takes) != ("auto",):
       raise UserError("data.val_pattern: set it or data.val_takes, not both")
-    try:
-      found = re.compile(val_pattern).search
-    except re.error as e:
-      raise UserError(f"data.val_pattern: not a regular expression ({e})") from None
-    out = [n for n in names if found(n)]
+    out = [n for n in names if search_name(val_pattern, n, "data.val_pattern")]
     if not out:
       raise UserError(f"data.val_pattern: {val_pattern!r} finds no take; takes: {_some(names)}")
   elif tuple(val_takes) == ("auto",):

@@ -9,9 +9,9 @@ style=elderly:0.5,style=active:0.5``), and a take it never saw is conditioned by
 from __future__ import annotations
 
 import dataclasses
-import re
 
 import numpy as np
+import regex
 
 from chorjax.errors import UserError
 
@@ -44,7 +44,7 @@ class Labels:
     """The take's labels: its row, else what the pattern reads from its name (None: neither knows it)."""
     if name in self.table:
       return self.table[name]
-    found = re.search(self.pattern, name) if self.pattern else None
+    found = search_name(self.pattern, name, "data.labels") if self.pattern else None
     return None if found is None else {f: found.group(f) for f in self.fields}
 
   def vector(self, labels: dict) -> np.ndarray:
@@ -112,6 +112,23 @@ def _label_pairs(text: str, source: str, weighted: bool) -> dict:
   return out
 
 
+PATTERN_SECONDS = 1.0  # the longest one take's name may take to match a pattern
+
+
+def search_name(pattern: str, name: str, where: str):
+  """``regex.search(pattern, name)``, or a UserError naming ``where`` if it takes over ``PATTERN_SECONDS``: a
+  pattern of nested repeats (``(a+)+``) backtracks for ages on a name it nearly matches."""
+  try:
+    return regex.search(pattern, name, timeout=PATTERN_SECONDS)
+  except TimeoutError:
+    raise UserError(
+      f"{where} = {pattern[:80]!r}: matching take {name[:80]!r} took over {PATTERN_SECONDS:g} s (nested repeats "
+      "such as (a+)+ backtrack without end); simplify the pattern"
+    ) from None
+  except regex.error as e:
+    raise UserError(f"{where} = {pattern[:80]!r}: not a regular expression ({e})") from None
+
+
 def read_labels(spec: str, take_names: list[str], where: str = "data.labels") -> Labels:
   """The labels of ``take_names`` from ``spec``: a CSV file (``.csv``: a header ``take,FIELD,...``, then one row
   per take) or a regular expression with named groups, searched in each take's name. A take neither names
@@ -121,8 +138,8 @@ def read_labels(spec: str, take_names: list[str], where: str = "data.labels") ->
     pattern = None
   else:
     try:
-      compiled = re.compile(spec)
-    except re.error as e:
+      compiled = regex.compile(spec)
+    except regex.error as e:
       raise UserError(f"{where} = {spec[:80]!r}: not a regular expression ({e})") from None
     if not compiled.groupindex:
       raise UserError(f"{where} = {spec[:80]!r}: name the labels with groups, e.g. (?P<style>[^_]+)")
