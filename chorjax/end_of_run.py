@@ -89,7 +89,8 @@ def write_end_sample(workdir: Path, graphdef, params, ds, cfg, controls: Control
   from chorjax.output import as_motions, write_motions
 
   controls = controls or Controls.resolve(cfg.sample)
-  positions, motions, title = family_of(cfg).end_sample(graphdef, params, ds, cfg, controls)
+  named = dataclasses.replace(cfg, name=Path(workdir).resolve().name)  # a run is named by its folder
+  positions, motions, title = family_of(cfg).end_sample(graphdef, params, ds, named, controls)
   first = as_motions(positions[None], ds.fps, ds.features.skeleton, ds.features.up_axis)
   csv = write_motions(Path(workdir) / "samples" / "sample.csv", first)[0]
   html = write_motions(Path(workdir) / "samples" / "player.html", motions, title=title)[0]

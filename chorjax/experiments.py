@@ -654,7 +654,7 @@ def train_command(config, overrides=(), *, workdir=None, force: bool = False, lo
     )
     return [s]
   steps = f"steps {s['start_step']}->{s['final_step']}"
-  log(f"trained {cfg.name}: {steps}{_losses(s)}, {s['seconds']:.0f} s; workdir {workdir}")
+  log(f"trained {Path(workdir).resolve().name}: {steps}{_losses(s)}, {s['seconds']:.0f} s; workdir {workdir}")
   if "samples" in s:
     log(f"sample: {s['samples']['csv']}\nwatch it: {s['samples']['html']}")
   return [s]

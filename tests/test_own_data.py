@@ -39,6 +39,11 @@ def test_a_native_csv_trains_on_its_own_skeleton(shared_data, tmp_path, capsys):
   assert cli.main(["train", str(tmp_path / "defaults.toml"), *args, "--workdir", str(tmp_path / "run")]) == 0
   said = capsys.readouterr().out
   assert "a training window of 12 frames lasts 0.4 s at 30 fps" in said
+  # the run is named by its folder (its config says "default"), in the log and in the player's title
+  assert (
+    "trained run: " in said
+    and "<title>chorjax: run</title>" in (tmp_path / "run" / "samples" / "player.html").read_text()
+  )
   run = load_run(tmp_path / "run")
   assert run.fps == 30.0 and run.features.skeleton.num_joints == 38
   # the same CSVs mapped onto the 16 joints by their sidecar's names

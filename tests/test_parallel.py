@@ -161,7 +161,7 @@ def test_cli_distributed_flags_launch_two_processes(tmp_path):
   ]
   outs = [p.communicate(timeout=300) for p in procs]
   assert [p.returncode for p in procs] == [0, 0], outs[0][1][-1500:] + outs[1][1][-1500:]
-  assert "trained default: steps 0->2" in outs[0][0] and "process 1/2: steps 0->2" in outs[1][0]
+  assert "trained w: steps 0->2" in outs[0][0] and "process 1/2: steps 0->2" in outs[1][0]  # named by its folder
   rows = [json.loads(l) for l in (tmp_path / "w" / "metrics.jsonl").read_text().splitlines()]
   final = float(outs[1][0].split("final train loss ")[1])
   assert final == pytest.approx(rows[-1]["train_loss"], rel=1e-5)
