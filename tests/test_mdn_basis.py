@@ -109,13 +109,29 @@ def test_a_pca_run_fixes_its_basis_from_its_training_frames_and_never_trains_it(
 
 def test_an_acceleration_basis_is_the_principal_axes_of_the_frames_second_differences(tmp_path):
   """``model.mdn_basis = "acceleration"``: the axes of how the training frames change from one frame to the
-  next but one (what an MDN carrying its residuals draws), not of the frames; fixed like the pose axes."""
-  cfg = tiny_config("train.num_steps=3", "log.tensorboard=false", "model.mdn_basis=acceleration", "model.mdn_memory=2")
+  next but one (what an MDN carrying its residuals draws), not of the frames; fixed like the pose axes. The
+  foot contacts (0/1 flags, the canonical features' last two) are axes of their own that carry nothing: drawn
+  about the means, they neither stay planted nor wander off."""
+  import jax.numpy as jnp
+  from flax import nnx
+
+  flags = ["train.num_steps=3", "log.tensorboard=false", "data.representation=canonical"]
+  cfg = tiny_config(*flags, "model.mdn_basis=acceleration", "model.mdn_memory=2")
   train_and_evaluate(cfg, tmp_path / "run")
   train = [z for _, z in load_dataset(cfg.data).train]
-  basis = np.asarray(load_run(tmp_path / "run").params["head"]["basis"])
-  np.testing.assert_allclose(basis, principal_axes([np.diff(z, 2, axis=0) for z in train]), atol=1e-6)
+  run = load_run(tmp_path / "run")
+  basis = np.asarray(run.params["head"]["basis"])
+  np.testing.assert_allclose(basis[:-2, :-2], principal_axes([np.diff(z[:, :-2], 2, axis=0) for z in train]), atol=1e-6)
+  np.testing.assert_array_equal(basis[-2:], np.eye(len(basis))[-2:])
+  np.testing.assert_array_equal(basis[:, -2:], np.eye(len(basis))[:, -2:])
   assert np.abs(basis - principal_axes(train)).max() > 0.1  # another basis than the frames'
+  head = nnx.merge(run.graphdef, run.params).head
+  out = jnp.asarray(np.random.default_rng(0).normal(size=(3, head.num_outputs)), jnp.float32)
+  residuals = [jnp.ones((3, head.num_mixtures, head.dim))] * 2
+  _, carried, _ = head.carried(out, residuals)
+  mu = head.params(out)[1]
+  assert head.white == 2 and np.array_equal(carried[..., -2:], mu[..., -2:])
+  assert np.abs(carried[..., :-2] - mu[..., :-2]).min() > 0  # the other axes carry
 
 
 def test_an_mse_head_ignores_the_quickstarts_basis_and_trains(tmp_path):

@@ -89,6 +89,16 @@ def ar_coefficients(partial):
   return phi
 
 
+def white_axes(model_cfg, features) -> int:
+  """How many of the MDN's last coordinates carry no residuals: with ``model.mdn_memory``, a canonical run's
+  foot contacts (its features' last ``len(feet)``, 0/1 flags: carried, their residuals wander without end and
+  every foot stays planted or never lands), which the basis keeps as axes of their own
+  (``families.recurrent.mdn_basis``); else none."""
+  if not model_cfg.memory or model_cfg.mdn_scale == "isotropic" or features.representation != "canonical":
+    return 0
+  return len(features.skeleton.feet)
+
+
 def mdn_log_prob(logpi_xK, mu_xKxD, scale_xKxS, x_xD):
   """``log p(x)`` of every frame under the mixture, by logsumexp (finite for tiny scales)."""
   dim = mu_xKxD.shape[-1]
@@ -159,7 +169,9 @@ class MDNHead(nnx.Module):
   diagonal there, so a full
   covariance in feature space with the data's own axes. ``params`` and the scales ``scale_cap`` holds are
   in those coordinates; what ``loss``, ``sample``, ``draw`` and ``mean`` take and return are features, as
-  without it. A rotation keeps the likelihood: the NLL is the same quantity either way.
+  without it. A rotation keeps the likelihood: the NLL is the same quantity either way. With ``memory``, the
+  last ``white`` coordinates carry no residuals (a run's foot contacts, 0/1 flags whose carried residuals
+  would wander without end: :func:`white_axes`).
   """
 
   def __init__(
@@ -172,10 +184,11 @@ class MDNHead(nnx.Module):
     min_scale: float = 1e-3,
     basis: bool = False,
     memory: int = 0,
+    white: int = 0,
     rngs: nnx.Rngs,
   ):
     self.dim, self.num_mixtures, self.isotropic, self.min_scale = dim, num_mixtures, isotropic, min_scale
-    self.memory = memory
+    self.memory, self.white = memory, white
     self.out = nnx.Linear(hidden, self.num_outputs, rngs=rngs)
     self.basis = nnx.Param(jnp.eye(dim)) if basis else None  # a Param so checkpoints carry it; never trained
 
@@ -220,6 +233,8 @@ class MDNHead(nnx.Module):
     they were heading and how that was turning. Returns ``(logpi, means, scale)``."""
     logpi, mu, scale = self.params(out_xP)
     partial = jnp.moveaxis(mdn_carry(out_xP, self.num_scales, self.memory), -3, 0)
+    if self.white:  # the last axes carry nothing: drawn white about the means
+      partial = partial * (jnp.arange(self.num_scales) < self.num_scales - self.white)
     carried = mu
     for phi, r in zip(ar_coefficients(list(partial)), residuals):
       carried = carried + phi * r

@@ -12,6 +12,22 @@ from chorjax.families.family import Family
 from chorjax.registry import register
 
 
+def mdn_basis(model_cfg, takes, white: int = 0):
+  """The MDN's ``[D, D]`` coordinates (``model.mdn_basis``): the principal axes of the training frames
+  (``takes``, ``[T, D]`` each) or of their second differences; the last ``white`` features
+  (``heads.white_axes``) are axes of their own, left out of the others."""
+  import numpy as np
+
+  from chorjax.data.features import principal_axes
+
+  lag = 2 if model_cfg.mdn_basis == "acceleration" else 0
+  d = takes[0].shape[-1]
+  axes = principal_axes([np.diff(z[:, : d - white], lag, axis=0) for z in takes])
+  basis = np.eye(d, dtype=np.float32)
+  basis[: d - white, : d - white] = axes
+  return basis
+
+
 class Recurrent(Family):
   name = "rnn"
   data_parallel = True
@@ -28,20 +44,17 @@ class Recurrent(Family):
 
   def build_model(self, cfg, features, num_motions: int):
     from chorjax.families.recurrent.recurrent_model import create_model
+    from chorjax.models.heads import white_axes
 
-    return create_model(cfg.model, features.dim, num_motions, cfg.train.seed)
+    return create_model(cfg.model, features.dim, num_motions, cfg.train.seed, white_axes(cfg.model, features))
 
   def create_state(self, cfg, ds):
-    import numpy as np
-
-    from chorjax.data.features import principal_axes
     from chorjax.families.recurrent.steps import create_train_state
+    from chorjax.models.heads import white_axes
 
-    basis = None
-    if cfg.model.pca_basis:  # the frames' principal axes, or their accelerations' (model.mdn_basis)
-      lag = 2 if cfg.model.mdn_basis == "acceleration" else 0
-      basis = principal_axes([np.diff(z, lag, axis=0) for _, z in ds.train])
-    return create_train_state(cfg, ds.features.dim, ds.num_motions, basis)
+    white = white_axes(cfg.model, ds.features)
+    basis = mdn_basis(cfg.model, [z for _, z in ds.train], white) if cfg.model.pca_basis else None
+    return create_train_state(cfg, ds.features.dim, ds.num_motions, basis, white)
 
   def parts(self, cfg, ds):
     from chorjax.data.dataset import WindowSampler, eval_windows

@@ -19,7 +19,7 @@ class ChorModel(nnx.Module):
   ``model.step(carry, x_BxD)`` does the same for one frame, with the state carried (generation).
   """
 
-  def __init__(self, cfg, dim: int, num_motions: int, *, rngs: nnx.Rngs):
+  def __init__(self, cfg, dim: int, num_motions: int, *, white: int = 0, rngs: nnx.Rngs):
     self.dim, self.num_motions = dim, num_motions
     self.core = RecurrentCore(
       cfg.cell,
@@ -44,6 +44,7 @@ class ChorModel(nnx.Module):
         min_scale=cfg.min_scale,
         basis=cfg.pca_basis,
         memory=cfg.memory,
+        white=white,
         rngs=rngs,
       )
     else:
@@ -102,5 +103,7 @@ class ChorModel(nnx.Module):
     return self.head.out.out_features
 
 
-def create_model(model_cfg, dim: int, num_motions: int, seed: int) -> ChorModel:
-  return ChorModel(model_cfg, dim, num_motions, rngs=nnx.Rngs(params=seed))
+def create_model(model_cfg, dim: int, num_motions: int, seed: int, white: int = 0) -> ChorModel:
+  """The model of ``model_cfg`` on ``dim`` features; ``white``: the MDN's last coordinates that carry no
+  residuals (``heads.white_axes``)."""
+  return ChorModel(model_cfg, dim, num_motions, white=white, rngs=nnx.Rngs(params=seed))

@@ -80,11 +80,11 @@ class StepSpec:
   parts: int = 1
 
 
-def create_train_state(cfg: Config, dim: int, num_motions: int, basis=None) -> tuple[dict, StepSpec]:
+def create_train_state(cfg: Config, dim: int, num_motions: int, basis=None, white: int = 0) -> tuple[dict, StepSpec]:
   """``({params, opt_state, step}, spec)`` for a fresh run of ``cfg`` (the rnn family) on ``dim`` features;
   ``basis``: the MDN's ``[D, D]`` coordinates where ``model.mdn_basis`` is not "features"
-  (``features.principal_axes`` of the training frames or of their accelerations)."""
-  model = create_model(cfg.model, dim, num_motions, cfg.train.seed)
+  (``families.recurrent.mdn_basis``); ``white``: its last coordinates that carry no residuals."""
+  model = create_model(cfg.model, dim, num_motions, cfg.train.seed, white)
   graphdef, params = nnx.split(model, nnx.Param)
   params = nnx.to_pure_dict(params)
   if cfg.model.pca_basis:
