@@ -19,7 +19,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any  # noqa: F401  (the inherited fields' annotations name these: the API docs resolve them here)
 
-import numpy as np  # noqa: F401
+import numpy as np
 
 # What every command does, as functions (the command line calls these and prints what they return).
 from chorjax.calibrate import CALIBRATION_DANCERS, LABELLED_DANCERS, calibrate_run  # noqa: F401
@@ -62,6 +62,17 @@ from chorjax.scoring import score_to  # noqa: F401
 __all__ = ["Motion", "Player", "Run", "UserError", "load_dataset", "load_run", "read_motion", "score", "train"]
 
 
+def _check_writable(positions, path) -> None:
+  """A UserError unless ``positions`` hold at least one frame, every number finite: no file of any format says
+  what a NaN joint or an empty dance is (the writers failed with a traceback or wrote NaN silently)."""
+  pos = np.asarray(positions)
+  if pos.shape[0] == 0:
+    raise UserError(f"{path}: the motion has no frames; nothing written")
+  bad = ~np.isfinite(pos.reshape(pos.shape[0], -1)).all(-1)
+  if bad.any():
+    raise UserError(f"{path}: frame {int(np.argmax(bad))} holds NaN or infinity; nothing written")
+
+
 @dataclasses.dataclass(frozen=True, repr=False)  # the base's one-line repr
 class Motion(_motion.Motion):
   """One take or one generated dancer: ``positions [T, J, 3]``, ``fps``, ``skeleton``, ``up_axis`` ...
@@ -84,6 +95,7 @@ class Motion(_motion.Motion):
     if "\x00" in str(path):
       raise UserError(f"{path!r}: a file name cannot hold a NUL character")
     refuse_existing(written_paths(path, 1, self.skeleton), force, how="force=True")  # a sidecar is the user's too
+    _check_writable(self.positions, path)
     if skeleton is not None and suffix != ".bvh":
       raise UserError(f"{path}: a character skeleton is for .bvh output")
     title = self.name or "chorjax"

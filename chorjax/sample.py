@@ -73,6 +73,9 @@ def sample_dancers(run, frames: int, num: int, seed: int, prime=None, motion=Non
   id or blend that conditions the dance; ``controls``: sampling controls (unset: the run's own)."""
   check_counts(frames=frames, num=num, seed=seed)
   run = run.serving("sample")
+  if not run.family.conditioned and (motion is not None or mix is not None):
+    flag = "--motion" if motion is not None else "--mix"
+    raise UserError(f"{flag}: a {run.family.name} run draws from noise alone; it is conditioned on no take or label")
   run.check_drawn(frames * num, f"frames {frames} x num {num}")
   sampling = run.sampling(**(controls or {}))
   run = run.ranged(sampling)

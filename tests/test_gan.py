@@ -171,6 +171,9 @@ def test_resume_is_exact_and_the_run_samples_evaluates_and_compares(tmp_path, ca
     cli.main(["sample", str(straight), "-o", str(tmp_path / "p.csv"), "--prime", "cmu94/94_10_skeleton_3d.csv"]) == 2
   )
   assert "cannot continue a phrase" in capsys.readouterr().err
+  for flag in (["--motion", "1"], ["--mix", "0=1"]):  # conditioned on nothing: refused, not the same bytes
+    assert cli.main(["sample", str(straight), "-o", str(tmp_path / "m.csv"), *flag]) == 2
+    assert "draws from noise alone" in capsys.readouterr().err and not (tmp_path / "m.csv").exists()
 
   assert cli.main(["eval", str(straight), "--data", "cmu94", "--frames", "120", "--num", "2"]) == 0
   result = json.loads((straight / "eval" / "metrics.json").read_text())

@@ -659,3 +659,21 @@ def test_a_pattern_that_backtracks_without_end_is_refused_not_run_forever(tmp_pa
     assert cli.main([*args, f"{key}='{pattern}'"]) == 2
     _one_line(capsys, key, said)
     assert not (tmp_path / "w").exists()
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".npz", ".bvh", ".glb", ".html"])
+def test_motion_write_refuses_nan_frames_and_empty_motions_in_one_line(tmp_path, suffix):
+  """``Motion.write`` of a NaN frame to ``.glb`` was a LinAlgError, of 0 frames to ``.glb``/``.bvh`` an
+  IndexError, and NaN went silently into ``.csv``, ``.npz`` and ``.bvh``: now one UserError, nothing written."""
+  from chorjax import read_motion
+  from chorjax.data.dataset import bundled_path
+  from chorjax.errors import UserError
+
+  take = read_motion(bundled_path("cmu94") / "94_01_skeleton_3d.csv")
+  nan = take.positions[:20].copy()
+  nan[7, 3, 1] = np.nan
+  for positions, said in ((nan, "frame 7 holds NaN"), (take.positions[:0], "no frames")):
+    with pytest.raises(UserError, match=said):
+      take.replace(positions=positions).write(tmp_path / f"m{suffix}")
+  assert not list(tmp_path.iterdir())
+  assert take.replace(positions=take.positions[:20]).write(tmp_path / f"m{suffix}").is_file()

@@ -24,6 +24,7 @@ class Family:
     figures: training draws TensorBoard figures of its dance (``train.figure_every``).
     data_parallel: it trains data-parallel over processes (``[parallel]``).
     calibrated: its draw has the controls ``chorjax calibrate`` chooses (the run's calibration.json applies).
+    conditioned: a dance is conditioned on a take or labels (``--motion``, ``--mix``); else drawn from noise alone.
   """
 
   name: str = ""
@@ -31,6 +32,7 @@ class Family:
   figures: bool = True
   data_parallel: bool = False
   calibrated: bool = False
+  conditioned: bool = True
 
   def refusal(self, command: str) -> str | None:
     """Why this family's runs cannot serve ``command`` (``sample``, ``eval``, ``calibrate``, ``live``,

@@ -17,6 +17,7 @@ from chorjax.registry import register
 class Gan(Family):
   name = "gan"
   likelihood = False
+  conditioned = False
 
   def refusal(self, command: str) -> str | None:
     if command == "calibrate":
