@@ -369,6 +369,7 @@ class TrainConfig:
       "vectorized program compute each point's shares one after another inside it (each share's own cut, "
       "noise and dropout, as in threads)."
     ),
+    below=65,  # a share a core: more shares than cores gain nothing, and 100,000 made LLVM abort
   )
   num_steps: int = _field(1000, "total optimizer steps", minimum=0, resumable=True, below=2**31)
   seed: int = _field(0, "seed of parameters, batches, dropout and noise", minimum=0, below=2**32)
@@ -882,12 +883,14 @@ FEATURES_GUESS = 256  # pose features per frame, more than any skeleton we read 
 def check_training_size(config: Config, copies: int = 1) -> None:
   """A one-line ``UserError`` naming the keys when training would need more memory than this machine has,
   estimated from the sizes alone (before anything is allocated): the parameters with Adam's two moments,
-  and the activations a step keeps for its backward pass (about 16 values per unit, layer and frame); for
-  ``copies`` models trained together as one program (a list of seeds), all of them."""
+  and the activations a step keeps for its backward pass (about 16 values per unit, layer and frame, and the
+  head's: about 6 per feature and mixture component per frame, which rule small models); for ``copies``
+  models trained together as one program (a list of seeds), all of them."""
   m, t, d = config.model, config.train, config.data
   h, layers, inputs = m.hidden_size, m.num_layers, FEATURES_GUESS
   params = layers * 4 * h * (h + max(h, inputs)) + h * FEATURES_GUESS * (2 * m.num_mixtures + 1)
-  activations = t.batch_size * d.seq_length * layers * h * 16
+  components = m.num_mixtures if m.head == "mdn" else 1
+  activations = t.batch_size * d.seq_length * (layers * h * 16 + components * FEATURES_GUESS * 6)
   together = f" x {copies:,} points trained together" if copies > 1 else ""
   check_memory(
     4.0 * (3 * params + activations) * copies,

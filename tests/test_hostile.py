@@ -677,3 +677,15 @@ def test_motion_write_refuses_nan_frames_and_empty_motions_in_one_line(tmp_path,
       take.replace(positions=positions).write(tmp_path / f"m{suffix}")
   assert not list(tmp_path.iterdir())
   assert take.replace(positions=take.positions[:20]).write(tmp_path / f"m{suffix}").is_file()
+
+
+def test_a_batch_that_xla_cannot_hold_or_too_many_shares_are_refused_before_training(tmp_path, capsys):
+  """``train.batch_size=100000`` on a small model passed the memory check (11.8 GiB), then XLA asked for 24.5 GB
+  (an internal error); ``train.batch_parts=100000`` made LLVM abort (exit 134). Both one line now, nothing made."""
+  (tmp_path / "base.toml").write_text("")
+  args = ["train", str(tmp_path / "base.toml"), *TINY, "--workdir", str(tmp_path / "w")]
+  assert cli.main([*args, "train.batch_size=100000"]) == 2
+  _one_line(capsys, "train.batch_size=100000", "GiB")
+  assert cli.main([*args, "train.batch_size=100000", "train.batch_parts=100000"]) == 2
+  _one_line(capsys, "train.batch_parts")
+  assert not (tmp_path / "w").exists()
