@@ -689,3 +689,27 @@ def test_a_batch_that_xla_cannot_hold_or_too_many_shares_are_refused_before_trai
   assert cli.main([*args, "train.batch_size=100000", "train.batch_parts=100000"]) == 2
   _one_line(capsys, "train.batch_parts")
   assert not (tmp_path / "w").exists()
+
+
+def test_a_cache_entry_that_is_not_a_file_is_made_again_not_read(tmp_path, capsys):
+  """Cache entries replaced by FIFOs blocked training forever (reading one waits for a writer). An entry that
+  is not a regular file is never opened: the take is read again and the entry written over it."""
+  import threading
+
+  from chorjax.data.cache import Cache
+  from chorjax.data.csv import read_csv as read
+  from chorjax.data.dataset import bundled_path
+
+  take = bundled_path("cmu94") / "94_01_skeleton_3d.csv"
+  cache = Cache(tmp_path / "cache")
+  first = cache.motions(take, {"v": 1}, lambda: [read(take)])
+  entry = next((tmp_path / "cache").rglob("*.npz"))
+  entry.unlink()
+  os.mkfifo(entry)
+  got: list = []
+  worker = threading.Thread(target=lambda: got.append(cache.motions(take, {"v": 1}, lambda: [read(take)])), daemon=True)
+  worker.start()
+  worker.join(timeout=60)
+  assert got, "reading the cache blocked on a FIFO"
+  np.testing.assert_array_equal(got[0][0].positions, first[0].positions)
+  assert "is not a file" in capsys.readouterr().err and entry.is_file()

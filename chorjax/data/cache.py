@@ -113,7 +113,9 @@ class Cache:
 
   def _entry(self, kind: str, key: str, make, save, load, what: str):
     path = self._path(kind, key)
-    if path.exists():
+    if path.exists() and not path.is_file():  # a FIFO or a device would block the read forever: never opened
+      print(f"cache: {path} is not a file; {what} is read again", file=sys.stderr, flush=True)
+    elif path.exists():
       try:
         return load(path, key)
       except Exception as e:  # anything that cannot be read back is damage: made again, never trusted
