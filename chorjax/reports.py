@@ -28,7 +28,13 @@ METRIC_KEYS = (
   "novelty",
   "speed",
   "root_travel",
+  "coverage",
+  "global_diversity",
+  "local_diversity",
+  "inter_diversity",
 )
+# printed only where measured: the single-take measures (takes of up to two minutes; two samples for inter_)
+WHERE_MEASURED = ("coverage", "global_diversity", "local_diversity", "inter_diversity")
 INFO_COLUMNS = ("take", "frames", "joints", "fps", "x range", "y range", "z range")
 BONE_COLUMNS = ("bone len (mean)", "bone CV median", "bone CV max")
 CHECK_COLUMNS = ("take", "frames", "fps", "seconds", "joints", "up", "units", "bone CV", "held", "jumps")
@@ -98,6 +104,8 @@ def metric_lines(result: dict, keys) -> list[str]:
     lines.append(f"segments of {result['segment_frames']} frames (movement_first/last/min/max, jitter_max)")
   for k in keys:
     real = result.get(k + "_real")
+    if result.get(k) is None and k in WHERE_MEASURED:
+      continue
     if result.get(k) is None:
       lines.append(f"{k:22s} {'-':>10s}   (none: a GAN has no likelihood)" if k == "heldout_loss" else f"{k:22s} -")
       continue

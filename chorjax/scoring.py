@@ -44,6 +44,9 @@ Keys (a value, or ``{"mean", "sd"}`` over several motions or reference splits):
 * ``novelty``: RMS joint distance (body sizes) from each motion window to its nearest window of the
   training takes (``chorjax metrics``: of the reference); ``novelty_real``: the same for real takes
   that are not training takes (``chorjax metrics``: each reference take against the others).
+* ``coverage``, ``coverage_together``, ``global_diversity``, ``local_diversity``, ``inter_diversity``: the
+  single-take measures (:mod:`chorjax.single_take`) against the training takes (``chorjax metrics``: the
+  reference), where those hold at most two minutes (``SINGLE_TAKE_FRAMES``); None otherwise.
 """
 
 from __future__ import annotations
@@ -344,6 +347,7 @@ def score(
     "airborne": spread([metrics.airborne(m, skeleton, size) for m in motions]),
     "airborne_real": float(np.mean([metrics.airborne(t, skeleton, size) for t in reference])),
     **_novelty(motions, reference, train, unseen, skeleton, size, window),
+    **_single_take(motions, train if train is not None else reference, skeleton, size),
     "speed_ratio": speeds,  # the name before `speed`, kept for older readers; NOT a freeze measure
     "speed": speeds,
     **_travel_and_train_reference(motions, reference, skeleton, train, unseen, (kin, geo), window, splits, seed),
@@ -351,6 +355,20 @@ def score(
     "window": window,
     "splits": splits,
   }
+
+
+SINGLE_TAKE_FRAMES = 3600  # the single-take measures for takes of up to two minutes at 30 fps (one take: 10-60 s)
+SINGLE_TAKE_KEYS = ("coverage", "coverage_together", "global_diversity", "local_diversity", "inter_diversity")
+
+
+def _single_take(motions, takes, skeleton: Skeleton, size: float) -> dict:
+  """``single_take.single_take`` of the motions against the takes they were drawn from (the training takes, or
+  ``chorjax metrics``' reference), where those hold at most ``SINGLE_TAKE_FRAMES`` frames; else None each."""
+  from chorjax.single_take import single_take
+
+  if sum(len(t) for t in takes) > SINGLE_TAKE_FRAMES:
+    return dict.fromkeys(SINGLE_TAKE_KEYS)
+  return single_take(motions, takes, skeleton, size)
 
 
 def score_files(motion_specs, data_specs, **kw) -> dict:

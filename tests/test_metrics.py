@@ -16,7 +16,7 @@ from chorjax.data.dataset import bundled_path, load_dataset, read_takes
 from chorjax.data.motion import bone_length_cv
 from chorjax.data.skeletons import MPII16
 from chorjax.evaluate import held_out
-from chorjax.reports import METRIC_KEYS
+from chorjax.reports import METRIC_KEYS, WHERE_MEASURED
 from chorjax.scoring import mean_of, score
 
 TAKE = read_csv(bundled_path("cmu94") / "94_05_skeleton_3d.csv")
@@ -145,7 +145,7 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
   m = json.loads((runs[0] / "eval" / "metrics.json").read_text())
   for key in (
     "heldout_loss",
-    *METRIC_KEYS,
+    *(k for k in METRIC_KEYS if k not in WHERE_MEASURED),  # not single-take: nine takes, five minutes
     "fid_k_real",
     "fid_g_real",
     "novelty_real",
@@ -154,6 +154,7 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
     "movement_min_train",
   ):
     assert np.isfinite(mean_of(m[key])), key
+  assert all(m[k] is None for k in WHERE_MEASURED)
   assert m["data"] == ["held-out"]  # judged on the run's own held-out take (94_10) alone
   assert set(m["fid_k"]) == {"mean", "sd"} and set(m["movement_first"]) == {"mean", "sd"}  # 2 seeds
   each = m["per_motion"]  # every sample's own value of the per-sample bars, the keys' mean and sd over them
@@ -427,3 +428,86 @@ def test_airborne_is_near_zero_for_real_dance_and_counts_the_frames_a_dancer_flo
   assert M.airborne(take, MPII16, size) == pytest.approx(lifted.mean(), abs=0.01)
   r = _score(take, takes)
   assert r["airborne"] == pytest.approx(lifted.mean(), abs=0.01) and r["airborne_real"] < 0.01
+
+
+# ---------------------------------------------------------------- the single-take measures
+
+
+def _cmu94(n: int) -> np.ndarray:
+  from chorjax.data.csv import read_csv
+  from chorjax.data.dataset import bundled_path
+  from chorjax.data.transforms import to_y_up
+
+  m = read_csv(bundled_path("cmu94") / f"94_{n:02d}_skeleton_3d.csv")
+  return np.asarray(to_y_up(m.positions, m.up_axis), np.float64)
+
+
+def test_patched_cost_is_the_least_cost_cut_into_long_enough_pieces():
+  """``global_diversity``'s dynamic programme equals trying every cut of the rows into pieces of at least
+  ``shortest`` frames, each matched along a diagonal of the columns within one take."""
+  import functools
+
+  from chorjax.single_take import patched_cost
+
+  rng = np.random.default_rng(0)
+  for t, u, shortest, starts in ((7, 5, 2, (0,)), (9, 6, 3, (0, 3)), (8, 8, 1, (0, 2, 5))):
+    cost = rng.random((t, u))
+    take_of = np.searchsorted(np.array(starts), np.arange(u), side="right")
+
+    @functools.cache
+    def best(i: int, t=t, u=u, shortest=shortest, take_of=take_of, cost=cost) -> float:  # rows i.. cut into pieces
+      if i == t:
+        return 0.0
+      out = np.inf
+      for end in range(i + shortest, t + 1):
+        for k in range(u - (end - i) + 1):
+          if take_of[k] == take_of[k + end - i - 1]:
+            out = min(out, sum(cost[i + d, k + d] for d in range(end - i)) + best(end))
+      return out
+
+    assert patched_cost(cost, shortest, starts) == pytest.approx(best(0) / t)
+
+
+def test_single_take_measures_tell_a_replay_a_variation_and_another_dance_apart():
+  """On cmu94: the take itself is covered whole with no diversity; the take danced 10% faster is covered
+  whole and barely diverse; another take of the dancer covers none of it and is far; a frozen pose covers
+  nothing; two samples that are one dance have no diversity between them."""
+  from chorjax import metrics
+  from chorjax.data.skeletons import MPII16
+  from chorjax.data.transforms import resample
+  from chorjax.single_take import single_take
+
+  take, other = _cmu94(1), _cmu94(2)
+  size = metrics.body_size(take, MPII16)
+  same = single_take([take, take], [take], MPII16, size)
+  assert same["coverage"] == 1.0 and same["global_diversity"] == pytest.approx(0.0, abs=1e-6)
+  assert same["local_diversity"] == pytest.approx(0.0, abs=1e-6) and same["inter_diversity"] == pytest.approx(
+    0, abs=1e-6
+  )
+  faster = np.asarray(resample(take, 30.0, 27.0), np.float64)
+  varied = single_take([faster, other], [take], MPII16, size)
+  assert varied["coverage"] == 0.5 and varied["coverage_together"] == 1.0  # the faster one covers it all
+  alone = single_take([other], [take], MPII16, size)
+  assert alone["coverage"] == 0.0 and alone["inter_diversity"] is None
+  assert 0 < single_take([faster], [take], MPII16, size)["global_diversity"] < 0.1 < 0.3 < alone["global_diversity"]
+  assert varied["inter_diversity"] > 0.3
+  frozen = single_take([np.repeat(take[:1], 600, 0)], [take], MPII16, size)
+  assert frozen["coverage"] == 0.0
+
+
+def test_chorjax_metrics_reports_the_single_take_measures_against_a_short_reference(tmp_path, capsys):
+  from chorjax import cli
+  from chorjax.data.csv import read_csv, write_csv
+  from chorjax.data.dataset import bundled_path
+  from chorjax.data.transforms import resample
+
+  m = read_csv(bundled_path("cmu94") / "94_01_skeleton_3d.csv")
+  write_csv(m.replace(positions=np.asarray(resample(m.positions, 30.0, 27.0), np.float32)), tmp_path / "fast.csv")
+  args = ["metrics", str(tmp_path / "fast.csv"), "--data"]
+  assert cli.main([*args, str(bundled_path("cmu94") / "94_01_skeleton_3d.csv"), "-o", str(tmp_path / "a.json")]) == 0
+  said = capsys.readouterr().out
+  assert "coverage" in said and "global_diversity" in said and "inter_diversity" not in said  # one sample
+  assert json.loads((tmp_path / "a.json").read_text())["coverage"] == 1.0
+  assert cli.main([*args, "cmu94", "-o", str(tmp_path / "b.json")]) == 0  # ten takes, 5 minutes: not one take
+  assert "coverage" not in capsys.readouterr().out
+  assert json.loads((tmp_path / "b.json").read_text())["coverage"] is None
