@@ -286,3 +286,31 @@ def test_takes_read_and_encoded_in_processes_are_the_ones_read_here(takes, tmp_p
   there = load_dataset(config(tmp_path / "there", 2))
   assert parsed == [] and _same(here, there)
   assert len(list((tmp_path / "there").rglob("*.npz"))) == 2 * len(TAKES)
+
+
+@pytest.mark.parametrize(
+  "text, said",
+  [
+    ("take,action\nt1,walk\nt1,run\n", r"labels.csv:3: take 't1' has another row that says otherwise"),
+    ('take,action\nt1,"wa\nlk"\n', r"a label cannot be empty or hold"),
+    ("take,action,\nt1,walk,x\n", r"labels.csv:1: field ''"),
+    ("take,action,take\nt1,walk,x\n", r"field 'take' is named twice"),
+    ("take,action,action\nt1,walk,x\n", r"field 'action' is named twice"),
+    ("take,act=ion\nt1,walk\n", r"field 'act=ion'"),
+    ("take,action\nt1,wa:lk\n", r"take 't1': action 'wa:lk'"),
+    ('take,action\nt1,"a,b"\n', r"take 't1': action 'a,b'"),
+  ],
+)
+def test_a_labels_csv_whose_labels_motion_cannot_name_is_refused(tmp_path, text, said):
+  """Conflicting duplicate rows, quoted line breaks, empty or doubled field names, a field named take, and
+  fields or values holding , = : were accepted, though ``--motion`` and ``--mix`` could never name them."""
+  table = tmp_path / "labels.csv"
+  table.write_text(text)
+  with pytest.raises(UserError, match=said):
+    read_labels(str(table), ["t1"])
+
+
+def test_a_pattern_reading_a_label_motion_cannot_name_is_refused():
+  with pytest.raises(UserError, match=r"take 'a=b_1': x 'a=b'"):
+    read_labels(r"^(?P<x>[^_]+)_\d$", ["a=b_1"])
+  assert read_labels(r"^(?P<x>[^_]+)_\d$", ["ab_1"]).fields == {"x": ("ab",)}

@@ -151,6 +151,8 @@ def read_labels(spec: str, take_names: list[str], where: str = "data.labels") ->
     if got is None:
       how = "has no row in the labels file" if pattern is None else "does not match the labels pattern"
       raise UserError(f"{where}: take {name!r} {how}")
+    for field, value in got.items():
+      _check_label(value, f"{where}: take {name!r}: {field}")
     found[name] = got
   values = {f: tuple(sorted({str(t[f]) for t in found.values()})) for f in fields}
   return Labels(values, pattern, table)
@@ -158,11 +160,12 @@ def read_labels(spec: str, take_names: list[str], where: str = "data.labels") ->
 
 def _read_label_csv(path: str, where: str) -> tuple[list[str], dict]:
   import csv
+  import io
 
   from chorjax.errors import read_text
 
   try:
-    rows = list(csv.reader(read_text(path, "labels").splitlines()))
+    rows = list(csv.reader(io.StringIO(read_text(path, "labels"), newline="")))  # a quoted line break kept
   except FileNotFoundError:
     raise UserError(f"{where}: {path}: no such labels file") from None
   except (csv.Error, UnicodeDecodeError) as e:
@@ -170,14 +173,30 @@ def _read_label_csv(path: str, where: str) -> tuple[list[str], dict]:
   if not rows or len(rows[0]) < 2 or rows[0][0].strip() != "take":
     raise UserError(f"{where}: {path}:1: the header must be take,FIELD[,FIELD...]")
   fields = [f.strip() for f in rows[0][1:]]
-  table = {}
+  for f in fields:
+    _check_label(f, f"{where}: {path}:1: field")
+    if f == "take" or fields.count(f) > 1:
+      raise UserError(f"{where}: {path}:1: field {f!r} is named twice (the first column is take)")
+  table: dict = {}
   for line, row in enumerate(rows[1:], start=2):
     if not row:
       continue
     if len(row) != len(rows[0]) or not all(c.strip() for c in row):
       raise UserError(f"{where}: {path}:{line}: expected {len(rows[0])} non-empty cells, got {len(row)}")
-    table[row[0].strip()] = {f: c.strip() for f, c in zip(fields, row[1:])}
+    take, labels = row[0].strip(), {f: c.strip() for f, c in zip(fields, row[1:])}
+    if table.get(take, labels) != labels:
+      raise UserError(f"{where}: {path}:{line}: take {take!r} has another row that says otherwise")
+    table[take] = labels
   return fields, table
+
+
+LABEL_SEPARATORS = ",=:\n\r"  # what --motion and --mix split labels on: no field or value may hold them
+
+
+def _check_label(text: str, where: str) -> None:
+  """A UserError unless ``text`` (a field's name or value) can be named by ``--motion`` and ``--mix``."""
+  if not text or any(c in LABEL_SEPARATORS for c in text):
+    raise UserError(f"{where} {text!r}: a label cannot be empty or hold , = : or a line break (--motion names it)")
 
 
 def take_condition(labels: Labels | None, id_map: dict, name: str, default: int | None = None):
