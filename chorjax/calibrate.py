@@ -65,6 +65,14 @@ GRID = {
   "crossfade": (0.0, 0.8),
   "foot_lock": (True, False),  # canonical runs only (the others cannot lock feet)
 }
+# An MDN that carries its noise over frames (model.mdn_memory) draws smoothly at full temperature: what is left to
+# choose is how wide its draws are and whether its feet lock. On the dancers benchmark's runs, its own draw on the
+# training takes of martial moved at 1.5-1.6x their speed at temperature 1 and 0.93x at 0.5; salsa's at 0.94x
+# only unlocked or at 1.1 (experiments/draw).
+CARRIED_GRID = {
+  "sigma_temperature": (0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.1, 1.2),
+  "foot_lock": (True, False),
+}
 # Where the grid's best value of a control is one of its ends, the search goes on past it, one value at a
 # time along these ladders (lower, higher), while the objective falls: the grid's ends bound 29 of the 39
 # chosen sigma temperatures of the dancers benchmark's runs (0.9: 24, most on cmu94 and salsa; 1.2: 5).
@@ -91,12 +99,14 @@ RECORDED = ("noise_order", "pace")  # not searched: what the chosen settings wer
 
 
 def default_grid(config, noise_order: int | None = None, pace: float | None = None) -> dict:
-  """``GRID`` less what ``config``'s run cannot use: ``foot_lock`` needs canonical features, and an MSE head
+  """``GRID`` (``CARRIED_GRID`` for an MDN that carries its noise: ``model.mdn_memory``) less what ``config``'s
+  run cannot use: ``foot_lock`` needs canonical features, and an MSE head
   draws no noise (its frame is its prediction), so only ``foot_lock`` can change its dance. The noise passes
   ``noise_order`` filters and the governor holds the pace with gain ``pace`` (defaults: the run's
   ``sample.noise_order`` and ``sample.pace``), both recorded with the settings chosen."""
   pace = config.sample.pace if pace is None else pace
-  grid = {"noise_order": (noise_order or config.sample.noise_order,), "pace": (pace,), **GRID}
+  searched = CARRIED_GRID if config.model.memory else GRID
+  grid = {"noise_order": (noise_order or config.sample.noise_order,), "pace": (pace,), **searched}
   if config.data.representation != "canonical":
     del grid["foot_lock"]
   if config.model.head == "mse":

@@ -226,6 +226,23 @@ def test_an_mse_head_calibrates_only_what_can_change_its_dance():
   assert default_grid(load_config("configs/quickstart.toml", ["model.head=mse"])) == {"foot_lock": (True, False)}
   assert default_grid(load_config(None, ["model.head=mse", "data.representation=directions"])) == {}
   assert "foot_lock" not in default_grid(load_config(None, ["data.representation=directions"]))
+  # an MDN that carries its noise: how wide it draws and whether its feet lock, nothing more
+  carried = default_grid(load_config("configs/quickstart.toml", ["model.mdn_memory=2"]))
+  assert set(carried) == {"noise_order", "pace", "sigma_temperature", "foot_lock"}
+  assert len(carried["sigma_temperature"]) == 8 and carried["foot_lock"] == (True, False)
+
+
+def test_a_run_that_carries_its_noise_calibrates_its_temperature_and_feet(tmp_path):
+  """``chorjax calibrate`` of a ``model.mdn_memory`` run searches 16 settings and records what it chose."""
+  from chorjax.calibrate import calibrate
+
+  w = tmp_path / "run"
+  flags = ["train.num_steps=3", "log.tensorboard=false", "data.representation=canonical", "model.mdn_memory=2"]
+  train_and_evaluate(tiny_config(*flags, "model.mdn_basis=acceleration", "sample.clamp=true"), w)
+  result = calibrate(w, frames=240, num=1, log=lambda line: None)
+  assert set(result["settings"]) == {"noise_order", "pace", "sigma_temperature", "foot_lock"}
+  assert len(result["table"]) >= 16 and {r["settings"]["foot_lock"] for r in result["table"]} == {True, False}
+  assert load_run(w).sampling().sigma_temperature == result["settings"]["sigma_temperature"]
 
 
 def test_the_pose_measure_holds_real_takes_near_one_and_a_frozen_dancer_far_from_it():
