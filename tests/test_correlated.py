@@ -131,3 +131,19 @@ def test_a_correlated_run_samples_live_streams_and_primes(tmp_path, prime):
   state, first = continue_stream(graphdef, params, state, jax.random.key(0), draw, num_frames=6)
   assert np.abs(np.asarray(first) - np.asarray(whole)).max() < 1e-4  # the same program, compiled apart
   assert len(state[3]) == 2 + 2 and float(jnp.abs(state[3][2]).max()) > 0  # the residuals ride in the state
+
+
+def test_the_carried_recipe_draws_with_three_controls_and_calibrates_two():
+  """``configs/carried.toml``: the quickstart's model carrying its noise; its draw is the plain draw but for the
+  temperatures and the clip to the training range (decoding aside), and calibration chooses the scale
+  temperature and foot lock."""
+  from chorjax.calibrate import default_grid
+  from chorjax.config import load_config
+  from chorjax.controls import PLAIN, Controls
+
+  cfg = load_config("configs/carried.toml")
+  assert cfg.model.memory == 2 and cfg.model.mdn_basis == "acceleration" and cfg.train.calibrate
+  drawn = Controls.resolve(cfg.sample).to_dict()
+  used = {k for k in PLAIN if drawn[k] != PLAIN[k]} | {"pi_temperature", "sigma_temperature"}
+  assert used == {"pi_temperature", "sigma_temperature", "clamp"}
+  assert set(default_grid(cfg)) - {"noise_order", "pace"} == {"sigma_temperature", "foot_lock"}
