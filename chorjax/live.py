@@ -7,8 +7,9 @@ steer the dance with JSON messages; OSC can steer it too, and feed a dancer's ow
 
 Protocol (WebSocket at ``/ws``; every message is one JSON object):
 
-- server -> client, first: ``{"hello": {"fps", "joints", "bones", "joint_names", "up_axis", "motions",
-  "settings"}}``; then one message per frame, paced in real time:
+- server -> client, first: ``{"hello": {"fps", "joints", "bones", "joint_names", "up_axis", "to_y_up", "floor",
+  "motions", "settings"}}`` (``floor``: the training floor's height along the up axis, in the data's units; null
+  where the run records none); then one message per frame, paced in real time:
   ``{"frame": n, "positions": [[x, y, z], ...], "source": "model" | "input"}`` (J joints, the data's
   units and axes; ``source`` is ``input`` while a dancer's frames are passed through, ``--alternate``).
 - client -> server: ``{"prime": [[[x, y, z], ...], ...]}`` (a phrase of frames in data space: the model
@@ -195,6 +196,7 @@ class Live:
           "joint_names": list(sk.joint_names),
           "up_axis": f.up_axis,
           "to_y_up": up_axis_matrix(f.up_axis).tolist(),  # the page draws y-up
+          "floor": None if f.floor is None else f.floor / f.scale,  # the training floor's height, y-up data units
           "motions": run.num_motions,
           "settings": settings,
         }

@@ -167,6 +167,8 @@ def test_live_server_end_to_end(live_run, tmp_path):
     with connect(url.replace("http://", "ws://") + "/ws") as ws:
       hello = json.loads(ws.recv())["hello"]
       assert hello["joints"] == 16 and hello["fps"] == FPS and len(hello["bones"]) == 15
+      f = load_run(live_run).features  # the training floor along the up axis, in the data's units
+      assert f.floor is not None and hello["floor"] == pytest.approx(f.floor / f.scale)
       start, count = time.monotonic(), 0
       while time.monotonic() - start < 5.0:
         msg = json.loads(ws.recv())
@@ -618,6 +620,8 @@ def test_the_blender_addon_puts_a_sample_and_the_live_stream_onto_a_mixamo_like_
   motion = read_npz(dance)[0]
   y_up = np.asarray(to_y_up(np.asarray(motion.positions, np.float64), motion.up_axis))
   blender = np.stack([y_up[..., 0], -y_up[..., 2], y_up[..., 1]], -1)  # Blender's axes: z up, -y forward
+  feet = [motion.skeleton.joint_names.index(n) for n in ("left_foot", "right_foot")]
+  blender[..., 2] -= np.median(blender[:, feet, 2].min(-1))  # standing on Blender's floor (a y-down run too)
   imported = np.asarray(report["imported"])
   assert report["refused"] == {
     "not humanoid": "Error: Stick: no bone found for left_hip, left_knee, left_foot, left_shoulder, left_elbow, "
@@ -633,6 +637,10 @@ def test_the_blender_addon_puts_a_sample_and_the_live_stream_onto_a_mixamo_like_
   scale = (hips * pelvis).sum() / (pelvis * pelvis).sum()  # the dance scaled onto the armature's legs
   assert scale > 0 and np.abs(hips - scale * pelvis).max() < 1e-4 * np.ptp(imported[..., 2])
   assert np.abs(imported - np.asarray(report["rest"])).max() > 0.05 * np.ptp(imported[..., 2])  # it moved
+  # on the floor: a y-down sample stood 3 m under it. The hips follow the dance's pelvis above its floor (above);
+  # the armature's feet (its own proportions) land within 5% of its hip height of z = 0
+  ankles = imported[:, [3, 6], 2].min(-1)  # tests/blender_addon.py's DRIVEN: LeftFoot, RightFoot
+  assert motion.up_axis == "-y" and abs(np.median(ankles)) < 0.05 * np.median(imported[:, 0, 2])
 
   live = report["live"]
   assert live["error"] is None and live["received"] >= 100 and live["shown"] >= 100 and live["stopped"]

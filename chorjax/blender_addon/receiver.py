@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .rig import Rig, to_blender
+from .rig import FEET, Rig, on_floor, to_blender
 
 
 def _connect():
@@ -39,6 +39,7 @@ class Receiver:
     self.rig, self.url = Rig(armature_object), url
     self.received = self.shown = 0
     self.hello, self.error, self.latest, self.last, self.scale = None, None, None, None, None
+    self.floor: float | None = None
     self.lock, self.stopping, self.socket = threading.Lock(), False, None
     self.thread = threading.Thread(target=self._listen, name="chorjax live", daemon=True)
     self.thread.start()
@@ -53,6 +54,10 @@ class Receiver:
             self.hello = data["hello"]
           elif "frame" in data and self.hello is not None:
             frame = to_blender(np.asarray(data["positions"], np.float64), self.hello["up_axis"])
+            if self.floor is None:  # the run's training floor, else where the first frame's lower foot is
+              self.floor = self.hello.get("floor")
+              self.floor = float(frame[FEET, 2].min()) if self.floor is None else self.floor
+            frame = on_floor(frame[None], self.floor)[0]
             with self.lock:
               self.latest, self.received = frame, self.received + 1
     except Exception as e:  # the stream's end, for any reason, is shown in the panel

@@ -29,6 +29,19 @@ FRAMED = {"pelvis": "hip", "thorax": "shoulder"}  # bones turned as the frame of
 LIMB_ROLES = {"hip": "hip", "knee": "knee", "foot": "ankle", "shoulder": "shoulder", "elbow": "elbow", "hand": "wrist"}
 
 
+FEET = [MPII16.index("left_foot"), MPII16.index("right_foot")]
+
+
+def on_floor(positions_Tx16x3: np.ndarray, floor: float | None = None) -> np.ndarray:
+  """The dance (Blender's axes) moved up or down so that its floor is at z = 0: ``floor``, the training floor's
+  height where the run knows it (``chorjax live``'s hello), else the median height of its lower foot (where a
+  dance's feet are most of the time). A y-down take's floor is where its y is largest: turned to z up as it
+  is, a quickstart sample stood 3 m under Blender's floor."""
+  p = np.array(positions_Tx16x3, np.float64)
+  p[..., 2] -= float(np.median(p[:, FEET, 2].min(-1))) if floor is None else floor
+  return p
+
+
 class DanceError(Exception):
   """A file or an armature the add-on cannot use; its message is one line for Blender's status bar."""
 
@@ -42,7 +55,8 @@ def to_blender(positions, up_axis: str) -> np.ndarray:
 
 
 def read_dance(path, fps: float = 30.0, up_axis: str = "-y", dancer: int = 0) -> tuple[np.ndarray, float]:
-  """A chorjax output's ``[T, 16, 3]`` positions in Blender's axes, and its frame rate.
+  """A chorjax output's ``[T, 16, 3]`` positions in Blender's axes, standing on z = 0 (:func:`on_floor`), and its
+  frame rate.
 
   ``.npz`` (``[K, T, 16, 3]``: K dancers, ``dancer`` picks one) carries its frame rate and up axis; a ``.csv``
   of the 16-joint layout does not (``fps`` and ``up_axis`` say them: chorjax's CSV default is ``-y``, y
@@ -71,7 +85,7 @@ def read_dance(path, fps: float = 30.0, up_axis: str = "-y", dancer: int = 0) ->
     raise DanceError(f"{path.name}: not in the 16-joint layout (joints {', '.join(names[:4])}, ...)")
   if positions.ndim != 3 or not np.isfinite(positions).all():
     raise DanceError(f"{path.name}: positions must be [frames, 16, 3] finite numbers")
-  return to_blender(positions, up_axis), fps
+  return on_floor(to_blender(positions, up_axis)), fps
 
 
 def _common_parent(a, b):
