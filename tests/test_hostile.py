@@ -713,3 +713,26 @@ def test_a_cache_entry_that_is_not_a_file_is_made_again_not_read(tmp_path, capsy
   assert got, "reading the cache blocked on a FIFO"
   np.testing.assert_array_equal(got[0][0].positions, first[0].positions)
   assert "is not a file" in capsys.readouterr().err and entry.is_file()
+
+
+def test_a_cache_entry_holding_another_takes_arrays_is_encoded_again(tmp_path, capsys):
+  """A features entry holding another take's arrays under the right key (its own key written in) trained on
+  the wrong take. What an entry holds is checked against the take's positions: made again, and said."""
+  from chorjax.config import load_config
+  from chorjax.data.dataset import load_dataset
+
+  cfg = load_config(None, ["data.dataset=cmu94", f"data.cache={tmp_path / 'cache'}", "data.representation=canonical"])
+  first = load_dataset(cfg.data)
+  entries = sorted((tmp_path / "cache" / "features").rglob("*.npz"), key=lambda p: p.stat().st_size)
+  small, large = entries[0], entries[-1]
+  with np.load(large) as other:
+    swapped = {k: other[k] for k in other.files if k != "__key__"}
+  with np.load(small) as mine:
+    key = str(mine["__key__"])
+  with open(small, "wb") as f:
+    np.savez(f, __key__=np.array(key), **swapped)
+  capsys.readouterr()
+  again = load_dataset(cfg.data)
+  assert "holds another take's arrays" in capsys.readouterr().err
+  for (_, a), (_, b) in zip(first.train, again.train, strict=True):
+    np.testing.assert_array_equal(a, b)

@@ -103,13 +103,15 @@ class Cache:
   def has_encoded(self, motion: Motion, settings: dict) -> bool:
     return self.root is not None and self._path("features", self._encoded_key(motion, settings)).exists()
 
-  def encoded(self, motion: Motion, settings: dict, make: Callable[[], dict]) -> dict:
+  def encoded(self, motion: Motion, settings: dict, make: Callable[[], dict], check=None) -> dict:
     """``make()``'s arrays for ``motion`` (``{name: array}``), from the cache when the same positions were
-    encoded with these ``settings`` before."""
+    encoded with these ``settings`` before; ``check(arrays)`` raises ValueError for an entry that cannot be
+    this motion's (made again, as a damaged one is)."""
     if self.root is None:
       return make()
     key = self._encoded_key(motion, settings)
-    return self._entry("features", key, make, _save_arrays, _load_arrays, motion.source or motion.name)
+    load = _load_arrays if check is None else lambda path, k: check(_load_arrays(path, k))
+    return self._entry("features", key, make, _save_arrays, load, motion.source or motion.name)
 
   def _entry(self, kind: str, key: str, make, save, load, what: str):
     path = self._path(kind, key)
@@ -119,7 +121,8 @@ class Cache:
       try:
         return load(path, key)
       except Exception as e:  # anything that cannot be read back is damage: made again, never trusted
-        print(f"cache: {path} was damaged ({type(e).__name__}); {what} is read again", file=sys.stderr, flush=True)
+        why = f"{type(e).__name__}: {str(e)[:80]}" if str(e) else type(e).__name__
+        print(f"cache: {path} was damaged ({why}); {what} is read again", file=sys.stderr, flush=True)
     value = make()
     try:
       atomic_write(path, lambda tmp: save(tmp, key, value))

@@ -298,7 +298,16 @@ def _encoded(motion: Motion, proto: Features, augment, cache: Cache) -> dict:
       out += [np.asarray(transforms.reverse_time(c)) for c in out]
     return {"canon": canon, **{f"version{k}": np.asarray(proto.represent(c)) for k, c in enumerate(out)}}
 
-  return cache.encoded(motion, _encoding(proto, augment), make)
+  def check(arrays: dict) -> dict:  # an entry holding another take's arrays under this one's key is not used
+    # proto.canonical in numpy: no program compiled per take length when a library's entries are read
+    canon = np.einsum("ij,...j->...i", transforms.up_axis_matrix(proto.up_axis), motion.positions) * proto.scale
+    sizes = {len(v) for k, v in arrays.items() if k.startswith("version")}
+    held = arrays.get("canon")
+    if held is None or held.shape != canon.shape or sizes != {len(canon)} or not np.allclose(held, canon, atol=1e-4):
+      raise ValueError("holds another take's arrays")
+    return arrays
+
+  return cache.encoded(motion, _encoding(proto, augment), make, check)
 
 
 def _load_dataset(data_cfg) -> Dataset:
