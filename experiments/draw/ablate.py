@@ -46,6 +46,16 @@ VARIANTS = {
     "--no-clamp",
     "--no-clamp-steps",
   ],
+  # the own draw with every frame clipped to the training range (sample.clamp): what keeps it in bounds
+  "plain, clamped": [
+    *("--pi-temperature", "1", "--sigma-temperature", "1", "--noise-smoothing", "0", "--noise-order", "1"),
+    *("--persistence", "0", "--crossfade", "0", "--pace", "0", "--scale-cap", "0", "--clamp", "--no-clamp-steps"),
+  ],
+  # and held to the training takes' pace (sample.pace 2): the draw of at most three controls, measured
+  "plain, clamped, paced": [
+    *("--pi-temperature", "1", "--sigma-temperature", "1", "--noise-smoothing", "0", "--noise-order", "1"),
+    *("--persistence", "0", "--crossfade", "0", "--pace", "2", "--scale-cap", "0", "--clamp", "--no-clamp-steps"),
+  ],
   "no noise filter": ["--noise-smoothing", "0", "--noise-order", "1"],
   "no pace governor": ["--pace", "0"],
   "no persistence, crossfade": ["--persistence", "0", "--crossfade", "0"],
@@ -53,6 +63,45 @@ VARIANTS = {
 }
 # ratios to the held-out takes' own figures, and FIDs over the training takes' own distance
 COLUMNS = ("jitter", "speed", "root_travel", "movement_min", "movement_max", "fid_k", "fid_g", "root_step_max")
+
+
+CALIBRATED_VARIANT = "calibrated temperature and feet, clamped"  # the draw of three controls, the run's own choice
+
+
+def small_calibration(run_dir: Path) -> dict:
+  """What ``chorjax calibrate`` chooses for a run that carries its noise (``calibrate.CARRIED_GRID``: the scale
+  temperature and foot lock, on its training takes), the rest of the draw plain and clamped: run here, as the
+  runs measured were trained with the quickstart's other ``[sample]`` keys."""
+  import jax
+
+  from chorjax.calibrate import CALIBRATION_DANCERS, CARRIED_GRID, search
+  from chorjax.controls import PLAIN
+  from chorjax.data.transforms import to_y_up
+  from chorjax.run import load_run, read_reference
+
+  run = load_run(run_dir)
+  reference, train = read_reference(run, None)
+  up = run.features.up_axis
+  motion, key, base = run.dancer_conditions(train, CALIBRATION_DANCERS), jax.random.key(0), {**PLAIN, "clamp": True}
+  ranged = run.ranged(run.sampling(**base))
+
+  def draw(settings):
+    s = run.sampling(**{**base, **settings})
+    return np.asarray(
+      to_y_up(run.family.dance(ranged.graphdef, ranged.params, ranged.features, motion, key, 1200, s), up)
+    )
+
+  best, _ = search(
+    draw, [np.asarray(to_y_up(m.positions, up)) for m in reference], run.features.skeleton, run.fps, CARRIED_GRID
+  )
+  return best
+
+
+def calibrated_flags(best: dict) -> list[str]:
+  """The plain, clamped draw's flags with the chosen scale temperature and foot lock."""
+  flags = list(VARIANTS["plain, clamped"])
+  flags[flags.index("--sigma-temperature") + 1] = str(best["sigma_temperature"])
+  return [*flags, "--foot-lock" if best["foot_lock"] else "--no-foot-lock"]
 
 
 def figures(metrics: dict) -> dict:
@@ -65,6 +114,8 @@ def figures(metrics: dict) -> dict:
 
 
 def measure(run: Path, variant: str, frames: int, seeds: list[int]) -> dict:
+  chosen = small_calibration(run) if variant == CALIBRATED_VARIANT else None
+  flags = calibrated_flags(chosen) if chosen else VARIANTS[variant]
   with tempfile.TemporaryDirectory() as tmp:
     out = Path(tmp) / "metrics.json"
     cmd = [
@@ -76,9 +127,9 @@ def measure(run: Path, variant: str, frames: int, seeds: list[int]) -> dict:
       "--frames",
       str(frames),
     ]
-    cmd += ["--num", "1", "--seeds", *map(str, seeds), "-o", str(out), *VARIANTS[variant]]
+    cmd += ["--num", "1", "--seeds", *map(str, seeds), "-o", str(out), *flags]
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
-    return figures(json.loads(out.read_text()))
+    return {**figures(json.loads(out.read_text())), **({"chosen": chosen} if chosen else {})}
 
 
 def summary(results: dict) -> str:
@@ -145,7 +196,7 @@ def table(results: dict) -> str:
 def main() -> None:
   p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
   p.add_argument("runs", nargs="*", type=Path)
-  p.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
+  p.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=[*VARIANTS, CALIBRATED_VARIANT])
   p.add_argument("--frames", type=int, default=10_000)
   p.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
   p.add_argument("--name", help="the name a run is recorded under (default: its folder's parent/name)")
