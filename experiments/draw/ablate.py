@@ -74,7 +74,7 @@ def small_calibration(run_dir: Path) -> dict:
   runs measured were trained with the quickstart's other ``[sample]`` keys."""
   import jax
 
-  from chorjax.calibrate import CALIBRATION_DANCERS, CARRIED_GRID, search
+  from chorjax.calibrate import CALIBRATION_DANCERS, CARRIED_BEYOND, CARRIED_GRID, search
   from chorjax.controls import PLAIN
   from chorjax.data.transforms import to_y_up
   from chorjax.run import load_run, read_reference
@@ -91,9 +91,8 @@ def small_calibration(run_dir: Path) -> dict:
       to_y_up(run.family.dance(ranged.graphdef, ranged.params, ranged.features, motion, key, 1200, s), up)
     )
 
-  best, _ = search(
-    draw, [np.asarray(to_y_up(m.positions, up)) for m in reference], run.features.skeleton, run.fps, CARRIED_GRID
-  )
+  takes = [np.asarray(to_y_up(m.positions, up)) for m in reference]
+  best, _ = search(draw, takes, run.features.skeleton, run.fps, CARRIED_GRID, beyond=CARRIED_BEYOND)
   return best
 
 
