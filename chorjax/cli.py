@@ -313,7 +313,9 @@ def _add_sampling_args(p, seed: bool = True) -> None:
       flag = name.replace("_", "-")
       p.add_argument(f"--{flag}", action=argparse.BooleanOptionalAction, help=_control_help(name))
   if seed:
-    p.add_argument("--seed", type=int, default=0, help="sampling seed: the same seed draws the same dance (default 0)")
+    p.add_argument(
+      "--seed", type=_seed, default=0, help="sampling seed: the same seed draws the same dance (default 0)"
+    )
   _add_checkpoint_args(p)
 
 
@@ -541,7 +543,7 @@ def _add_inbetween_command(sub) -> None:
   p.add_argument(
     "--frames", required=True, type=int, action="append", metavar="N", help="frames written before each target"
   )
-  p.add_argument("--seed", type=int, default=0, help="seed of the transitions' noise (default 0)")
+  p.add_argument("--seed", type=_seed, default=0, help="seed of the transitions' noise (default 0)")
   p.add_argument("--num", type=int, default=1, help="transitions written in parallel, each its own piece (default 1)")
   p.add_argument(
     "-o",
@@ -684,7 +686,7 @@ def _add_calibrate_command(sub) -> None:
     type=int,
     help=f"dancers drawn per setting (default {api.CALIBRATION_DANCERS}; {api.LABELLED_DANCERS} for a run with labels)",
   )
-  cal.add_argument("--seed", type=int, default=0, help="sampling seed (default 0)")
+  cal.add_argument("--seed", type=_seed, default=0, help="sampling seed (default 0)")
   cal.add_argument(
     "--noise-order",
     type=int,
@@ -720,7 +722,7 @@ def _add_report_commands(sub) -> None:
   )
   ev.add_argument(
     "--seeds",
-    type=int,
+    type=_seed,
     nargs="+",
     metavar="SEED",
     help="several sampling seeds: --num dancers each, scored together (mean and sd); overrides --seed",
@@ -742,7 +744,7 @@ def _add_report_commands(sub) -> None:
   me.add_argument("-o", "--output", metavar="metrics.json", help="write every key as JSON")
   me.add_argument("--window", type=int, default=60, help="frames per window for FID and novelty (default 60)")
   me.add_argument("--splits", type=int, default=10, help="random halves of the reference for the spreads (default 10)")
-  me.add_argument("--seed", type=int, default=0, help="seed of the resampling (default 0)")
+  me.add_argument("--seed", type=_seed, default=0, help="seed of the resampling (default 0)")
   me.add_argument("--force", action="store_true", help="overwrite the output if it exists")
   me.set_defaults(func=_metrics)
 
@@ -818,7 +820,23 @@ def _above_zero(most: float):
   return number
 
 
-_rate = _above_zero(1000.0)  # frames per second, as data.fps allows
+def _at_least(low: float, most: float):
+  """An argparse type: a number from ``low`` to ``most``."""
+
+  def number(text: str) -> float:
+    try:
+      value = float(text)
+    except ValueError:
+      raise argparse.ArgumentTypeError(f"invalid number: {text!r}") from None
+    if not (math.isfinite(value) and low <= value <= most):
+      raise argparse.ArgumentTypeError(f"{text}: must be a number from {low:g} to {most:g}")
+    return value
+
+  return number
+
+
+_rate = _at_least(1.0, 1000.0)  # frames per second, as data.fps allows (render --fps 1e-9 was an internal error)
+_seed = _in_range(0, 2**32 - 1)  # a seed JAX takes (calibrate --seed 2**64 + 1 was an internal error)
 _scale = _above_zero(1e6)  # a length multiplier (metres to micrometres at most)
 
 

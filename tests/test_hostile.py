@@ -736,3 +736,29 @@ def test_a_cache_entry_holding_another_takes_arrays_is_encoded_again(tmp_path, c
   assert "holds another take's arrays" in capsys.readouterr().err
   for (_, a), (_, b) in zip(first.train, again.train, strict=True):
     np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize(
+  "args, flag",
+  [
+    (["render", "cmu94/94_01_skeleton_3d.csv", "-o", "{tmp}/x.gif", "--fps", "1e-9"], "--fps"),
+    (["data", "convert", "cmu94/94_01_skeleton_3d.csv", "-o", "{tmp}/c", "--fps", "0.5"], "--fps"),
+    (["data", "convert", "cmu94/94_01_skeleton_3d.csv", "-o", "{tmp}/c", "--amc-fps", "0.001"], "--amc-fps"),
+    (["calibrate", "{tmp}", "--seed", "18446744073709551617"], "--seed"),
+    (["calibrate", "{tmp}", "--seed", "-1"], "--seed"),
+    (["eval", "{tmp}", "--seeds", "-1"], "--seeds"),
+    (["metrics", "cmu94/94_01_skeleton_3d.csv", "--data", "cmu94", "--seed", "-1"], "--seed"),
+  ],
+)
+def test_rates_and_seeds_out_of_range_are_one_line(tmp_path, capsys, args, flag):
+  """``render --fps 1e-9`` and ``calibrate --seed 18446744073709551617`` were internal errors; ``data convert --fps
+  0.5`` (documented 1-1000), ``--amc-fps 0.001``, ``calibrate --seed -1`` and ``eval --seeds -1`` passed."""
+  from chorjax.data.dataset import bundled_path
+
+  take = str(bundled_path("cmu94").parent)
+  argv = [a.replace("{tmp}", str(tmp_path)).replace("cmu94/", take + "/cmu94/") for a in args]
+  with pytest.raises(SystemExit) as e:
+    cli.main(argv)
+  assert e.value.code == 2
+  _one_line(capsys, flag)
+  assert not list(tmp_path.iterdir())
