@@ -805,39 +805,25 @@ def _in_range(low: int, high: int):
   return whole
 
 
-def _above_zero(most: float):
-  """An argparse type: a number above 0 and at most ``most`` (a frame rate, a scale)."""
+def _number(low: float, most: float, above: bool = False):
+  """An argparse type: a number from ``low`` (``above``: above it) to ``most`` (a frame rate, a scale)."""
 
   def number(text: str) -> float:
     try:
       value = float(text)
     except ValueError:
       raise argparse.ArgumentTypeError(f"invalid number: {text!r}") from None
-    if not (math.isfinite(value) and 0 < value <= most):
-      raise argparse.ArgumentTypeError(f"{text}: must be a number above 0 and at most {most:g}")
+    if not (math.isfinite(value) and (low < value if above else low <= value) and value <= most):
+      span = f"above {low:g} and at most {most:g}" if above else f"from {low:g} to {most:g}"
+      raise argparse.ArgumentTypeError(f"{text}: must be a number {span}")
     return value
 
   return number
 
 
-def _at_least(low: float, most: float):
-  """An argparse type: a number from ``low`` to ``most``."""
-
-  def number(text: str) -> float:
-    try:
-      value = float(text)
-    except ValueError:
-      raise argparse.ArgumentTypeError(f"invalid number: {text!r}") from None
-    if not (math.isfinite(value) and low <= value <= most):
-      raise argparse.ArgumentTypeError(f"{text}: must be a number from {low:g} to {most:g}")
-    return value
-
-  return number
-
-
-_rate = _at_least(1.0, 1000.0)  # frames per second, as data.fps allows (render --fps 1e-9 was an internal error)
+_rate = _number(1.0, 1000.0)  # frames per second, as data.fps allows (render --fps 1e-9 was an internal error)
 _seed = _in_range(0, 2**32 - 1)  # a seed JAX takes (calibrate --seed 2**64 + 1 was an internal error)
-_scale = _above_zero(1e6)  # a length multiplier (metres to micrometres at most)
+_scale = _number(0.0, 1e6, above=True)  # a length multiplier (metres to micrometres at most)
 
 
 def reference_markdown() -> str:
