@@ -318,12 +318,18 @@ def ease(a_xT, width: int):
     return a_xT
   w = np.hanning(2 * width + 3)[1:-1]
   w = w / w.sum()
+  shifted = _around(a_xT, width)
+  out = jnp.zeros_like(shifted[0])
+  for weight, frames in zip(w, shifted):
+    out = out + float(weight) * frames
+  return out
+
+
+def _around(a_xT, width: int) -> list:
+  """The ``2 * width + 1`` copies of ``a`` shifted by ``-width .. width`` frames (the last axis), its ends held."""
   n = a_xT.shape[-1]
   padded = jnp.pad(a_xT, [(0, 0)] * (a_xT.ndim - 1) + [(width, width)], mode="edge")
-  out = jnp.zeros_like(padded[..., :n])
-  for i in range(2 * width + 1):
-    out = out + float(w[i]) * padded[..., i : i + n]
-  return out
+  return [padded[..., i : i + n] for i in range(2 * width + 1)]
 
 
 def lock_feet(pos_xTxJx3, contacts_xTxF, feet: Sequence[int], max_step: float = float("inf"), width: int = LOCK_EASE):
@@ -405,10 +411,8 @@ def _ground_feet(pos_xTxJx3, contacts_xTxF, feet, floor, hold, width, root, max_
 
 
 def _box(a_xT, width: int, reduce):
-  """``reduce`` over the ``2 * width + 1`` frames around each (the last axis; ends edge padded)."""
-  n = a_xT.shape[-1]
-  padded = jnp.pad(a_xT, [(0, 0)] * (a_xT.ndim - 1) + [(width, width)], mode="edge")
-  return reduce(jnp.stack([padded[..., i : i + n] for i in range(2 * width + 1)]), 0)
+  """``reduce`` over the ``2 * width + 1`` frames around each (the last axis; ends held)."""
+  return reduce(jnp.stack(_around(a_xT, width)), 0)
 
 
 def _build(root_pos, dirs_xJx3, parents: Sequence[int], lengths_J):
