@@ -104,6 +104,10 @@ def find_ort_web(given=None) -> Path:
   raise UserError(f"--web needs onnxruntime-web's files ({where}; or --ort-web PATH/onnxruntime-web/dist)")
 
 
+WEB_DANCER = "dancer.onnx"  # what write_web puts in its folder: this, its sidecar, the page and ort/
+WEB_FILES = ("index.html", WEB_DANCER, sidecar_path(WEB_DANCER).name, "ort")
+
+
 def write_web(workdir, folder, *, ort_web=None, controls=None, checkpoint="kept", force: bool = False) -> Path:
   """``chorjax export --web``: a static folder in which the run's dancer dances live in the page, offline:
   ``index.html``, the dancer (``dancer.onnx`` and its sidecar) and onnxruntime-web's files (``ort/``, with its
@@ -127,7 +131,7 @@ def write_web(workdir, folder, *, ort_web=None, controls=None, checkpoint="kept"
   out.parent.mkdir(parents=True, exist_ok=True)
   staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
   try:
-    export_onnx(run, staging / "dancer.onnx", controls=controls)
+    export_onnx(run, staging / WEB_DANCER, controls=controls)
     (staging / "ort").mkdir()
     for name in ORT_WEB_FILES:
       shutil.copyfile(ort / name, staging / "ort" / name)
@@ -145,9 +149,6 @@ def write_web(workdir, folder, *, ort_web=None, controls=None, checkpoint="kept"
   finally:
     shutil.rmtree(staging, ignore_errors=True)
   return out
-
-
-WEB_FILES = ("index.html", "dancer.onnx", "dancer.json", "ort")  # what write_web puts in its folder
 
 
 def _check_web_folder(out: Path) -> None:
