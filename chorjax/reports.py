@@ -7,6 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
+from chorjax.single_take import KEYS as SINGLE_TAKE_KEYS
+
+# printed only where measured: the single-take measures (takes of up to two minutes; two samples for inter_)
+WHERE_MEASURED = tuple(k for k in SINGLE_TAKE_KEYS if k != "coverage_together")
 # The keys `chorjax metrics` and `chorjax eval` print (every one is in the JSON; see chorjax/scoring.py).
 METRIC_KEYS = (
   "movement_first",
@@ -28,13 +32,8 @@ METRIC_KEYS = (
   "novelty",
   "speed",
   "root_travel",
-  "coverage",
-  "global_diversity",
-  "local_diversity",
-  "inter_diversity",
+  *WHERE_MEASURED,
 )
-# printed only where measured: the single-take measures (takes of up to two minutes; two samples for inter_)
-WHERE_MEASURED = ("coverage", "global_diversity", "local_diversity", "inter_diversity")
 INFO_COLUMNS = ("take", "frames", "joints", "fps", "x range", "y range", "z range")
 BONE_COLUMNS = ("bone len (mean)", "bone CV median", "bone CV max")
 CHECK_COLUMNS = ("take", "frames", "fps", "seconds", "joints", "up", "units", "bone CV", "held", "jumps")

@@ -358,16 +358,15 @@ def score(
 
 
 SINGLE_TAKE_FRAMES = 3600  # the single-take measures for takes of up to two minutes at 30 fps (one take: 10-60 s)
-SINGLE_TAKE_KEYS = ("coverage", "coverage_together", "global_diversity", "local_diversity", "inter_diversity")
 
 
 def _single_take(motions, takes, skeleton: Skeleton, size: float) -> dict:
   """``single_take.single_take`` of the motions against the takes they were drawn from (the training takes, or
   ``chorjax metrics``' reference), where those hold at most ``SINGLE_TAKE_FRAMES`` frames; else None each."""
-  from chorjax.single_take import single_take
+  from chorjax.single_take import KEYS, single_take
 
   if sum(len(t) for t in takes) > SINGLE_TAKE_FRAMES:
-    return dict.fromkeys(SINGLE_TAKE_KEYS)
+    return dict.fromkeys(KEYS)
   return single_take(motions, takes, skeleton, size)
 
 

@@ -35,6 +35,7 @@ COVERAGE_THRESHOLD = 0.15
 GLOBAL_FRAMES = 30
 LOCAL_FRAMES = 15
 INTER_FRAMES = 1000  # inter_diversity compares the samples' first 1,000 frames (10,000 x 10,000 costs: 800 MB)
+KEYS = ("coverage", "coverage_together", "global_diversity", "local_diversity", "inter_diversity")  # single_take's
 MAX_COST_CELLS = 200_000_000  # frames of the samples x frames of the takes one measure may compare
 
 

@@ -475,11 +475,12 @@ def test_single_take_measures_tell_a_replay_a_variation_and_another_dance_apart(
   from chorjax import metrics
   from chorjax.data.skeletons import MPII16
   from chorjax.data.transforms import resample
-  from chorjax.single_take import single_take
+  from chorjax.single_take import KEYS, single_take
 
   take, other = _cmu94(1), _cmu94(2)
   size = metrics.body_size(take, MPII16)
   same = single_take([take, take], [take], MPII16, size)
+  assert tuple(same) == KEYS  # what eval and metrics write (null where not measured)
   assert same["coverage"] == 1.0 and same["global_diversity"] == pytest.approx(0.0, abs=1e-6)
   assert same["local_diversity"] == pytest.approx(0.0, abs=1e-6) and same["inter_diversity"] == pytest.approx(
     0, abs=1e-6
