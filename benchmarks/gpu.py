@@ -84,9 +84,9 @@ def train_steps(reps: int) -> dict:
 def jax_sampler(batch: int, smooth: bool):
   from flax import nnx
 
-  from chorjax.controls import Draw
   from chorjax.families.recurrent.generation import generate
   from chorjax.families.recurrent.recurrent_model import create_model
+  from chorjax.sampling.controls import Draw
 
   layers, hidden, _, _ = SHAPES["shipped"]
   graphdef, params = nnx.split(create_model(_config("lstm", layers, hidden).model, D, 10, 0), nnx.Param)

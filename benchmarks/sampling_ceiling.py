@@ -105,7 +105,7 @@ def unroll_ab(reps: int = 5) -> dict:
 
   graphdef, params = sampler_model()
   motion = jax.nn.one_hot(jnp.zeros(B, jnp.int32), 10)
-  from chorjax.controls import Draw
+  from chorjax.sampling.controls import Draw
 
   pairs = []
   for n in (1, chorjax.families.recurrent.generation.UNROLL):

@@ -21,9 +21,6 @@ from typing import Any  # noqa: F401  (the inherited fields' annotations name th
 
 import numpy as np
 
-# What every command does, as functions (the command line calls these and prints what they return).
-from chorjax.calibrate import CALIBRATION_DANCERS, LABELLED_DANCERS, calibrate_run  # noqa: F401
-from chorjax.calibration_file import CALIBRATED  # noqa: F401
 from chorjax.config import (  # noqa: F401
   Config,
   check_sample_control,
@@ -33,11 +30,6 @@ from chorjax.config import (  # noqa: F401
   reference_markdown,
   to_toml,
   toml_value,
-)
-from chorjax.controls import FLAGS as CONTROL_SWITCHES  # noqa: F401
-from chorjax.controls import (
-  PLAIN,  # noqa: F401
-  Controls,  # noqa: F401
 )
 from chorjax.convert import convert  # noqa: F401
 from chorjax.data import motion as _motion
@@ -57,6 +49,12 @@ from chorjax.reports import METRIC_KEYS, check_report, metric_lines, takes_table
 from chorjax.run import Run as _Run
 from chorjax.runtime import keep_compiled_programs, keep_freed_memory  # noqa: F401
 from chorjax.sample import write_inbetween, write_sample  # noqa: F401
+
+# What every command does, as functions (the command line calls these and prints what they return).
+from chorjax.sampling.calibrate import CALIBRATION_DANCERS, LABELLED_DANCERS, calibrate_run  # noqa: F401
+from chorjax.sampling.controls import Controls  # noqa: F401
+from chorjax.sampling.table import CALIBRATED, PLAIN, RECORDS  # noqa: F401
+from chorjax.sampling.table import SWITCHES as CONTROL_SWITCHES  # noqa: F401
 from chorjax.scoring import score_to  # noqa: F401
 
 __all__ = ["Motion", "Player", "Run", "UserError", "load_dataset", "load_run", "read_motion", "score", "train"]

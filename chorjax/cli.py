@@ -224,7 +224,7 @@ def _controls(args) -> dict:
     if value is not None:
       api.check_sample_control(name, value, f"--{name.replace('_', '-')}")
   switches = {k: getattr(args, k) for k in api.CONTROL_SWITCHES}
-  chosen = {**given, **switches, "greedy": True if args.greedy else None}
+  chosen = {**given, **switches}
   if getattr(args, "plain", False):
     both = [k for k in api.PLAIN if chosen[k] is not None]
     if both:
@@ -272,19 +272,6 @@ def _add_checkpoint_args(p) -> None:
   p.add_argument("--force", action="store_true", help="overwrite the output if it exists")
 
 
-# The numeric sampling controls' flags and metavars; their help comes from the [sample] keys they set.
-SAMPLING_FLAGS = (
-  ("pi_temperature", "T"),
-  ("sigma_temperature", "S"),
-  ("noise_smoothing", "RHO"),
-  ("noise_order", "N"),
-  ("persistence", "P"),
-  ("crossfade", "F"),
-  ("pace", "GAIN"),
-  ("scale_cap", "Q"),
-)
-
-
 def _control_help(name: str) -> str:
   """A sampling flag's help: its ``[sample]`` key's, and where an unset flag's value comes from."""
   return _key_flag(f"sample.{name}", "the run's calibration, else the run's" if name in api.CALIBRATED else "the run's")
@@ -298,20 +285,18 @@ def _key_flag(key: str, whose: str) -> str:
 def _add_sampling_args(p, seed: bool = True) -> None:
   """Sampling controls shared by `sample`, `eval` and `export`; unset ones come from the run's calibration.json
   (`chorjax calibrate`), else its [sample] config."""
-  for name, metavar in SAMPLING_FLAGS:
-    kind = int if name == "noise_order" else float
-    p.add_argument(f"--{name.replace('_', '-')}", type=kind, metavar=metavar, help=_control_help(name))
-  p.add_argument("--greedy", action="store_true", help=_control_help("greedy"))
+  for name, record in api.RECORDS.items():
+    if record.metavar:  # a number: its type is its default's
+      kind = type(getattr(api.Controls(), name))
+      p.add_argument(f"--{name.replace('_', '-')}", type=kind, metavar=record.metavar, help=_control_help(name))
   p.add_argument(
     "--plain",
     action="store_true",
-    help="the model's own draw: temperatures 1 and every draw control off (no smoothing, persistence, crossfade,"
-    " pace, scale cap or clamps); decoding (rigid bones, feet) as the run's",
+    help="the model's own draw: temperatures 1 and every other draw control off; decoding (rigid bones, feet) "
+    "as the run's",
   )
   for name in api.CONTROL_SWITCHES:
-    if name != "greedy":
-      flag = name.replace("_", "-")
-      p.add_argument(f"--{flag}", action=argparse.BooleanOptionalAction, help=_control_help(name))
+    p.add_argument(f"--{name.replace('_', '-')}", action=argparse.BooleanOptionalAction, help=_control_help(name))
   if seed:
     p.add_argument(
       "--seed", type=_seed, default=0, help="sampling seed: the same seed draws the same dance (default 0)"

@@ -14,38 +14,14 @@ import math
 import re
 import tomllib
 import typing
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from chorjax.errors import UserError, check_draw, check_memory, load_toml, read_text
+from chorjax.fields import config_field as _field
 from chorjax.registry import names as family_names
-
-
-def _field(
-  default,
-  help: str,
-  choices: Sequence | Callable[[], Sequence] | None = None,
-  minimum: float | None = None,
-  resumable: bool = False,
-  below: float | None = None,
-  more: str | None = None,
-) -> Any:
-  """A config field: its default, help text (one or two lines: ``chorjax config keys`` and the flags that set
-  it show it) and checks; ``more``: what the docs' reference says besides (the reasoning, the measurements).
-  ``choices`` of a list field apply to each of its elements; ``resumable`` keys may change when a run is
-  continued without --force (e.g. to train longer); ``below``: an exclusive upper bound."""
-  meta = {
-    "help": help,
-    "more": more,
-    "choices": choices if callable(choices) else tuple(choices) if choices else None,
-    "minimum": minimum,
-    "below": below,
-    "resumable": resumable,
-  }
-  if isinstance(default, (list, tuple)):
-    return dataclasses.field(default_factory=lambda: tuple(default), metadata=meta)
-  return dataclasses.field(default=default, metadata=meta)
+from chorjax.sampling.table import ControlFields
 
 
 def field_choices(meta, registered: bool = True) -> tuple | None:
@@ -443,114 +419,17 @@ class TrainConfig:
   )
 
 
-# The most AR(1) filters the MDN noise can pass (``sample.noise_order``): a stream's state holds this many
-# (chorjax.sample), so the order may change between chunks of an endless dance.
-MAX_NOISE_ORDER = 8
-
-
 @dataclasses.dataclass(frozen=True)
-class SampleConfig:
+class _SampleWhat:
   frames: int = _field(600, "frames written by the sample at the end of training", minimum=1, resumable=True)
   num: int = _field(1, "dancers sampled in parallel", minimum=1, resumable=True)
   motion: int = _field(0, "motion id that conditions the sample")
-  pi_temperature: float = _field(
-    1.0, "MDN mixture-weight temperature (0 = most likely component)", minimum=0.0, below=1000.0
-  )
-  sigma_temperature: float = _field(1.0, "MDN scale multiplier", minimum=0.0, below=1000.0)
-  greedy: bool = _field(False, "take the mean of the most likely component (no noise)")
-  noise_smoothing: float = _field(
-    0.0,
-    "MDN noise correlated over frames: the coefficient of the noise_order AR(1) filters it passes (0 = white noise)",
-    more=("The filters keep unit variance, so a full-temperature sample moves smoothly instead of trembling."),
-    minimum=0.0,
-    below=1.0,
-    resumable=True,
-  )
-  noise_order: int = _field(
-    2,
-    "how many AR(1) filters, each with coefficient noise_smoothing, the MDN noise passes",
-    more=(
-      "Two filters leave a tremble in every frame's change; four at 0.8 move as fast per frame as two at "
-      "0.9 with a third of the second difference."
-    ),
-    minimum=1,
-    below=MAX_NOISE_ORDER + 1,
-    resumable=True,
-  )
-  persistence: float = _field(
-    0.0,
-    "bonus to the log-weight of the previous frame's mixture component (0 = off)",
-    more=("The dancer does not hop between mixture components every frame."),
-    minimum=0.0,
-    resumable=True,
-  )
-  crossfade: float = _field(
-    0.0,
-    "MDN component switches glide: the jump between the means decays by this factor per frame (0 = off)",
-    more=("At 0.8 a switch's jump is mostly gone after 10 frames."),
-    minimum=0.0,
-    below=1.0,
-    resumable=True,
-  )
-  rigid_bones: bool = _field(
-    False,
-    "decode with the training takes' mean bone lengths: bones cannot stretch",
-    more=("Each bone keeps its direction."),
-    resumable=True,
-  )
-  foot_lock: bool = _field(
-    False,
-    "canonical runs: a foot in contact with the floor does not slide",
-    more=(
-      "The body travels by what its legs do: the slide of the feet in contact, averaged over 17 frames, is taken "
-      "back, so a slide that lasts is gone while a foot's tremble does not shake the whole body."
-    ),
-    resumable=True,
-  )
-  ground: bool = _field(
-    False,
-    "canonical runs: feet in contact with the floor stand on the training floor, no floating",
-    more=(
-      "The body is moved up or down to the floor smoothly (averaged over 17 frames), never faster than the takes' "
-      "fastest vertical root step."
-    ),
-    resumable=True,
-  )
-  clamp: bool = _field(
-    False,
-    "clip every generated frame to the training features' range before it is fed back",
-    more=("Feature by feature: the model is never fed a frame unlike its training inputs."),
-    resumable=True,
-  )
-  clamp_steps: bool = _field(
-    False,
-    "clip every frame's change from the previous one to the range of the training frames' changes",
-    more=("Feature by feature: a component that flickers for a frame cannot jump further than the data ever does."),
-    resumable=True,
-  )
-  pace: float = _field(
-    0.0,
-    "pace governor gain g: scale temperature x m = (training / own pace)^g in 0.5-2, persistence x min(m, 1/m)^2",
-    more=(
-      "The pace is how far the joints move relative to the root in half a second, turning included (the "
-      "pose features where the run has no canonical features), averaged over about 5 s: a dancer who slows "
-      "gets more energy, one who races less, and either lets go of its component sooner. A run conditioned on "
-      "labels (data.labels) holds each dancer to the pace of its own labels' training takes."
-    ),
-    minimum=0.0,
-    resumable=True,
-  )
-  scale_cap: float = _field(
-    0.0,
-    "hold MDN scales at most at this quantile of the model's own scales on its training frames (0 = off)",
-    more=(
-      "Teacher forced on the training frames, e.g. 0.95: a model unsure of a state then draws a calm frame "
-      "and finds its way back. Needs the run's training data at sampling time."
-    ),
-    minimum=0.0,
-    below=1.0,
-    resumable=True,
-  )
+
+
+@dataclasses.dataclass(frozen=True)
+class SampleConfig(ControlFields, _SampleWhat):
+  """``[sample]``: what is sampled, and the sampling controls (declared in ``chorjax.sampling.table``)."""
+
   seed: int = _field(0, "sampling seed", resumable=True, minimum=0, below=2**32)
 
 
@@ -823,9 +702,9 @@ def _apply_file(sections: dict[str, dict], path: Path, below: tuple = ()) -> str
   return name
 
 
-def load_config(path: str | Path | Config | None = None, overrides: Sequence[str] = ()) -> Config:
-  """Loads a TOML config file (or the defaults, or a loaded ``Config``) and applies dotted ``KEY=VALUE``
-  overrides.
+def load_config(path: str | Path | Config | dict | None = None, overrides: Sequence[str] = ()) -> Config:
+  """Loads a TOML config file (or the defaults, a loaded ``Config``, or a ``{section: {key: value}}`` dict as
+  a file's tables would be) and applies dotted ``KEY=VALUE`` overrides.
 
   Raises:
     UserError: for a missing or malformed file, an unknown section or key, a wrong type, or a

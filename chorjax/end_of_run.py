@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from chorjax.controls import Controls
 from chorjax.families import family_of
+from chorjax.sampling.controls import Controls
 
 
 @dataclasses.dataclass(frozen=True)
@@ -47,8 +47,8 @@ def record_ceiling(run: Finished) -> dict:
   """``sample.scale_cap``'s ceiling for the kept checkpoint, measured on the training takes and saved in the
   run (``run.save_ceiling``): the run samples without its training data (moved, deleted, or a relative
   path read from elsewhere)."""
-  from chorjax.controls import scale_ceiling
   from chorjax.run import save_ceiling
+  from chorjax.sampling.controls import scale_ceiling
 
   kept = run.kept
   q = run.cfg.sample.scale_cap
@@ -60,14 +60,14 @@ def record_ceiling(run: Finished) -> dict:
 
 def calibrates(cfg) -> bool:
   """Whether training ends by calibrating (``train.calibrate``; a family whose draw a control can change)."""
-  from chorjax.calibrate import default_grid
+  from chorjax.sampling.calibrate import default_grid
 
   return cfg.train.calibrate and family_of(cfg).calibrated and bool(default_grid(cfg))
 
 
 def calibration(run: Finished) -> dict:
   """``train.calibrate``: ``chorjax calibrate`` on the kept checkpoint, then the end sample drawn with it."""
-  from chorjax.calibrate import calibrate
+  from chorjax.sampling.calibrate import calibrate
 
   calibrate(run.workdir, log=lambda line: print(line, flush=True))
   if run.cfg.sample.frames <= 0:

@@ -10,13 +10,13 @@ import jax
 import numpy as np
 
 from chorjax import scoring
-from chorjax.controls import Controls
 from chorjax.data.dataset import eval_windows
 from chorjax.data.motion import Motion
 from chorjax.data.transforms import to_y_up
 from chorjax.errors import UserError, atomic_write
 from chorjax.run import HELD_OUT, Run, load_run, read_reference  # noqa: F401  (re-exported)
 from chorjax.runtime import side_by_side
+from chorjax.sampling.controls import Controls
 
 
 def evaluate(

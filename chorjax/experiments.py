@@ -49,10 +49,10 @@ from pathlib import Path
 import numpy as np
 
 from chorjax.config import check_training_size, load_config, plain_name, suggest, valid_keys
-from chorjax.controls import Controls
 from chorjax.errors import UserError, atomic_write, load_json, load_toml, read_text
 from chorjax.families import family_of
 from chorjax.runtime import cpu_info
+from chorjax.sampling.controls import Controls
 from chorjax.scoring import mean_of, upgrade
 
 SWEEP_KEYS = {"name", "base", "root", "grid", "set", "eval", "candidates", "vectorize"}
@@ -292,7 +292,7 @@ def _read_run(workdir: Path) -> dict:
 def _calibration_objective(workdir: Path) -> float | None:
   """The objective of the settings a run's calibration chose (how far its draws are from its training takes
   on movement, jitter, speed, root travel and poses); None if never calibrated or hand-edited."""
-  from chorjax.calibration_file import chosen_calibration_row
+  from chorjax.sampling.calibration_file import chosen_calibration_row
 
   row = chosen_calibration_row(workdir)
   try:

@@ -47,8 +47,8 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from chorjax.controls import Controls
 from chorjax.errors import UserError, load_json
+from chorjax.sampling.controls import Controls
 
 AHEAD = 2  # chunks generated ahead of the clock
 PRIME_RANGE = 10.0  # a primed frame's features may lie this many times the training range's span outside it

@@ -22,13 +22,13 @@ import numpy as np
 from flax import nnx
 
 from chorjax import checkpoint as ckpt
-from chorjax.calibration_file import read_calibration
 from chorjax.config import Config, config_from_dict
-from chorjax.controls import Controls, with_ceiling
 from chorjax.data.features import Features
 from chorjax.data.labels import Labels, take_condition
 from chorjax.errors import UserError, atomic_write, check_draw, load_json
 from chorjax.families import family_of
+from chorjax.sampling.calibration_file import read_calibration
+from chorjax.sampling.controls import Controls, with_ceiling
 
 if TYPE_CHECKING:  # (the annotation only: a family reads runs back)
   from chorjax.families.family import Family

@@ -77,7 +77,7 @@ def upgrade(result: dict) -> dict:
   """A metrics dict in today's key names (older files named the first and last segment after 1,000 frames)
   and with every sampling control stated (older files lack the ones added since: they were off)."""
   from chorjax.config import SampleConfig
-  from chorjax.controls import Controls
+  from chorjax.sampling.controls import Controls
 
   out = dict(result)
   for old, new in (("movement_first_1000", "movement_first"), ("movement_last_1000", "movement_last")):

@@ -32,12 +32,12 @@ import numpy as np
 from chorjax import checkpoint as ckpt
 from chorjax import end_of_run
 from chorjax.config import Config, config_diff, config_from_dict, resumable_keys
-from chorjax.controls import Controls, with_ceiling
 from chorjax.data.dataset import Dataset, dataset_notes, load_dataset
 from chorjax.errors import Interrupted, UserError, atomic_write, load_json
 from chorjax.families import family_of
 from chorjax.models import motion_weight_vector
 from chorjax.run import run_meta
+from chorjax.sampling.controls import Controls, with_ceiling
 
 
 class TrainingDiverged(UserError):

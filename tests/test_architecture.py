@@ -180,3 +180,51 @@ def test_every_command_handler_is_short():
   functions = {n.name: n for n in tree.body if isinstance(n, ast.FunctionDef)}
   long = {h: functions[h].end_lineno - functions[h].lineno + 1 for h in handlers}
   assert not {h: n for h, n in long.items() if n > MAX_HANDLER_LINES}, long
+
+
+TABLE = PACKAGE / "sampling" / "table.py"
+# The draw's jitted form (``controls.Draw``: traced and static fields, made from the controls by name).
+COMPILED = {"Draw"}
+
+
+def control_lists(path: Path, names: set[str]) -> list[str]:
+  """Where ``path`` lists three or more sampling controls by name: a literal list, tuple, set or dict, the
+  keywords of one call, or the fields of a class (a function's parameters are where controls act)."""
+  found = []
+  for node in ast.walk(ast.parse(path.read_text())):
+    if isinstance(node, (ast.List, ast.Tuple, ast.Set, ast.Dict)):
+      items = node.keys if isinstance(node, ast.Dict) else node.elts
+      named = {e.value for e in items if isinstance(e, ast.Constant) and e.value in names}
+    elif isinstance(node, ast.Call):
+      named = {k.arg for k in node.keywords} & names
+    elif isinstance(node, ast.ClassDef) and node.name not in COMPILED:
+      named = {s.target.id for s in node.body if isinstance(s, ast.AnnAssign) and isinstance(s.target, ast.Name)}
+      named &= names
+    else:
+      continue
+    if len(named) >= 3:
+      found.append(f"{path.name}:{node.lineno} {sorted(named)}")
+  return found
+
+
+def test_the_control_list_finder_finds_lists(tmp_path):
+  code = tmp_path / "m.py"
+  listed = "A = ('pace', 'clamp', 'ground')\nf(pace=1, clamp=2, ground=3)\n"
+  code.write_text(listed + "class C:\n  pace: int\n  clamp: int\n  ground: int\n")
+  assert len(control_lists(code, {"pace", "clamp", "ground"})) == 3
+  code.write_text("def f(pace, clamp, ground):\n  return {'pace': pace, 'clamp': clamp}\n")
+  assert control_lists(code, {"pace", "clamp", "ground"}) == []
+
+
+def test_the_sampling_controls_are_listed_once():
+  """Flags, config keys, help, the calibration grid, plain draw and the ONNX graph's inputs are all made from
+  ``chorjax.sampling.table``: no second list of the controls anywhere in the package."""
+  from chorjax.sampling.table import NAMES
+
+  lists = [
+    f"{p.parent.name}/{hit}"
+    for p in sorted(PACKAGE.rglob("*.py"))
+    if p != TABLE
+    for hit in control_lists(p, set(NAMES))
+  ]
+  assert not lists, "sampling controls listed outside chorjax/sampling/table.py: " + "; ".join(lists)

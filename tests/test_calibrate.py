@@ -9,15 +9,16 @@ import numpy as np
 import pytest
 from helpers import QUICKSTART_SAMPLING, tiny_config
 
-from chorjax import calibrate, cli, runtime
-from chorjax.calibrate import calibration_path, search
-from chorjax.calibration_file import CALIBRATED, chosen_calibration_row
-from chorjax.controls import Draw, Pacing
+from chorjax import cli, runtime
 from chorjax.data.npz import read_npz
 from chorjax.data.transforms import to_y_up
 from chorjax.errors import UserError
 from chorjax.families.recurrent.generation import dance
 from chorjax.run import load_run
+from chorjax.sampling import calibrate
+from chorjax.sampling.calibrate import calibration_path, search
+from chorjax.sampling.calibration_file import CALIBRATED, chosen_calibration_row
+from chorjax.sampling.controls import Draw, Pacing
 from chorjax.training import train_and_evaluate
 
 GRID = {"noise_smoothing": (0.6, 0.75, 0.85, 0.95), "sigma_temperature": (0.8, 0.9, 1.0, 1.15, 1.3, 1.5)}
@@ -219,8 +220,8 @@ def test_a_resumed_run_keeps_the_best_checkpoint_it_had_before(tmp_path):
 def test_an_mse_head_calibrates_only_what_can_change_its_dance():
   """An MSE head draws no noise (its frame is its prediction): of the calibrated controls only foot_lock
   can change its dance, and on non-canonical features nothing can (training then skips calibration)."""
-  from chorjax.calibrate import default_grid
   from chorjax.config import load_config
+  from chorjax.sampling.calibrate import default_grid
 
   assert set(default_grid(load_config("configs/quickstart.toml"))) == set(CALIBRATED)
   assert default_grid(load_config("configs/quickstart.toml", ["model.head=mse"])) == {"foot_lock": (True, False)}
@@ -234,7 +235,7 @@ def test_an_mse_head_calibrates_only_what_can_change_its_dance():
 
 def test_a_run_that_carries_its_noise_calibrates_its_temperature_and_feet(tmp_path):
   """``chorjax calibrate`` of a ``model.mdn_memory`` run searches 16 settings and records what it chose."""
-  from chorjax.calibrate import calibrate
+  from chorjax.sampling.calibrate import calibrate
 
   w = tmp_path / "run"
   flags = ["train.num_steps=3", "log.tensorboard=false", "data.representation=canonical", "model.mdn_memory=2"]

@@ -12,11 +12,11 @@ from flax import nnx
 from helpers import TINY, tiny_config
 
 from chorjax import cli
-from chorjax.controls import PLAIN
 from chorjax.data.dataset import load_dataset
 from chorjax.families.recurrent.recurrent_model import create_model
 from chorjax.metrics import roughness
 from chorjax.models.heads import mdn_log_prob
+from chorjax.sampling.controls import PLAIN
 from chorjax.training import train_and_evaluate
 
 
@@ -118,8 +118,8 @@ def test_what_a_correlated_draw_cannot_be_given_is_refused_in_one_line(tmp_path,
 @pytest.mark.parametrize("prime", [False, True])
 def test_a_correlated_run_samples_live_streams_and_primes(tmp_path, prime):
   """The generator's draw equals the stream's draw chunk by chunk (the residuals carried across chunks)."""
-  from chorjax.controls import Draw
   from chorjax.families.recurrent.generation import continue_stream, generate, start_stream
+  from chorjax.sampling.controls import Draw
 
   model, window = _model_and_window(8)
   graphdef, params = nnx.split(model, nnx.Param)
@@ -137,9 +137,9 @@ def test_the_carried_recipe_draws_with_three_controls_and_calibrates_two():
   """``configs/carried.toml``: the quickstart's model carrying its noise; its draw is the plain draw but for the
   temperatures and the clip to the training range (decoding aside), and calibration chooses the scale
   temperature and foot lock."""
-  from chorjax.calibrate import default_grid
   from chorjax.config import load_config
-  from chorjax.controls import PLAIN, Controls
+  from chorjax.sampling.calibrate import default_grid
+  from chorjax.sampling.controls import PLAIN, Controls
 
   cfg = load_config("configs/carried.toml")
   assert cfg.model.memory == 2 and cfg.model.mdn_basis == "acceleration" and cfg.train.calibrate

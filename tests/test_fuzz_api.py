@@ -17,8 +17,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import chorjax
-from chorjax.controls import Controls
 from chorjax.data.dataset import bundled_path
+from chorjax.sampling.controls import Controls
 from chorjax.training import train_and_evaluate
 
 settings.register_profile(

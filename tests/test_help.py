@@ -8,7 +8,7 @@ import pytest
 
 from chorjax import cli
 from chorjax.config import SampleConfig, key_docs, valid_keys
-from chorjax.controls import Controls
+from chorjax.sampling.controls import Controls
 
 MAX_HELP = 160  # characters: one or two lines of a terminal; the reasoning goes to `more` (the docs)
 

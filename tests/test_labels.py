@@ -190,8 +190,8 @@ def test_calibration_holds_each_labelled_dancer_to_the_poses_of_its_own_labels(l
   """A labelled run's calibration measures each dancer's poses against its own labels' takes: the real takes,
   each as a dancer under its own labels, are nearer than under another pair's (pooled over the library, the
   labels would not count); a pair with too few takes leaves the pooled distribution in its place."""
-  from chorjax.calibrate import PosesByLabel
   from chorjax.data.transforms import to_y_up
+  from chorjax.sampling.calibrate import PosesByLabel
   from chorjax.scoring import PoseDistribution
 
   run = load_run(labelled_run)

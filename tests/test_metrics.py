@@ -181,7 +181,7 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
   assert (tmp_path / "report_loss.png").exists() and (tmp_path / "report_movement.png").exists()
   assert "Chosen from the training takes alone" not in text  # no run was calibrated
   # calibrated runs: the report names the one whose draws came nearest its own training takes
-  from chorjax.calibrate import calibrate
+  from chorjax.sampling.calibrate import calibrate
 
   objective = {}
   for run, rho in ((runs[0], 0.9), (runs[1], 0.0)):  # smooth draws and white noise: different distances

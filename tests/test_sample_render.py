@@ -15,7 +15,6 @@ from flax import nnx
 from helpers import headless, tiny_config
 
 from chorjax import cli
-from chorjax.controls import Bounds, Draw, Pacing
 from chorjax.data.csv import read_csv, write_csv
 from chorjax.data.dataset import bundled_path, load_dataset
 from chorjax.data.npz import read_npz
@@ -23,6 +22,7 @@ from chorjax.families.recurrent import generation
 from chorjax.families.recurrent.generation import generate
 from chorjax.models import as_weights, parse_mix
 from chorjax.run import load_run
+from chorjax.sampling.controls import Bounds, Draw, Pacing
 from chorjax.training import train_and_evaluate
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -488,10 +488,10 @@ def test_off_pace_the_governor_changes_the_scale_and_lets_go_of_the_component():
 
 
 def test_scale_cap_holds_draws_to_the_scales_the_model_predicts_on_its_data(loaded, run_dir, tmp_path, capsys):
-  from chorjax.controls import scale_ceiling
   from chorjax.errors import UserError
   from chorjax.families.recurrent.generation import dance
   from chorjax.models.heads import MDNHead
+  from chorjax.sampling.controls import scale_ceiling
 
   train = load_dataset(loaded.config.data).train
   seq = loaded.config.data.seq_length

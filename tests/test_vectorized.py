@@ -98,7 +98,7 @@ def test_what_cannot_be_vectorized_is_named(tmp_path):
 def test_points_trained_together_are_calibrated_as_each_would_be_alone(tmp_path, monkeypatch):
   """`train.calibrate` (the quickstart's): every point of a vectorized run chooses its own sampling settings on
   its training takes and draws its end sample with them, as it would trained alone (a 2-setting grid here)."""
-  from chorjax import calibrate
+  from chorjax.sampling import calibrate
 
   monkeypatch.setattr(calibrate, "GRID", {**{k: v[:1] for k, v in calibrate.GRID.items()}, "foot_lock": (True, False)})
   overrides = [*BASE, "train.calibrate=true", "data.representation=canonical", "sample.frames=20"]

@@ -11,7 +11,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # (the annotations only)
-  from chorjax.controls import Controls
+  from chorjax.sampling.controls import Controls
 
 
 class Family:
@@ -86,8 +86,8 @@ class Family:
     import jax
     import numpy as np
 
-    from chorjax.controls import with_ceiling
     from chorjax.data.motion import Motion
+    from chorjax.sampling.controls import with_ceiling
 
     s = cfg.sample
     features = with_ceiling(ds.features, graphdef, params, ds.train, cfg.data.seq_length, controls)

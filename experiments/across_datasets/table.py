@@ -24,7 +24,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).parent.parent))
 from _results import end_strip, keep_small_files, real_strip
 
-from chorjax.calibration_file import chosen_calibration_row
+from chorjax.sampling.calibration_file import chosen_calibration_row
 from chorjax.scoring import mean_of
 
 HERE = Path(__file__).parent.parent  # experiments/

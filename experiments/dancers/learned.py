@@ -36,7 +36,7 @@ def main(
   is the same its evaluation is kept (the same checkpoint, settings and sampling seeds: the same dance).
   ``calibrate_args``: flags for `chorjax calibrate` (``--frames N``, ``--num N``). A copy whose checkpoint and
   chosen settings are its run's keeps the run's evaluation."""
-  from chorjax.calibrate import MEASURES, calibrate
+  from chorjax.sampling.calibrate import MEASURES, calibrate
 
   if reuse and (sets or calibrate_args):
     raise SystemExit("--reuse draws what the runs drew: it changes nothing in their config or draws")

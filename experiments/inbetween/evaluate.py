@@ -22,10 +22,10 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from chorjax.families.inbetween import inbetweening as ib
 from chorjax.data.dataset import conform, load_dataset, read_takes, to_rate
 from chorjax.data.features import leg_length
 from chorjax.experiments import machine_info
+from chorjax.families.inbetween import inbetweening as ib
 from chorjax.run import load_run
 
 HERE = Path(__file__).parent

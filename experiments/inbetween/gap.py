@@ -18,8 +18,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).parent))
 from evaluate import BASELINES, cell, groups_of, held_out, methods_of
 
-from chorjax.families.inbetween import inbetweening as ib
 from chorjax.data.dataset import load_dataset
+from chorjax.families.inbetween import inbetweening as ib
 from chorjax.run import load_run
 
 LENGTHS = (5, 15, 30)

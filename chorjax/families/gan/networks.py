@@ -29,6 +29,7 @@ from flax import nnx
 
 from chorjax.families.family import frame_io
 from chorjax.models.rnn import RecurrentCore
+from chorjax.sampling.table import PLAIN
 
 
 def _dense_stack(sizes, *, rngs: nnx.Rngs) -> nnx.List:
@@ -279,6 +280,4 @@ def gan_controls(controls):
   """Sampling ``controls`` (``SampleConfig.controls``) as a GAN applies them: the frame-by-frame MDN draw
   controls at their neutral values (temperatures 1, the rest off); ``clamp``, ``rigid_bones`` and
   ``foot_lock`` (decoding) as given."""
-  off = {"pi_temperature": 1.0, "sigma_temperature": 1.0, "greedy": False, "noise_smoothing": 0.0, "noise_order": 2}
-  frames = {"persistence": 0.0, "crossfade": 0.0, "pace": 0.0, "scale_cap": 0.0, "clamp_steps": False}
-  return controls.replace(**off, **frames)
+  return controls.replace(**{k: v for k, v in PLAIN.items() if k != "clamp"})

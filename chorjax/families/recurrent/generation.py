@@ -16,11 +16,11 @@ import jax.numpy as jnp
 import numpy as np
 from flax import nnx
 
-from chorjax.config import MAX_NOISE_ORDER
-from chorjax.controls import Controls, Draw, Pacing, noise_gain
 from chorjax.data.features import joint_pace
 from chorjax.families.family import frame_io
 from chorjax.models.heads import frame_numbers
+from chorjax.sampling.controls import Controls, Draw, Pacing, noise_gain
+from chorjax.sampling.table import MAX_NOISE_ORDER
 
 # Frames per iteration of the plain generation loop, for long batched draws (at least UNROLL_FROM frames over
 # the batch): an iteration's fixed cost (the loop's bookkeeping, one dispatch per operation) then serves four

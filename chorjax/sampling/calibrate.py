@@ -53,37 +53,12 @@ import jax
 import numpy as np
 
 from chorjax import metrics, scoring
-from chorjax.calibration_file import CALIBRATED, calibration_path, read_calibration  # noqa: F401  (re-exported)
 from chorjax.data.transforms import to_y_up
 from chorjax.errors import UserError, atomic_write
 from chorjax.runtime import side_by_side
+from chorjax.sampling.calibration_file import calibration_path, read_calibration  # noqa: F401  (re-exported)
+from chorjax.sampling.table import BEYOND, CALIBRATED, CARRIED_BEYOND, CARRIED_GRID, DECODING, GRID, RECORDED  # noqa: F401
 
-GRID = {
-  "noise_smoothing": (0.6, 0.75, 0.85, 0.9, 0.95),  # 0.95: a model that trembles (cmu05 seed 1: jitter 3 at 0.9)
-  "sigma_temperature": (0.9, 1.0, 1.2),
-  "persistence": (0.0, 1.5, 6.0),
-  "crossfade": (0.0, 0.8),
-  "foot_lock": (True, False),  # canonical runs only (the others cannot lock feet)
-}
-# An MDN that carries its noise over frames (model.mdn_memory) draws smoothly at full temperature: what is left to
-# choose is how wide its draws are and whether its feet lock. On the dancers benchmark's runs, its own draw on the
-# training takes of martial moved at 1.5-1.6x their speed at temperature 1 and 0.93x at 0.5; salsa's at 0.94x
-# only unlocked or at 1.1 (experiments/draw).
-CARRIED_GRID = {
-  "sigma_temperature": (0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.1, 1.2),
-  "foot_lock": (True, False),
-}
-# ... and below the grid's 0.5, where a dancer with half a minute of motion is drawn (CMU 5's three runs chose
-# 0.5 with nothing lower to try; one walking down chose 0.3: held-out jitter 1.35 -> 0.88, FID_g 2.7 -> 1.8x)
-CARRIED_BEYOND = {"sigma_temperature": ((0.4, 0.3, 0.25, 0.2), (1.4, 1.7, 2.0))}
-# Where the grid's best value of a control is one of its ends, the search goes on past it, one value at a
-# time along these ladders (lower, higher), while the objective falls: the grid's ends bound 29 of the 39
-# chosen sigma temperatures of the dancers benchmark's runs (0.9: 24, most on cmu94 and salsa; 1.2: 5).
-# Persistence is not walked (6 already holds a component until another outweighs it: 12 draws the same).
-BEYOND = {
-  "sigma_temperature": ((0.8, 0.7, 0.6, 0.5), (1.4, 1.7, 2.0)),
-  "noise_smoothing": ((0.5, 0.4, 0.3), (0.97, 0.98)),
-}
 # The walk starts from each of the grid's WALKS best settings: from the best alone it missed, on one martial run,
 # a setting a quarter nearer (objective 0.51 against 0.67) that the third best's walk reaches.
 WALKS = 3
@@ -97,8 +72,6 @@ CALIBRATION_DANCERS = 4  # dancers drawn per setting
 # named their action at 0.39-0.48 of the held-out takes' rate against 0.27-0.45, their style at 0.35-0.40
 # against 0.38-0.40; experiments/library)
 LABELLED_DANCERS = 16
-DRAWN = ("noise_smoothing", "noise_order", "pace", "sigma_temperature", "persistence", "crossfade")  # MSE ignores
-RECORDED = ("noise_order", "pace")  # not searched: what the chosen settings were chosen with
 
 
 def default_grid(config, noise_order: int | None = None, pace: float | None = None) -> dict:
@@ -113,7 +86,7 @@ def default_grid(config, noise_order: int | None = None, pace: float | None = No
   if config.data.representation != "canonical":
     del grid["foot_lock"]
   if config.model.head == "mse":
-    grid = {k: v for k, v in grid.items() if k not in DRAWN}
+    grid = {k: v for k, v in grid.items() if k in DECODING}
   return grid
 
 

@@ -1,6 +1,6 @@
 """Sampling controls, one typed value from the flags to the draw.
 
-:class:`Controls` holds the fourteen controls of ``[sample]``, resolved in one
+:class:`Controls` holds the controls of ``[sample]`` (declared in :mod:`chorjax.sampling.table`), resolved in one
 place (:meth:`Controls.resolve`: a flag or keyword given, else the run's calibration, else its ``[sample]``).
 It splits into what the draw uses (:class:`Draw`, with the training range as :class:`Bounds`, the pace
 target as :class:`Pacing` and the scale ceiling filled in from the run's features) and what decoding uses
@@ -21,50 +21,20 @@ import numpy as np
 from flax import nnx
 
 from chorjax.errors import UserError
+from chorjax.sampling.table import HEAD, NAMES, PLAIN, SWITCHES, TRACED, ControlFields  # noqa: F401  (PLAIN re-exported)
 
 LABEL_PACE_WIDTH = 0.05  # two label combinations that differ in one value are 2 apart: each its own pace
-FLAGS = ("greedy", "rigid_bones", "foot_lock", "ground", "clamp", "clamp_steps")  # the on/off controls
-# The model's own draw (``--plain``): full temperature, white noise, nothing held, smoothed, governed or clipped;
-# decoding (rigid bones, grounded and locked feet) stays the run's.
-PLAIN = {
-  "pi_temperature": 1.0,
-  "sigma_temperature": 1.0,
-  "greedy": False,
-  "noise_smoothing": 0.0,
-  "noise_order": 1,
-  "persistence": 0.0,
-  "crossfade": 0.0,
-  "pace": 0.0,
-  "scale_cap": 0.0,
-  "clamp": False,
-  "clamp_steps": False,
-}
 
 
 @dataclasses.dataclass(frozen=True)
-class Controls:
+class Controls(ControlFields):
   """How to draw and decode a dance: each field is the ``[sample]`` key of its name (``chorjax config keys
-  sample`` says what each does). A pytree: the numbers are its leaves, the switches and the noise order
-  static."""
-
-  pi_temperature: float
-  sigma_temperature: float
-  greedy: bool
-  noise_smoothing: float
-  noise_order: int
-  persistence: float
-  crossfade: float
-  pace: float
-  scale_cap: float
-  rigid_bones: bool
-  foot_lock: bool
-  ground: bool
-  clamp: bool
-  clamp_steps: bool
+  sample`` says what each does; ``chorjax.sampling.table`` declares them). A pytree: the numbers the draw
+  traces are its leaves, the rest static."""
 
   @classmethod
   def names(cls) -> tuple[str, ...]:
-    return tuple(f.name for f in dataclasses.fields(cls))
+    return NAMES
 
   @classmethod
   def resolve(cls, sample_config, calibrated: dict | None = None, **given) -> Controls:
@@ -83,7 +53,7 @@ class Controls:
     saved = {k: check_sample_control(k, v, "calibration.json") for k, v in (calibrated or {}).items()}
     given = {**saved, **{k: check_sample_control(k, v, k) for k, v in given.items() if v is not None}}
     values = {k: given.get(k, getattr(sample_config, k)) for k in names}
-    return cls(**{**values, **{k: bool(values[k]) for k in FLAGS}})
+    return cls(**{**values, **{k: bool(values[k]) for k in SWITCHES}})
 
   def replace(self, **changes) -> Controls:
     return dataclasses.replace(self, **changes)
@@ -106,27 +76,17 @@ class Controls:
         raise ValueError("scale_cap: the run's scale ceiling was not measured (Run.ranged, controls.with_ceiling)")
     except ValueError as e:
       raise UserError(str(e)) from None
+    made = {"bounds", "pacing", "scale_cap"}  # from the run's features; the other controls as they are
     return Draw(
-      pi_temperature=self.pi_temperature,
-      sigma_temperature=self.sigma_temperature,
-      greedy=self.greedy,
-      noise_smoothing=self.noise_smoothing,
-      noise_order=self.noise_order,
-      persistence=self.persistence,
-      crossfade=self.crossfade,
+      **{f.name: getattr(self, f.name) for f in dataclasses.fields(Draw) if f.name in NAMES and f.name not in made},
       bounds=Bounds.of(features, self.clamp, self.clamp_steps),
-      pace=self.pace,
       pace_lag=features.pace_lag if self.pace else Draw.pace_lag,
       pacing=Pacing.of(features) if self.pace else None,
       scale_cap=features.scale_ceiling if self.scale_cap else None,
     )
 
 
-jax.tree_util.register_dataclass(
-  Controls,
-  data_fields=["pi_temperature", "sigma_temperature", "persistence", "crossfade"],
-  meta_fields=["noise_smoothing", "noise_order", "pace", "scale_cap", *FLAGS],
-)
+jax.tree_util.register_dataclass(Controls, data_fields=list(TRACED), meta_fields=[n for n in NAMES if n not in TRACED])
 
 
 @jax.tree_util.register_dataclass
@@ -261,14 +221,8 @@ class Draw:
     )
 
   def head_args(self) -> dict:
-    """The MDN draw's keyword arguments (``heads.MDNHead.draw``)."""
-    return {
-      "pi_temperature": self.pi_temperature,
-      "sigma_temperature": self.sigma_temperature,
-      "persistence": self.persistence,
-      "crossfade": self.crossfade,
-      "scale_cap": self.scale_cap,
-    }
+    """The MDN draw's keyword arguments (``heads.MDNHead.draw``: the controls the table marks ``head``)."""
+    return {name: getattr(self, name) for name in HEAD}
 
 
 def scale_ceiling(graphdef, params, train, seq_length: int, quantile: float):

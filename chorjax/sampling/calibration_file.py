@@ -7,11 +7,7 @@ import json
 from pathlib import Path
 
 from chorjax.errors import UserError, load_json
-
-# What calibration.json's settings may hold: what `chorjax calibrate` chooses, and the noise order and governor
-# gain it was chosen with (an older calibration may hold fewer: noise_smoothing and sigma_temperature alone, or
-# no noise_order or pace, which were then the run's sample.noise_order and sample.pace)
-CALIBRATED = ("noise_smoothing", "noise_order", "pace", "sigma_temperature", "persistence", "crossfade", "foot_lock")
+from chorjax.sampling.table import CALIBRATED
 
 
 def calibration_path(workdir) -> Path:
