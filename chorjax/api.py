@@ -209,9 +209,9 @@ def _recast(cls, obj):
 
 
 def train(config, workdir=None, overrides: Sequence[str] | None = None, *, force: bool = False) -> Run:
-  """Trains ``config`` (a TOML path or a loaded ``chorjax.config.Config``; ``overrides``: ``"key=value"``
-  strings) in ``workdir`` (default ``runs/<name>``), resuming from its latest checkpoint as ``chorjax
-  train`` does, and returns the run at the checkpoint it keeps."""
+  """Trains ``config`` (a TOML path, a loaded ``chorjax.config.Config`` or a ``{section: {key: value}}``
+  dict; ``overrides``: ``"key=value"`` strings) in ``workdir`` (default ``runs/<name>``), resuming from its
+  latest checkpoint as ``chorjax train`` does, and returns the run at the checkpoint it keeps."""
   from chorjax.end_of_run import standard
   from chorjax.training import default_workdir, train_and_evaluate
 

@@ -808,7 +808,7 @@ def _number(low: float, most: float, above: bool = False):
 
 _rate = _number(1.0, 1000.0)  # frames per second, as data.fps allows (render --fps 1e-9 was an internal error)
 _seed = _in_range(0, 2**32 - 1)  # a seed JAX takes (calibrate --seed 2**64 + 1 was an internal error)
-_scale = _number(0.0, 1e6, above=True)  # a length multiplier (metres to micrometres at most)
+_scale = _number(1e-6, 1e6)  # a length multiplier (metres to micrometres at most, either way)
 
 
 def reference_markdown() -> str:
@@ -857,17 +857,30 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _quiet_closed_loop(hook):
   """After a failed checkpoint write or restore, the storage layer's threads still report to orbax's
-  event loop, closed by then, and orbax's unfinished read coroutines are closed; Python prints each as
-  an unraisable exception. The failure itself is reported as one line, so only those are dropped."""
+  event loop, closed by then, and orbax's unfinished read coroutines are closed or end in the read's error;
+  Python prints each as an unraisable exception. The failure itself is reported as one line, so only those
+  are dropped."""
 
   def unraisable(info):
     closed_loop = isinstance(info.exc_value, RuntimeError) and str(info.exc_value) == "Event loop is closed"
     code = getattr(info.object, "cr_code", None)  # an orbax coroutine closed unfinished when its read ended
-    abandoned = isinstance(info.exc_value, GeneratorExit) and "orbax" in getattr(code, "co_filename", "")
+    # (closed, or failed reading an array of a checkpoint that does not fit: the restore has failed already)
+    abandoned = isinstance(info.exc_value, GeneratorExit | Exception) and "orbax" in getattr(code, "co_filename", "")
     if not (closed_loop or abandoned):
       hook(info)
 
   return unraisable
+
+
+def _signed_axes(argv: list[str]) -> list[str]:
+  """``--up-axis -x`` as ``--up-axis=-x``: argparse takes a value that starts with a dash for a flag."""
+  out: list[str] = []
+  for a in argv:
+    if out and out[-1] == "--up-axis" and a in ("-x", "-y", "-z"):
+      out[-1] = f"--up-axis={a}"
+    else:
+      out.append(a)
+  return out
 
 
 def main(argv=None) -> int:
@@ -879,7 +892,7 @@ def main(argv=None) -> int:
     # runs asyncio in this process, and every failure of its reaches the user as a UserError)
     logging.getLogger("asyncio").setLevel(logging.CRITICAL)
   parser = build_parser()
-  args, extra = parser.parse_known_args(argv)
+  args, extra = parser.parse_known_args(_signed_axes(sys.argv[1:] if argv is None else list(argv)))
   api.keep_compiled_programs()  # (not for --help) a program compiled once per machine; see chorjax/runtime.py
   # KEY=VALUE overrides may also follow options (`train c.toml --workdir w model.cell=gru`).
   if extra:
@@ -887,6 +900,9 @@ def main(argv=None) -> int:
       args.overrides = [*args.overrides, *extra]
     else:
       parser.error(f"unrecognized arguments: {' '.join(extra)}")
+  for name in ("output", "workdir"):  # '' is no path: the working directory would stand in for it
+    if getattr(args, name, None) == "":
+      parser.error(f"{'-o' if name == 'output' else name.upper()} '': an empty path")
   try:
     return args.func(args)
   except UserError as e:

@@ -715,8 +715,13 @@ def load_config(path: str | Path | Config | dict | None = None, overrides: Seque
   if isinstance(path, Config):  # chorjax.train(config) from Python: the same overrides, the same checks
     _apply(sections, {k: v for k, v in path.to_dict().items() if k != "name"}, lambda s, k: "the given config")
     name = path.name
-  elif path is not None:
+  elif isinstance(path, dict):  # chorjax.train({"model": {"cell": "gru"}}): checked as a file's tables are
+    _apply(sections, path, lambda s, k: "the given dict")
+    name = str(path.get("name", name))
+  elif isinstance(path, str | Path):
     name = _apply_file(sections, Path(path))
+  elif path is not None:
+    raise UserError(f"config: expected a TOML file's path, a Config or a dict, got {type(path).__name__}")
   for item in overrides:
     key, value = parse_override(item)
     if key == "name":

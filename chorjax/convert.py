@@ -74,6 +74,8 @@ def convert(
 def _without_rest(motions, drop_first_frame: bool, keep_rest_frames: bool, log) -> list:
   """The takes without a converter's leading rest pose (or without their first frame, where asked)."""
   if drop_first_frame:
+    if short := [m for m in motions if m.num_frames < 2]:
+      raise UserError(f"{short[0].source or short[0].name}: one frame; --drop-first-frame would leave none")
     return [m.replace(positions=m.positions[1:]) for m in motions]
   if keep_rest_frames:
     return motions

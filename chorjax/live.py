@@ -38,7 +38,7 @@ import contextlib
 import dataclasses
 import json
 import math
-import os
+import re
 import signal
 import tempfile
 import typing
@@ -51,6 +51,7 @@ from chorjax.errors import UserError, load_json
 from chorjax.sampling.controls import Controls
 
 AHEAD = 2  # chunks generated ahead of the clock
+HOST_HEADER = re.compile(r"(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9._-]+)(:[0-9]{1,5})?")  # RFC 9110 Host, no user info
 PRIME_RANGE = 10.0  # a primed frame's features may lie this many times the training range's span outside it
 MAX_MESSAGE = 4 * 2**20  # bytes of one client message (a prime of minutes of frames, a file's text)
 MAX_FPS = 1000  # frames sent per second at most
@@ -299,9 +300,11 @@ class Live:
       await self.call(self.stream.set, **value)
     elif kind == "prime":
       try:
+        if not _all_numbers(value):  # not "1" or true, which numpy would take for numbers
+          raise TypeError
         positions = np.asarray(value, np.float32)
       except (ValueError, TypeError):
-        raise UserError("prime: expected frames of [x, y, z] per joint") from None
+        raise UserError("prime: expected frames of [x, y, z] per joint, numbers") from None
       await self.prime(positions)
     else:
       await self.prime(await asyncio.to_thread(self.read_file, value))
@@ -315,11 +318,26 @@ class Live:
     suffix = Path(value["name"]).suffix.lower()
     with tempfile.TemporaryDirectory() as tmp:
       path = Path(tmp) / f"phrase{suffix}"
-      path.write_text(value["text"])
+      try:
+        path.write_text(value["text"], encoding="utf-8")
+      except UnicodeEncodeError:  # a lone surrogate: JSON can carry one, no file can
+        raise UserError(f"prime_file {value['name']!r}: the text holds a character that is not Unicode") from None
       try:
         return read_phrase(str(path), self.stream.features, self.stream.run.config.data, "prime_file")
       except UserError as e:
         raise UserError(str(e).replace(str(path), value["name"])) from None
+
+
+def _all_numbers(value) -> bool:
+  """Whether ``value`` (a message's JSON) is numbers in nested lists: no strings, booleans or nulls."""
+  todo = [value]
+  while todo:
+    v = todo.pop()
+    if isinstance(v, list):
+      todo.extend(v)
+    elif isinstance(v, bool) or not isinstance(v, (int, float)):
+      return False
+  return True
 
 
 class Phrase:
@@ -409,6 +427,8 @@ def header_refusal(headers) -> str | None:
   hosts, origins = headers.get_all("Host"), headers.get_all("Origin")
   if len(hosts) != 1 or len(origins) > 1:
     return f"{len(hosts)} Host and {len(origins)} Origin headers (expected one Host and at most one Origin)"
+  if not HOST_HEADER.fullmatch(hosts[0]):  # a name or address and a port: no user info (a@b), no spaces
+    return f"Host {hosts[0]!r} is not a host name and port"
   return None
 
 
@@ -454,9 +474,10 @@ async def serve(live: Live, host: str, port: int, *, osc_in=None, on_ready=print
     refused = origin_refusal(request.headers, host, origins, names)
     if refused:
       return connection.respond(403, f"refused: {refused}\n")
-    if request.path == "/ws":
+    path = request.path.split("?", 1)[0]  # a query string (?v=2, a cache buster) names the same page
+    if path == "/ws":
       return None  # the WebSocket handshake goes on
-    if request.path in ("/", "/index.html"):
+    if path in ("/", "/index.html"):
       headers = Headers([("Content-Type", "text/html; charset=utf-8"), ("Content-Length", str(len(page)))])
       return Response(200, "OK", headers, page)
     return connection.respond(404, "not found: the page is at / and the stream at /ws\n")
@@ -565,6 +586,9 @@ def run_live(
   from chorjax.sample import read_phrase
 
   _check_flags(port, record, force, fps, alternate)
+  for origin in allow_origins:
+    if not origin.isprintable() or " " in origin:
+      raise UserError(f"--allow-origin {origin!r}: an origin has no spaces or control characters (CR, LF)")
   osc_out = host_port(osc, "--osc") if osc else None
   listen = host_port(osc_in, "--osc-in") if osc_in else None
   if alternate and not (input_spec or listen):
@@ -614,5 +638,9 @@ def _check_flags(port: int, record, force: bool, fps, alternate: float) -> None:
     raise UserError(f"--fps {fps}: must be a number above 0 and at most {MAX_FPS}")
   if not 0 <= alternate <= MAX_TURN:  # (NaN fails it too)
     raise UserError(f"--alternate {alternate}: must be a number of seconds from 0 to {MAX_TURN}")
-  if record is not None and not os.access(Path(record).absolute().parent, os.W_OK):
-    raise UserError(f"{record}: --record cannot be written there (no such folder, or not writable)")
+  if record is not None:
+    try:  # a file made and gone: what the end writes (os.access says yes to /proc for root)
+      with tempfile.TemporaryFile(dir=Path(record).absolute().parent):
+        pass
+    except OSError:
+      raise UserError(f"{record}: --record cannot be written there (no such folder, or not writable)") from None

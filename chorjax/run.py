@@ -150,12 +150,13 @@ class Run:
       raise UserError(f"{self.workdir}: {why}")
     return self
 
-  def sampling(self, **given) -> Controls:
-    """Sampling controls: the ones given (not None), else the run's calibration (``chorjax calibrate``),
-    else its ``[sample]`` config, as the run's family applies them (a GAN records the frame-by-frame draw's
-    controls as off, and reads no calibration)."""
+  def sampling(self, use_calibration: bool = True, **given) -> Controls:
+    """Sampling controls: the ones given (not None), else the run's calibration (``chorjax calibrate``;
+    not with ``use_calibration`` False: what calibrating it again draws with), else its ``[sample]`` config,
+    as the run's family applies them (a GAN records the frame-by-frame draw's controls as off, and reads no
+    calibration)."""
     family = self.family
-    calibrated = read_calibration(self.workdir) if self.workdir and family.calibrated else {}
+    calibrated = read_calibration(self.workdir) if use_calibration and self.workdir and family.calibrated else {}
     return family.controls(Controls.resolve(self.config.sample, calibrated, **given))
 
   def check_drawn(self, frames: int, what: str) -> None:

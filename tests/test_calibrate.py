@@ -163,6 +163,8 @@ def test_calibrate_records_the_settings_and_the_run_uses_them_unless_told(run_di
   assert "damaged calibration" in capsys.readouterr().err
   with pytest.raises(UserError, match="damaged calibration"):
     chosen_calibration_row(run_dir)
+  assert cli.main([*args, "--force"]) == 0  # as the refusal says: calibrating again replaces it, unread
+  assert chosen_calibration_row(run_dir) is not None
   calibration_path(run_dir).unlink()
   assert chosen_calibration_row(run_dir) is None
 

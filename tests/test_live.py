@@ -163,6 +163,8 @@ def test_live_server_end_to_end(live_run, tmp_path):
   try:
     with urllib.request.urlopen(url + "/") as page:  # the live page, offline
       html = page.read().decode()
+    with urllib.request.urlopen(url + "/?v=2") as again:  # a query string names the same page
+      assert again.read().decode() == html
     assert "new WebSocket" in html and "<script src" not in html and "https://" not in html
     with connect(url.replace("http://", "ws://") + "/ws") as ws:
       hello = json.loads(ws.recv())["hello"]
@@ -199,26 +201,30 @@ def test_live_server_end_to_end(live_run, tmp_path):
         json.dumps({"prime": [[[float("nan")] * 3] * 16] * 4}),
         json.dumps({"prime": (np.asarray(phrase) * 1e30).tolist()}),
         json.dumps({"set": {"sigma_temperature": 1e300}}),
+        json.dumps({"prime": [[["1", "2", "3"]] * 16] * 4}),  # numbers as text: numpy took them once
+        json.dumps({"prime": [[[True, False, True]] * 16] * 4}),
+        json.dumps({"prime_file": {"name": "p.csv", "text": "\ud800"}}),  # a lone surrogate dropped the line once
         *(json.dumps({"prime": phrase[:n]}) for n in (3, 5, 7, 9, 13, 17, 25)),  # lengths never seen before
       ):
         ws.send(message)
       # 7 prime lengths never seen before compile on the way: the deadline only guards against a hang (18 of 20
       # frames came in 6 s while a sweep and a calibration shared the two cores with the suite)
       start, after = time.monotonic(), 0
-      while time.monotonic() - start < 30.0 and (len(replies) < 17 or after < FPS):
+      while time.monotonic() - start < 30.0 and (len(replies) < 20 or after < FPS):
         msg = json.loads(ws.recv())
         if "frame" in msg:
           received[msg["frame"]] = np.asarray(msg["positions"])
-          after += len(replies) >= 17
+          after += len(replies) >= 20
         else:
           replies.append(msg)
       kinds = [next(iter(r)) for r in replies]
-      assert kinds == ["ok", "ok", "error", "error", "error", "ok", "ok", "error", "error", "error"] + ["ok"] * 7, (
-        replies
-      )
+      expected = ["ok", "ok", "error", "error", "error", "ok", "ok", "error", "error", "error"] + ["error"] * 3
+      assert kinds == expected + ["ok"] * 7, replies
       assert "not JSON" in replies[2]["error"] and "prime: expected" in replies[4]["error"]
       assert "finite" in replies[7]["error"] and "outside the training data's range" in replies[8]["error"]
       assert "sigma_temperature" in replies[9]["error"]
+      assert "numbers" in replies[10]["error"] and "numbers" in replies[11]["error"]
+      assert "not Unicode" in replies[12]["error"]
       assert after >= FPS  # frames keep coming after steering and bad messages
       assert all(np.isfinite(p).all() for p in received.values())  # never poisoned
       for origin in ("http://evil.example", "null"):  # another page in the user's browser: refused
@@ -339,6 +345,8 @@ def test_live_refuses_bad_flags_in_one_line(live_run, tmp_path, capsys):
     (["--mix", "99:1"], "out of range"),
     (["--alternate", "1e308", "--input", str(TAKE)], "--alternate 1e+308: must be a number of seconds from 0"),
     (["--record", str(tmp_path / "no" / "such" / "rec.npz")], "--record cannot be written there"),
+    (["--record", "/proc/rec.npz"], "--record cannot be written there"),  # os.access says yes for root
+    (["--allow-origin", "http://a\r\nSet-Cookie: x"], "no spaces or control characters"),
   ]
   for flags, expected in cases:
     assert cli.main(["live", str(live_run), *flags]) == 2
@@ -472,7 +480,8 @@ def test_off_loopback_the_host_must_name_this_server_and_headers_must_be_well_fo
   twice = Headers([("Host", "10.0.0.5:8765"), ("Origin", "http://a"), ("Origin", "http://b")])
   assert "2 Origin headers" in header_refusal(twice)
   assert "0 Host" in header_refusal(Headers([("Origin", "http://a")]))
-  assert header_refusal(h(host="10.0.0.5:8765")) is None
+  assert header_refusal(h(host="10.0.0.5:8765")) is None and header_refusal(h(host="[::1]:8765")) is None
+  assert "not a host name and port" in header_refusal(h(host="127.0.0.1:8765@evil.com"))  # user info
 
 
 def test_a_client_s_budget_refills_at_its_rate():

@@ -206,14 +206,14 @@ def suggest_config(reports: list[TakeReport], csv: bool) -> list[str]:
 
 def check_paths(specs, joint_map=None, fps: float = 30.0) -> tuple[list[TakeReport], list[str]]:
   """Reports for every take named by ``specs`` (files, folders, bundled names) and the suggested config."""
-  from chorjax.data.csv import sidecar_path
+  from chorjax.data.csv import has_sidecar
   from chorjax.data.dataset import read_motions, resolve_files
   from chorjax.data.mapping import HEAD_TOP_FROM_EYES, map_takes
 
   reports, motions, csv = [], [], False
   for spec in specs:
     for f in resolve_files(spec):
-      csv |= f.suffix.lower() == ".csv" and not sidecar_path(f).is_file()  # a sidecar records the rate
+      csv |= f.suffix.lower() == ".csv" and not has_sidecar(f)  # a sidecar records the rate
       try:
         motions += read_motions(f, fps=fps)
       except UserError as e:

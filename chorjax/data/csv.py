@@ -38,9 +38,8 @@ def read_csv(
       non-numeric cell, or a NaN/Inf value.
   """
   path = Path(path)
-  side = sidecar_path(path)
-  if side.is_file():
-    skeleton, fps, up_axis, units = read_sidecar(side)
+  if has_sidecar(path):
+    skeleton, fps, up_axis, units = read_sidecar(sidecar_path(path))
   text = read_text(path, "CSV")
   want = 3 * skeleton.num_joints
   rows = []
@@ -64,6 +63,15 @@ def read_csv(
 def sidecar_path(csv_path) -> Path:
   path = Path(csv_path)
   return path.with_name(path.stem + ".skeleton.json")
+
+
+def has_sidecar(csv_path) -> bool:
+  """Whether a sidecar lies beside ``csv_path`` (none can where its name would be longer than the file
+  system allows: a CSV named with 250 characters)."""
+  try:
+    return sidecar_path(csv_path).is_file()
+  except OSError:
+    return False
 
 
 def written_paths(motion_or_positions, path) -> list[Path]:

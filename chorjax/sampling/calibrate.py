@@ -262,12 +262,13 @@ def calibrate(
     if not grid:
       raise UserError(f"{workdir}: an MSE head on {run.config.data.representation} features draws nothing to calibrate")
   fixed = {k: v[0] for k, v in grid.items() if k in RECORDED and len(v) == 1}
-  ranged = run.ranged(run.sampling(**fixed))  # the searched controls leave the range, pace and scale ceiling alone
+  # drawn with the run's [sample], never the calibration this replaces; the range, pace and ceiling left alone
+  ranged = run.ranged(run.sampling(False, **fixed))
 
   y_up = lambda pos: np.asarray(to_y_up(pos, f.up_axis))  # what the measures (the pose questions) expect
 
   def draw(settings):
-    sampling = run.sampling(**settings)
+    sampling = run.sampling(False, **settings)
     return y_up(run.family.dance(ranged.graphdef, ranged.params, ranged.features, motion, key, frames, sampling))
 
   positions = [y_up(m.positions) for m in reference]

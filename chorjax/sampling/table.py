@@ -143,6 +143,7 @@ class ControlFields:
       "labels (data.labels) holds each dancer to the pace of its own labels' training takes."
     ),
     minimum=0.0,
+    below=100.0,  # past it the governor is on or off: the multiplier at its bounds for any difference in pace
     resumable=True,
   )
   scale_cap: float = control(
