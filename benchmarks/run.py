@@ -2,7 +2,8 @@
 
     python -m benchmarks.run            # full: every cell x head, more repetitions
     python -m benchmarks.run --quick    # < 5 minutes on 2 cores; writes benchmarks/results.json
-                                        # and results_shipped.json (benchmarks.shipped: the opening table)
+                                        # and results_shipped.json (benchmarks.shipped), then BENCHMARKS.md's
+                                        # opening table from them (benchmarks.opening)
 
 Both frameworks run in this one process; repetitions alternate (chorjax, torch, chorjax, ...) and
 medians are reported, so background load hits both sides alike. Writes ``benchmarks/results.json``
@@ -317,6 +318,9 @@ def main(argv=None):
 
   shipped.OUT.write_text(json.dumps(shipped.measure(9 if args.quick else 15), indent=2))
   print(f"wrote {shipped.OUT}")
+  from benchmarks import opening
+
+  opening.write()
 
 
 if __name__ == "__main__":

@@ -153,3 +153,15 @@ def test_the_readmes_install_brings_every_extra_its_own_commands_need():
   for extra, marks in needs.items():
     if any(m in text for m in marks):
       assert extra in extras, (extra, [m for m in marks if m in text])
+
+
+def test_the_benchmarks_opening_table_is_the_one_its_results_files_make(monkeypatch):
+  """BENCHMARKS.md opens with one table, one figure per cell with its machine, that ``benchmarks.opening``
+  writes from the results files: edited by hand or left behind by a new measurement, it fails here."""
+  monkeypatch.syspath_prepend(str(ROOT))
+  from benchmarks import opening
+
+  text = (ROOT / "BENCHMARKS.md").read_text()
+  assert text.count(opening.START) == 1 and opening.table() in text
+  table = opening.table().splitlines()[3:-1]
+  assert len(table) >= 8 and all(row.count("|") == 6 and row.split("|")[-2].strip() for row in table)
