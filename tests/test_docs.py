@@ -2,12 +2,16 @@
 README and of the guides in docs/ runs (on a tiny model standing in for runs/quickstart, with toy training
 sizes and short renders)."""
 
+import json
+import os
 import re
 import shlex
 import shutil
+import subprocess
 from pathlib import Path
 
-from helpers import GAN_NETWORKS, TINY
+import pytest
+from helpers import BLENDER_PYTHON, GAN_NETWORKS, TINY
 
 from chorjax import cli
 from chorjax.data.dataset import bundled_path
@@ -50,13 +54,7 @@ def run_documented(lines: list[str], where: Path) -> None:
   (where / "chorjax").symlink_to(ROOT / "chorjax")
   shutil.copy(bundled_path("cmu94") / "94_03_skeleton_3d.csv", where / "my_phrase.csv")
   train_and_evaluate(tiny_config("log.tensorboard=false", "train.eval_every=1"), where / "runs" / "quickstart")
-  for line in lines:
-    args = tiny(shlex.split(line)[1:])
-    try:
-      code = cli.main(args)
-    except SystemExit as e:  # argparse
-      code = e.code
-    assert code == 0, f"documented command failed: {line}"
+  _run_in_order(lines)
 
 
 def test_the_readme_has_examples_and_no_bare_chorjax_command():
@@ -67,11 +65,60 @@ def test_the_readme_has_examples_and_no_bare_chorjax_command():
       assert not line.startswith("chorjax "), f"README runs a bare chorjax (not on PATH after the quick start): {line}"
 
 
-def test_every_readme_command_runs(tmp_path, monkeypatch):
-  """... and writes under runs/ (ignored by git): nothing lands beside the user's own files."""
-  monkeypatch.chdir(tmp_path)
-  run_documented(readme_commands(), tmp_path)
-  assert {p.name for p in tmp_path.iterdir()} == {"configs", "chorjax", "my_phrase.csv", "runs"}
+# What a new user reads in their first hour, in order: the README (its quick start, then its commands), the
+# guide for their own dancer, the export guide (ONNX, glTF, the Blender add-on).
+FIRST_HOUR = ("README.md", "docs/guides/own-data.md", "docs/guides/export.md")
+
+
+def quick_start_train() -> str:
+  """The chorjax command that ends the README's one install command (``... && .venv/bin/chorjax train ...``)."""
+  section = (ROOT / "README.md").read_text().split("## Quick start", 1)[1]
+  install = re.search(r"```bash\n(.*?)\n```", section, flags=re.S).group(1).strip()
+  assert install.startswith("python3 -m venv .venv && .venv/bin/pip install -e '.["), install
+  return install.rsplit("&& ", 1)[1]
+
+
+def test_the_first_hour_runs_in_order_in_one_fresh_clone(tmp_path, monkeypatch):
+  """The README's quick start and commands, then the own-dancer guide's steps, then the export guide's (ONNX,
+  glTF, the add-on), in that order in one copy of the repository's files, as a new user runs them (toy
+  sizes); the add-on it wrote installs in headless Blender and imports the dance it drew. The README's
+  commands write under runs/ (ignored by git): nothing lands beside the user's own files."""
+  clone = tmp_path / "clone"
+  tracked = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, text=True, check=True).stdout
+  for name in filter(None, tracked.split("\0")):
+    if (ROOT / name).is_file():
+      (clone / name).parent.mkdir(parents=True, exist_ok=True)
+      shutil.copy2(ROOT / name, clone / name)
+  monkeypatch.chdir(clone)
+  shutil.copy(bundled_path("cmu94") / "94_03_skeleton_3d.csv", clone / "my_phrase.csv")  # the README's phrase
+  before = {p.name for p in clone.iterdir()}
+  readme = [quick_start_train(), *commands(ROOT / "README.md")]
+  _run_in_order(readme)
+  assert {p.name for p in clone.iterdir()} == before | {"runs"}
+  _run_in_order([line for page in FIRST_HOUR[1:] for line in commands(ROOT / page)])
+  assert (clone / "runs" / "mine" / "samples" / "player.html").is_file() and (clone / "dance.glb").is_file()
+  # the export guide's Blender step: its sample as .npz, imported with the add-on the guide wrote
+  _run_in_order([".venv/bin/chorjax sample runs/quickstart -o dance.npz --frames 60"])
+  if not BLENDER_PYTHON.exists():
+    pytest.fail(f"Blender's Python is missing: .ci/run installs the bpy package into {BLENDER_PYTHON.parents[1]}")
+  files = [str(clone / "chorjax_blender.zip"), str(clone / "dance.npz")]  # as Blender's file dialog gives them
+  script = [str(BLENDER_PYTHON), str(ROOT / "tests" / "blender_addon.py"), *files, "-", "0"]
+  env = {**os.environ, "BLENDER_USER_SCRIPTS": str(tmp_path / "blender")}
+  done = subprocess.run(script, capture_output=True, text=True, timeout=300, env=env, cwd=clone)
+  assert done.returncode == 0, done.stderr[-3000:]
+  (line,) = [line for line in done.stdout.splitlines() if line.startswith("ADDON")]
+  report = json.loads(line.removeprefix("ADDON"))
+  assert report["import"] == ["FINISHED"] and len(report["imported"]) == 60
+
+
+def _run_in_order(lines: list[str]) -> None:
+  for line in lines:
+    args = tiny(shlex.split(line)[1:])
+    try:
+      code = cli.main(args)
+    except SystemExit as e:  # argparse
+      code = e.code
+    assert code == 0, f"documented command failed: {line}"
 
 
 def test_the_guides_sweep_file_is_a_valid_sweep(tmp_path):

@@ -3,7 +3,7 @@ in page order, on toy sizes (a file of its own so that its worker runs beside th
 
 import re
 
-from test_docs import GUIDES, commands, run_documented
+from test_docs import FIRST_HOUR, GUIDES, ROOT, commands, run_documented
 
 
 def test_the_guides_have_examples_and_no_bare_chorjax_command():
@@ -16,5 +16,8 @@ def test_the_guides_have_examples_and_no_bare_chorjax_command():
 
 
 def test_every_guide_command_runs(tmp_path, monkeypatch):
+  """The guides the first hour does not run (test_docs runs own-data and export after the README, in one clone)."""
+  rest = [page for page in GUIDES if str(page.relative_to(ROOT)) not in FIRST_HOUR]
+  assert len(rest) == len(GUIDES) - 2
   monkeypatch.chdir(tmp_path)
-  run_documented([line for page in GUIDES for line in commands(page)], tmp_path)
+  run_documented([line for page in rest for line in commands(page)], tmp_path)
