@@ -82,6 +82,17 @@ class DataConfig:
     "held out instead: every take whose name the pattern finds (e.g. a trial of each label: '_001$')",
     more="A regular expression searched in take names, as `data.labels`'s; `data.val_takes` then stays `auto`.",
   )
+  val_tail: float = _field(
+    0.0,
+    "also hold out the last share of every training take (e.g. 0.2): frames to validate on from a single take",
+    more=(
+      "The kept checkpoint (`train.keep = \"best\"`) is then chosen on frames the model never trained on, cut from "
+      "the takes themselves; `chorjax eval --data held-out` judges on those frames too. Each tail is at least "
+      "one window long."
+    ),
+    minimum=0.0,
+    below=0.5,
+  )
   cache: str = _field(
     "auto",
     "where read and encoded takes are kept, so a library is read once: auto (~/.cache/chorjax), off, or a folder",

@@ -304,11 +304,12 @@ HELD_OUT = "held-out"  # --data held-out: the takes of the run's dataset it did 
 def read_reference(run: Run, data: Sequence[str] | None) -> tuple[list, list]:
   """``(the takes in data, the run's training takes)``, read exactly as training read its takes; ``data`` of
   ``["held-out"]``: the takes of the run's own dataset that it did not train on; None: the training takes."""
-  from chorjax.data.dataset import conform, read_takes
+  from chorjax.data.dataset import conform, read_takes, with_tails
 
   data_cfg = run.config.data
-  every = conform(read_takes([data_cfg.dataset], data_cfg), data_cfg)
   trained = set(run.train_takes)
+  heads, tails = with_tails(conform(read_takes([data_cfg.dataset], data_cfg), data_cfg), list(trained), data_cfg)
+  every = [*heads, *tails]  # with data.val_tail: the training takes' tails are held out as takes of their own
   train = [m for m in every if m.name in trained] or every
   if data is None:
     return train, train

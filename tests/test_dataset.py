@@ -2,10 +2,11 @@
 
 import numpy as np
 import pytest
+from helpers import tiny_config
 
 from chorjax.config import load_config
 from chorjax.data import transforms
-from chorjax.data.dataset import WindowSampler, eval_windows, load_dataset
+from chorjax.data.dataset import WindowSampler, bundled_path, eval_windows, load_dataset, read_takes
 from chorjax.errors import UserError
 
 
@@ -159,3 +160,32 @@ def test_the_takes_are_read_at_full_float32_precision_on_every_backend(monkeypat
   load_dataset(load_config(None, ["data.seq_length=20"]).data)
   assert seen and set(seen) == {"highest"}
   assert jax.config.jax_default_matmul_precision in (None, "default")  # restored afterwards
+
+
+def test_one_take_validates_on_its_own_last_frames(tmp_path):
+  """``data.val_tail``: a single take (nothing to hold out whole) keeps its last share for validation, a take
+  of its own conditioned as the take; the run's held-out takes are those frames (``chorjax eval --data
+  held-out``); a take too short for a window on each side is one line."""
+  from chorjax.data.dataset import TAIL, dataset_notes
+  from chorjax.run import load_run, read_reference
+  from chorjax.training import train_and_evaluate
+
+  take = bundled_path("cmu94") / "94_03_skeleton_3d.csv"
+  cfg = load_config(None, [f"data.dataset={take}", "data.seq_length=20", "data.val_tail=0.25"])
+  ds = load_dataset(cfg.data)
+  (whole,) = read_takes([str(take)], cfg.data)
+  assert ds.train_names == ("94_03_skeleton_3d",) and ds.val_names == ("94_03_skeleton_3d" + TAIL,)
+  assert not [n for n in dataset_notes(ds) if "no validation split" in n]
+  (_, head), (_, tail) = ds.train[0], ds.val[0]  # (condition, features): the tail is conditioned as its take
+  assert ds.val[0][0] == ds.train[0][0] == 0 and len(head) + len(tail) == whole.num_frames
+  assert len(tail) == round(0.25 * whole.num_frames)
+  run_dir = tmp_path / "run"
+  train_and_evaluate(tiny_config(*[f"data.dataset={take}", "data.val_tail=0.25", "log.tensorboard=false"]), run_dir)
+  run = load_run(run_dir)
+  assert run.val_loss is not None and run.val_takes == ("94_03_skeleton_3d" + TAIL,)
+  held_out, train = read_reference(run, ["held-out"])
+  np.testing.assert_array_equal(held_out[0].positions, whole.positions[-len(tail) :])
+  assert train[0].num_frames == len(head)
+  short = load_config(None, [f"data.dataset={take}", "data.seq_length=500", "data.val_tail=0.1"])
+  with pytest.raises(UserError, match=r"94_03_skeleton_3d.csv: \d+ frames; data.val_tail = 0.1 needs at least 1002"):
+    load_dataset(short.data)

@@ -321,10 +321,13 @@ def _load_dataset(data_cfg) -> Dataset:
   names = [m.name for m in motions]
   labels = read_labels(data_cfg.labels, names) if data_cfg.labels else None
   id_map = {n: i for i, n in enumerate(labels.names if labels else names)}
-  condition = lambda n: take_condition(labels, id_map, n)
   val_names = _val_names(names, data_cfg.val_takes, data_cfg.val_pattern)
   train_names = [n for n in names if n not in val_names]
-  by_name = dict(zip(names, motions))
+  motions, tails = with_tails(motions, train_names, data_cfg)
+  by_name = {m.name: m for m in [*motions, *tails]}
+  val_names = [*val_names, *(t.name for t in tails)]
+  names = [*names, *(t.name for t in tails)]
+  condition = lambda n: take_condition(labels, id_map, n.removesuffix(TAIL))
 
   skeleton = motions[0].skeleton
   proto = Features(
@@ -335,7 +338,7 @@ def _load_dataset(data_cfg) -> Dataset:
     np.zeros(feature_dim(skeleton, data_cfg.representation), np.float32),
     np.ones(feature_dim(skeleton, data_cfg.representation), np.float32),
   )
-  _encode_missing(motions, proto, data_cfg, cache)
+  _encode_missing(list(by_name.values()), proto, data_cfg, cache)
   encoded = {n: _encoded(by_name[n], proto, data_cfg.augment, cache) for n in names}
   # the training takes' mean bone lengths: `directions` builds every frame with them, rigid decoding too
   canon = [encoded[n]["canon"] for n in train_names]
@@ -380,6 +383,32 @@ def _normalized(raw: list, features: Features) -> tuple:
     out.append((i, z.astype(np.float32, copy=False)))
     raw[k] = None
   return tuple(out)
+
+
+TAIL = " (tail)"  # a take's last frames held out (data.val_tail): the take's name and this
+
+
+def with_tails(motions: Sequence, train_names: Sequence[str], data_cfg) -> tuple[list, list]:
+  """``(motions, tails)``: with ``data.val_tail``, each training take's last share of frames (at least one
+  window: ``data.seq_length + 1``) cut off as a take of its own named ``NAME (tail)``, the take keeping the
+  rest; without it, the motions as they are and no tails. A take too short to give both a window is refused."""
+  share, need = data_cfg.val_tail, data_cfg.seq_length + 1
+  if not share:
+    return list(motions), []
+  heads, tails, trained = [], [], set(train_names)
+  for m in motions:
+    if m.name not in trained:
+      heads.append(m)
+      continue
+    cut = m.num_frames - max(round(m.num_frames * share), need)
+    if cut < need:
+      raise UserError(
+        f"{m.source or m.name}: {m.num_frames} frames; data.val_tail = {share:g} needs at least {2 * need} "
+        f"(a window to train on and one to validate on; data.seq_length + 1 = {need} each)"
+      )
+    heads.append(m.replace(positions=m.positions[:cut]))
+    tails.append(m.replace(positions=m.positions[cut:], name=m.name + TAIL))
+  return heads, tails
 
 
 def _usable(motions, data_cfg) -> tuple[list, list[str]]:
