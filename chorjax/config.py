@@ -20,7 +20,9 @@ from typing import Any
 
 from chorjax.errors import UserError, check_draw, check_memory, load_toml, read_text
 from chorjax.fields import config_field as _field
+from chorjax.registry import family_of
 from chorjax.registry import names as family_names
+from chorjax.registry import sections as family_sections
 from chorjax.sampling.table import ControlFields
 
 
@@ -86,7 +88,7 @@ class DataConfig:
     0.0,
     "also hold out the last share of every training take (e.g. 0.2): frames to validate on from a single take",
     more=(
-      "The kept checkpoint (`train.keep = \"best\"`) is then chosen on frames the model never trained on, cut from "
+      'The kept checkpoint (`train.keep = "best"`) is then chosen on frames the model never trained on, cut from '
       "the takes themselves; `chorjax eval --data held-out` judges on those frames too. Each tail is at least "
       "one window long."
     ),
@@ -211,121 +213,6 @@ class ModelConfig:
     """Whether the MDN lives in a fixed basis of principal axes, the frames' or their accelerations' (an MSE
     head has no basis)."""
     return self.head == "mdn" and self.mdn_basis != "features"
-
-  def __post_init__(self):
-    if self.lstm_kernel == "cudnn" and (self.family, self.cell) != ("rnn", "lstm"):
-      raise UserError(
-        f"key 'model.lstm_kernel': 'cudnn' runs the rnn family's plain LSTM only (model.family = 'rnn', "
-        f"model.cell = 'lstm'); here model.family is {self.family!r} and model.cell {self.cell!r}"
-      )
-    if self.condition_every_frame and self.family != "rnn":
-      raise UserError(f"key 'model.condition_every_frame': the rnn family's only; model.family is {self.family!r}")
-
-
-@dataclasses.dataclass(frozen=True)
-class GanConfig:
-  """The LSTM-GAN family (``model.family = "gan"``); the optimizer is ``[optim]``'s, with these learning rates."""
-
-  latent_size: int = _field(64, "size of the noise vector the generator turns into a sequence", minimum=1)
-  generator_dense: tuple = _field((128,), "the generator's dense ReLU layers between the noise and its LSTM")
-  frame_noise: int = _field(
-    0,
-    "channels of fresh noise fed to the generator's LSTM at every frame (0 = one repeated noise vector)",
-    more=("0 is the tutorial's generator; an LSTM driven by a constant input tends to settle into one still pose."),
-    minimum=0,
-  )
-  generator_layers: int = _field(2, "the generator's stacked recurrent layers", minimum=1)
-  generator_size: int = _field(512, "units per generator recurrent layer", minimum=1)
-  critic_layers: int = _field(2, "the critic's stacked recurrent layers", minimum=1)
-  critic_size: int = _field(512, "units per critic recurrent layer", minimum=1)
-  critic_dense: tuple = _field((512,), "the critic's dense ReLU layers after its last time step")
-  cell: str = _field("lstm", "recurrent cell of generator and critic", choices=("lstm", "lnlstm", "gru"))
-  loss: str = _field(
-    "bce",
-    "adversarial loss: 'bce' (binary cross-entropy) or 'wgan-gp' (Wasserstein critic with gradient penalty)",
-    more=("bce is the tutorial's loss with a non-saturating generator; wgan-gp is the stable alternative."),
-    choices=("bce", "wgan-gp"),
-  )
-  gp_weight: float = _field(10.0, "weight of the gradient penalty (wgan-gp)", minimum=0.0)
-  critic_steps: int = _field(1, "critic updates per generator update, each on its own real batch", minimum=1)
-  generator_lr: float = _field(1e-4, "generator learning rate (peak, under optim.schedule)", minimum=0.0)
-  critic_lr: float = _field(1e-4, "critic learning rate (peak, under optim.schedule)", minimum=0.0)
-  pose: str = _field(
-    "directions",
-    "what the generator writes: bone 'directions', joint 'rotations' (quaternions, forward kinematics) or 'features'",
-    more=(
-      "directions and rotations need data.representation = directions (bones keep the takes' mean lengths). "
-      "Rotations go through forward kinematics from the takes' mean rest directions; they are the "
-      "generator's own, not a file's channels."
-    ),
-    choices=("directions", "rotations", "features"),
-  )
-
-
-@dataclasses.dataclass(frozen=True)
-class InbetweenConfig:
-  """The in-betweening family (``model.family = "inbetween"``): a recurrent transition model (Harvey et al.
-  2020) that writes what lies between a context phrase and a target pose; see ``chorjax.inbetween``."""
-
-  system: str = _field(
-    "lstm",
-    "the transition model: 'lstm' (Harvey et al. 2020) or 'cvae' (Tang et al. 2022: a motion manifold and a sampler)",
-    more=(
-      "lstm writes each frame's deviation from linear interpolation, conditioned on the target pose and the "
-      "time to arrival; cvae trains a conditional VAE manifold with a mixture-of-experts decoder first, "
-      "then a recurrent sampler of its latents with the decoder frozen."
-    ),
-    choices=("lstm", "cvae"),
-  )
-  context: int = _field(10, "frames of the phrase the model sees before a transition", minimum=2)
-  min_frames: int = _field(5, "shortest transition trained on (frames between context and target)", minimum=1)
-  max_frames: int = _field(30, "longest transition trained on; longer ones are written beyond it", minimum=1)
-  encoder_sizes: tuple = _field(
-    (256, 256), "ELU layers of each of the three encoders (state, offset to target, target)"
-  )
-  decoder_sizes: tuple = _field((256,), "ELU layers of the decoder before its output (which starts at zero)")
-  target_noise: float = _field(
-    0.5,
-    "std of the noise on the target (lstm) or of the sampler's latents (cvae): seeds write different transitions",
-    more=(
-      "lstm: added once per transition to the target and offset encodings, fading over the last 5-30 frames "
-      "before arrival (Harvey et al.'s z_target); cvae: latents drawn as mu + target_noise x sigma x eps."
-    ),
-    minimum=0.0,
-  )
-  velocity_weight: float = _field(
-    1.0, "weight of the L1 loss on frame-to-frame steps beside the pose loss", minimum=0.0
-  )
-  latent_size: int = _field(32, "cvae: size of the manifold's latent z", minimum=1)
-  manifold_encoder_sizes: tuple = _field((256, 256), "cvae: ELU layers of the manifold's encoder")
-  experts: int = _field(6, "cvae: expert networks of the manifold's decoder", minimum=1)
-  expert_sizes: tuple = _field((256, 256, 256), "cvae: ELU layers of each expert (z and the root's step fed to each)")
-  gate_sizes: tuple = _field((256, 256), "cvae: ELU layers of the gating network (then a softmax over the experts)")
-  manifold_steps: int = _field(
-    2000, "cvae: steps of stage 1 (the manifold); the rest of train.num_steps train the sampler", minimum=1
-  )
-  manifold_frames: int = _field(8, "cvae: frames each stage-1 window rolls out", minimum=1)
-  sampling_ramp: int = _field(
-    1000,
-    "cvae: stage-1 steps over which scheduled sampling's p (the chance that the previous frame is the model's "
-    "own) rises linearly from 0 to 1",
-    minimum=1,
-  )
-  kl_weight: float = _field(
-    1e-5,
-    "cvae: weight of stage 1's KL term",
-    more=(
-      "Beside a reconstruction that is a mean L1 per coordinate in leg lengths (about 0.003-0.01); on "
-      "cmu94, 0.1 and 5e-4 collapsed the posterior, 1e-5 keeps it some 70 nats."
-    ),
-    minimum=0.0,
-  )
-  physics_start: int = _field(
-    1000,
-    "cvae: the stage-1 step from which the foot-skating and bone-length losses join",
-    more=("Their weight ramps from 0 to 1 over the rest of stage 1, while the learning rate is warmed again from 0."),
-    minimum=0,
-  )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -467,34 +354,9 @@ class ParallelConfig:
   process_id: int = _field(-1, "this process's index (-1 = detect from the environment)", minimum=-1, resumable=True)
 
 
-@dataclasses.dataclass(frozen=True)
-class Config:
-  data: DataConfig = dataclasses.field(default_factory=DataConfig)
-  model: ModelConfig = dataclasses.field(default_factory=ModelConfig)
-  gan: GanConfig = dataclasses.field(default_factory=GanConfig)
-  inbetween: InbetweenConfig = dataclasses.field(default_factory=InbetweenConfig)
-  optim: OptimConfig = dataclasses.field(default_factory=OptimConfig)
-  train: TrainConfig = dataclasses.field(default_factory=TrainConfig)
-  sample: SampleConfig = dataclasses.field(default_factory=SampleConfig)
-  log: LogConfig = dataclasses.field(default_factory=LogConfig)
-  parallel: ParallelConfig = dataclasses.field(default_factory=ParallelConfig)
-  name: str = "default"
-
-  def to_dict(self) -> dict:
-    d = dataclasses.asdict(self)
-    return json.loads(json.dumps(d))  # tuples -> lists, a plain JSON tree
-
-  def model_sections(self) -> tuple:
-    """The sections that shape a model and its parameters (a checkpoint restored under others is checked
-    leaf by leaf)."""
-    return (self.model, self.gan, self.inbetween)
-
-
-_SECTION_CLASSES = {
+_BASE_SECTIONS = {
   "data": DataConfig,
   "model": ModelConfig,
-  "gan": GanConfig,
-  "inbetween": InbetweenConfig,
   "optim": OptimConfig,
   "train": TrainConfig,
   "sample": SampleConfig,
@@ -503,11 +365,58 @@ _SECTION_CLASSES = {
 }
 
 
+def section_classes() -> dict[str, type]:
+  """Every section's dataclass in schema order: the model families' own sections (``[gan]``, ...: each
+  family's ``section``) right after ``[model]``."""
+  base = list(_BASE_SECTIONS.items())
+  return dict([*base[:2], *family_sections().items(), *base[2:]])
+
+
+@dataclasses.dataclass(frozen=True)
+class Config:
+  """A run's configuration: a section per attribute (``cfg.train.batch_size``); a model family's own section
+  (``cfg.gan``) is read the same way, from ``families`` (each family's defaults where not given)."""
+
+  data: DataConfig = dataclasses.field(default_factory=DataConfig)
+  model: ModelConfig = dataclasses.field(default_factory=ModelConfig)
+  optim: OptimConfig = dataclasses.field(default_factory=OptimConfig)
+  train: TrainConfig = dataclasses.field(default_factory=TrainConfig)
+  sample: SampleConfig = dataclasses.field(default_factory=SampleConfig)
+  log: LogConfig = dataclasses.field(default_factory=LogConfig)
+  parallel: ParallelConfig = dataclasses.field(default_factory=ParallelConfig)
+  name: str = "default"
+  families: tuple = ()  # ((section, its dataclass instance), ...) of the model families' sections
+
+  def __getattr__(self, name: str) -> Any:  # only for names that are no field: a family's section
+    given = dict(self.__dict__.get("families", ()))
+    if name in given:
+      return given[name]
+    cls = None if name.startswith("__") else family_sections().get(name)
+    if cls is None:
+      raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+    return cls()
+
+  def to_dict(self) -> dict:
+    d = {s: dataclasses.asdict(getattr(self, s)) for s in section_classes()} | {"name": self.name}
+    return json.loads(json.dumps(d))  # tuples -> lists, a plain JSON tree
+
+  def model_sections(self) -> tuple:
+    """The sections that shape a model and its parameters (a checkpoint restored under others is checked
+    leaf by leaf): ``[model]`` and the families' own."""
+    return (self.model, *(getattr(self, s) for s in family_sections()))
+
+
+def _config(sections: dict[str, dict], name: str) -> Config:
+  """A Config of checked ``{section: {key: value}}`` (what a file or a saved dict gave)."""
+  families = tuple((s, cls(**sections[s])) for s, cls in family_sections().items())
+  return Config(**{s: cls(**sections[s]) for s, cls in _BASE_SECTIONS.items()}, name=name, families=families)
+
+
 def key_docs(prefix: str = "", registered: bool = True) -> list[dict]:
   """Every config key under ``prefix`` (a section, ``sample``, or a key, ``sample.pace``), in schema order:
   ``{key, default, help, more, choices, minimum, below}``. A prefix that names nothing is a UserError."""
   rows = []
-  for section, cls in _SECTION_CLASSES.items():
+  for section, cls in section_classes().items():
     defaults = cls()
     for f in dataclasses.fields(cls):
       key = f"{section}.{f.name}"
@@ -525,7 +434,7 @@ def key_docs(prefix: str = "", registered: bool = True) -> list[dict]:
           }
         )
   if not rows:
-    raise UserError(f"{prefix!r}: no such config key or section" + suggest(prefix, [*_SECTION_CLASSES, *valid_keys()]))
+    raise UserError(f"{prefix!r}: no such config key or section" + suggest(prefix, [*section_classes(), *valid_keys()]))
   return rows
 
 
@@ -561,13 +470,13 @@ def key_help(key: str | dict) -> str:
 
 
 def valid_keys() -> list[str]:
-  return [f"{s}.{f.name}" for s, cls in _SECTION_CLASSES.items() for f in dataclasses.fields(cls)]
+  return [f"{s}.{f.name}" for s, cls in section_classes().items() for f in dataclasses.fields(cls)]
 
 
 def resumable_keys() -> list[str]:
   """Dotted keys that may change when a run is continued without --force (a field flag in the schema)."""
   return [
-    f"{s}.{f.name}" for s, cls in _SECTION_CLASSES.items() for f in dataclasses.fields(cls) if f.metadata["resumable"]
+    f"{s}.{f.name}" for s, cls in section_classes().items() for f in dataclasses.fields(cls) if f.metadata["resumable"]
   ]
 
 
@@ -592,7 +501,7 @@ def _short(value: Any) -> str:
 
 def _check_value(where: str, key: str, field: dataclasses.Field, value: Any):
   """Returns ``value`` converted to the field's type, or raises a UserError naming ``key``."""
-  hint = typing.get_type_hints(_SECTION_CLASSES[key.split(".")[0]])[field.name]
+  hint = typing.get_type_hints(section_classes()[key.split(".")[0]])[field.name]
   meta = field.metadata
   if hint is bool:
     ok = isinstance(value, bool)
@@ -648,13 +557,13 @@ def _apply(sections: dict[str, dict], tree: dict, where_of) -> None:
   for section, body in tree.items():
     if section == "name":
       continue
-    if section not in _SECTION_CLASSES:
+    if section not in section_classes():
       raise UserError(
-        f"{where_of(section, None)}: unknown section {section!r}" + suggest(section, list(_SECTION_CLASSES))
+        f"{where_of(section, None)}: unknown section {section!r}" + suggest(section, list(section_classes()))
       )
     if not isinstance(body, dict):
       raise UserError(f"{where_of(section, None)}: {section!r} must be a table ([{section}])")
-    fields = {f.name: f for f in dataclasses.fields(_SECTION_CLASSES[section])}
+    fields = {f.name: f for f in dataclasses.fields(section_classes()[section])}
     for key, value in body.items():
       dotted = f"{section}.{key}"
       if key not in fields:
@@ -721,7 +630,7 @@ def load_config(path: str | Path | Config | dict | None = None, overrides: Seque
     UserError: for a missing or malformed file, an unknown section or key, a wrong type, or a
       value out of range; the message names the file (and line) or the override.
   """
-  sections: dict[str, dict] = {s: {} for s in _SECTION_CLASSES}
+  sections: dict[str, dict] = {s: {} for s in section_classes()}
   name = "default"
   if isinstance(path, Config):  # chorjax.train(config) from Python: the same overrides, the same checks
     _apply(sections, {k: v for k, v in path.to_dict().items() if k != "name"}, lambda s, k: "the given config")
@@ -742,7 +651,7 @@ def load_config(path: str | Path | Config | dict | None = None, overrides: Seque
       raise UserError(f"override {item[:80]!r}: expected SECTION.KEY=VALUE" + suggest(key, valid_keys()))
     section, sub = key.split(".", 1)
     _apply(sections, {section: {sub: value}}, lambda s, k, item=item: f"override {item[:80]!r}")
-  config = Config(**{s: cls(**sections[s]) for s, cls in _SECTION_CLASSES.items()}, name=plain_name(name, "name"))
+  config = _config(sections, plain_name(name, "name"))
   check_combinations(config)
   check_training_size(config)
   return config
@@ -753,13 +662,10 @@ def check_combinations(config: Config) -> None:
   runs already saved with them still load: their sampling says so when asked)."""
   if not config.data.cache.strip():  # an empty path is the working directory: entries among the user's files
     raise UserError("key 'data.cache': empty; give auto, off, or a folder")
-  parts, size, family = config.train.batch_parts, config.train.batch_size, config.model.family
+  parts, size = config.train.batch_parts, config.train.batch_size
   if parts > 1 and size % parts:
     raise UserError(f"key 'train.batch_parts': {parts} does not divide train.batch_size = {size}")
-  if parts > 1 and family != "rnn":
-    raise UserError(
-      f"key 'train.batch_parts': only the rnn family computes its batch in shares (model.family = {family!r})"
-    )
+  family_of(config).check_keys(config)  # keys of another model family's
   if parts > 1 and config.parallel.data_parallel:
     raise UserError(
       "key 'train.batch_parts': not with parallel.data_parallel (the batch is shared over the devices already)"
@@ -813,16 +719,16 @@ def _line_of_section(text: str, section: str) -> int | None:
 
 def config_from_dict(d: dict) -> Config:
   """Rebuilds a Config saved with ``to_dict`` (checked like a file)."""
-  sections: dict[str, dict] = {s: {} for s in _SECTION_CLASSES}
+  sections: dict[str, dict] = {s: {} for s in section_classes()}
   _apply(sections, {k: v for k, v in d.items() if k != "name"}, lambda s, k: "saved config")
-  return Config(**{s: cls(**sections[s]) for s, cls in _SECTION_CLASSES.items()}, name=d.get("name", "default"))
+  return _config(sections, d.get("name", "default"))
 
 
 def config_diff(a: Config, b: Config, ignore: Sequence[str] = ()) -> list[str]:
   """Dotted keys whose values differ between two configs."""
   da, db = a.to_dict(), b.to_dict()
   out = []
-  for s in _SECTION_CLASSES:
+  for s in section_classes():
     for k in da[s]:
       if da[s][k] != db[s][k] and f"{s}.{k}" not in ignore:
         out.append(f"{s}.{k}: {da[s][k]!r} -> {db[s][k]!r}")

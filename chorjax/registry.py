@@ -37,6 +37,12 @@ def names(registered: bool = True) -> tuple[str, ...]:
   return tuple(dict.fromkeys((*BUILTIN, *(_REGISTERED if registered else ()))))
 
 
+def sections(registered: bool = True) -> dict[str, type]:
+  """The families' own config sections, ``{section: its dataclass}`` (each ``Family.section``), in family order."""
+  found = (get(name).section for name in names(registered))
+  return dict(section for section in found if section)
+
+
 def get(name: str) -> Family:
   """The family called ``name`` (KeyError for none)."""
   if name not in _REGISTERED and name in BUILTIN:

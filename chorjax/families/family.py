@@ -25,6 +25,9 @@ class Family:
     data_parallel: it trains data-parallel over processes (``[parallel]``).
     calibrated: its draw has the controls ``chorjax calibrate`` chooses (the run's calibration.json applies).
     conditioned: a dance is conditioned on a take or labels (``--motion``, ``--mix``); else drawn from noise alone.
+    section: the family's own config section (``[gan]``), a frozen dataclass of ``fields.config_field``s keyed
+      by its name; None for none. The schema asks the registry for them (``registry.sections``).
+    own_keys: the keys other families refuse, which this one reads (``model.lstm_kernel = "cudnn"``, ...).
   """
 
   name: str = ""
@@ -33,6 +36,8 @@ class Family:
   data_parallel: bool = False
   calibrated: bool = False
   conditioned: bool = True
+  section: tuple[str, type] | None = None
+  own_keys: frozenset[str] = frozenset()
 
   def refusal(self, command: str) -> str | None:
     """Why this family's runs cannot serve ``command`` (``sample``, ``eval``, ``calibrate``, ``live``,
@@ -49,6 +54,24 @@ class Family:
 
   def check(self, cfg) -> None:
     """Raises UserError, naming the key, for a config this family cannot train (before anything is written)."""
+
+  def check_keys(self, cfg) -> None:
+    """Raises UserError, naming the key, where ``cfg`` sets a key another family owns (``own_keys``) away from
+    its default (``load_config`` asks)."""
+    from chorjax.errors import UserError
+
+    m, family = cfg.model, cfg.model.family
+    if m.lstm_kernel == "cudnn" and ("model.lstm_kernel" not in self.own_keys or m.cell != "lstm"):
+      raise UserError(
+        f"key 'model.lstm_kernel': 'cudnn' runs the rnn family's plain LSTM only (model.family = 'rnn', "
+        f"model.cell = 'lstm'); here model.family is {family!r} and model.cell {m.cell!r}"
+      )
+    if m.condition_every_frame and "model.condition_every_frame" not in self.own_keys:
+      raise UserError(f"key 'model.condition_every_frame': the rnn family's only; model.family is {family!r}")
+    if cfg.train.batch_parts > 1 and "train.batch_parts" not in self.own_keys:
+      raise UserError(
+        f"key 'train.batch_parts': only the rnn family computes its batch in shares (model.family = {family!r})"
+      )
 
   def build_model(self, cfg, features, num_motions: int):
     """The family's model for ``features`` (an ``nnx.Module``), parameters drawn from ``train.seed``."""

@@ -11,6 +11,7 @@ import numpy as np
 from flax import nnx
 
 from chorjax.families.family import Family
+from chorjax.families.gan.gan_config import GanConfig
 from chorjax.registry import register
 
 
@@ -18,6 +19,7 @@ class Gan(Family):
   name = "gan"
   likelihood = False
   conditioned = False
+  section = ("gan", GanConfig)
 
   def refusal(self, command: str) -> str | None:
     if command == "calibrate":

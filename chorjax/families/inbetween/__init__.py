@@ -10,6 +10,7 @@ a context phrase and a target pose (``chorjax inbetween``), no dance of their ow
 from __future__ import annotations
 
 from chorjax.families.family import Family
+from chorjax.families.inbetween.inbetween_config import InbetweenConfig
 from chorjax.registry import register
 
 _NO_DANCE = (
@@ -21,6 +22,7 @@ _NO_DANCE = (
 class Inbetween(Family):
   name = "inbetween"
   figures = False
+  section = ("inbetween", InbetweenConfig)
 
   def refusal(self, command: str) -> str | None:
     return None if command == "inbetween" else _NO_DANCE.format(command=command)

@@ -32,6 +32,7 @@ class Recurrent(Family):
   name = "rnn"
   data_parallel = True
   calibrated = True
+  own_keys = frozenset({"model.lstm_kernel", "model.condition_every_frame", "train.batch_parts"})
 
   def check(self, cfg) -> None:
     from chorjax.errors import UserError
