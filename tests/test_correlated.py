@@ -134,9 +134,9 @@ def test_a_correlated_run_samples_live_streams_and_primes(tmp_path, prime):
 
 
 def test_the_carried_recipe_draws_with_three_controls_and_calibrates_two():
-  """``configs/carried.toml``: the quickstart's model carrying its noise; its draw is the plain draw but for the
-  temperatures and the clip to the training range (decoding aside), and calibration chooses the scale
-  temperature and foot lock."""
+  """``configs/carried.toml``: the quickstart's model carrying its noise; its draw is the plain draw but for
+  three controls, the scale temperature, the pace governor and the clip to the training range (decoding
+  aside), and calibration chooses the scale temperature and foot lock."""
   from chorjax.config import load_config
   from chorjax.sampling.calibrate import default_grid
   from chorjax.sampling.controls import PLAIN, Controls
@@ -144,6 +144,6 @@ def test_the_carried_recipe_draws_with_three_controls_and_calibrates_two():
   cfg = load_config("configs/carried.toml")
   assert cfg.model.memory == 2 and cfg.model.mdn_basis == "acceleration" and cfg.train.calibrate
   drawn = Controls.resolve(cfg.sample).to_dict()
-  used = {k for k in PLAIN if drawn[k] != PLAIN[k]} | {"pi_temperature", "sigma_temperature"}
-  assert used == {"pi_temperature", "sigma_temperature", "clamp"}
+  used = {k for k in PLAIN if drawn[k] != PLAIN[k]} | {"sigma_temperature"}  # calibrated: used at any value
+  assert used == {"sigma_temperature", "pace", "clamp"}  # the mixture weights at full temperature
   assert set(default_grid(cfg)) - {"noise_order", "pace"} == {"sigma_temperature", "foot_lock"}

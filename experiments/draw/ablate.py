@@ -66,23 +66,31 @@ COLUMNS = ("jitter", "speed", "root_travel", "movement_min", "movement_max", "fi
 
 
 CALIBRATED_VARIANT = "calibrated temperature and feet, clamped"  # the draw of three controls, the run's own choice
+# ... the mixture weights at full temperature, and the governor holding the pace (gain 2) while it is chosen and
+# drawn: the three controls are the scale temperature, the clip and the governor
+PACED_VARIANT = "calibrated temperature and feet, clamped, paced"
+CALIBRATED_VARIANTS = {CALIBRATED_VARIANT: "plain, clamped", PACED_VARIANT: "plain, clamped, paced"}
 
 
-def small_calibration(run_dir: Path) -> dict:
+def small_calibration(run_dir: Path, pace: float = 0.0) -> dict:
   """What ``chorjax calibrate`` chooses for a run that carries its noise (``calibrate.CARRIED_GRID``: the scale
   temperature and foot lock, on its training takes), the rest of the draw plain and clamped: run here, as the
-  runs measured were trained with the quickstart's other ``[sample]`` keys."""
+  runs measured were trained with the quickstart's other ``[sample]`` keys; ``pace``: the governor's gain."""
   import jax
 
-  from chorjax.calibrate import CALIBRATION_DANCERS, CARRIED_BEYOND, CARRIED_GRID, search
-  from chorjax.controls import PLAIN
   from chorjax.data.transforms import to_y_up
   from chorjax.run import load_run, read_reference
+  from chorjax.sampling.calibrate import CALIBRATION_DANCERS, CARRIED_BEYOND, CARRIED_GRID, search
+  from chorjax.sampling.controls import PLAIN
 
   run = load_run(run_dir)
   reference, train = read_reference(run, None)
   up = run.features.up_axis
-  motion, key, base = run.dancer_conditions(train, CALIBRATION_DANCERS), jax.random.key(0), {**PLAIN, "clamp": True}
+  motion, key, base = (
+    run.dancer_conditions(train, CALIBRATION_DANCERS),
+    jax.random.key(0),
+    {**PLAIN, "clamp": True, "pace": pace},
+  )
   ranged = run.ranged(run.sampling(**base))
 
   def draw(settings):
@@ -96,9 +104,9 @@ def small_calibration(run_dir: Path) -> dict:
   return best
 
 
-def calibrated_flags(best: dict) -> list[str]:
-  """The plain, clamped draw's flags with the chosen scale temperature and foot lock."""
-  flags = list(VARIANTS["plain, clamped"])
+def calibrated_flags(best: dict, variant: str) -> list[str]:
+  """The plain, clamped (and paced) draw's flags with the chosen scale temperature and foot lock."""
+  flags = list(VARIANTS[CALIBRATED_VARIANTS[variant]])
   flags[flags.index("--sigma-temperature") + 1] = str(best["sigma_temperature"])
   return [*flags, "--foot-lock" if best["foot_lock"] else "--no-foot-lock"]
 
@@ -113,8 +121,8 @@ def figures(metrics: dict) -> dict:
 
 
 def measure(run: Path, variant: str, frames: int, seeds: list[int]) -> dict:
-  chosen = small_calibration(run) if variant == CALIBRATED_VARIANT else None
-  flags = calibrated_flags(chosen) if chosen else VARIANTS[variant]
+  chosen = small_calibration(run, 2.0 if variant == PACED_VARIANT else 0.0) if variant in CALIBRATED_VARIANTS else None
+  flags = calibrated_flags(chosen, variant) if chosen else VARIANTS[variant]
   with tempfile.TemporaryDirectory() as tmp:
     out = Path(tmp) / "metrics.json"
     cmd = [
@@ -195,7 +203,7 @@ def table(results: dict) -> str:
 def main() -> None:
   p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
   p.add_argument("runs", nargs="*", type=Path)
-  p.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=[*VARIANTS, CALIBRATED_VARIANT])
+  p.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=[*VARIANTS, *CALIBRATED_VARIANTS])
   p.add_argument("--frames", type=int, default=10_000)
   p.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
   p.add_argument("--name", help="the name a run is recorded under (default: its folder's parent/name)")
