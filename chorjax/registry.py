@@ -19,6 +19,7 @@ BUILTIN = {
   "rnn": "chorjax.families.recurrent",
   "gan": "chorjax.families.gan",
   "inbetween": "chorjax.families.inbetween",
+  "patch": "chorjax.families.patch",
 }
 
 _REGISTERED: dict[str, Family] = {}

@@ -217,7 +217,7 @@ def test_a_toy_family_streams_through_the_api_and_the_live_command(toy_run):
 
 
 def test_the_registry_names_every_family_and_asks_each_what_it_serves():
-  assert {"rnn", "gan", "inbetween", "toy"} <= set(names())
+  assert {"rnn", "gan", "inbetween", "patch", "toy"} <= set(names())
   assert get("gan").refusal("live") and get("inbetween").refusal("sample") and get("rnn").refusal("sample") is None
   assert get("toy").refusal("inbetween") and get("toy").refusal("sample") is None
   assert not get("gan").likelihood and get("rnn").calibrated and not get("toy").calibrated
@@ -251,3 +251,33 @@ def test_writing_a_sample_refuses_counts_that_are_no_whole_numbers_before_any_wo
     with pytest.raises(chorjax.UserError, match="must be a whole number"):
       chorjax.api.write_sample(toy_run.workdir, tmp_path / "s.csv", **bad)
   assert not any(tmp_path.iterdir())
+
+
+def test_the_patch_family_recombines_one_take_without_training(tmp_path, capsys):
+  """``configs/patch.toml`` on a single take: one step keeps the take in the run; a dance of 600 frames is
+  made of the take's own pieces (coverage of its windows, its pace), one per seed, from a run whose take is
+  gone; what a patch run cannot do is one line."""
+  import shutil
+
+  from chorjax.data.dataset import bundled_path
+  from chorjax.scoring import score_motions
+
+  take = tmp_path / "phrase.csv"
+  shutil.copy(bundled_path("cmu94") / "94_03_skeleton_3d.csv", take)
+  root = Path(__file__).resolve().parents[1]
+  run = tmp_path / "run"
+  argv = ["train", str(root / "configs" / "patch.toml"), f"data.dataset={take}", "log.tensorboard=false"]
+  assert cli.main([*argv, "sample.frames=60", "--workdir", str(run)]) == 0
+  take.unlink()  # the run keeps what it recombines
+  a, b = (tmp_path / "a.csv"), (tmp_path / "b.csv")
+  assert cli.main(["sample", str(run), "-o", str(a), "--frames", "600", "--seed", "1"]) == 0
+  assert cli.main(["sample", str(run), "-o", str(b), "--frames", "600", "--seed", "2"]) == 0
+  dance, other = chorjax.read_motion(a), chorjax.read_motion(b)
+  assert dance.num_frames == 600 and not np.allclose(dance.positions, other.positions)
+  real = chorjax.read_motion(bundled_path("cmu94") / "94_03_skeleton_3d.csv")
+  scores = score_motions([dance], [real], window=60, splits=2, seed=0)
+  assert scores["coverage"] > 0.3 and 0.7 < scores["speed"] < 1.3, scores
+  capsys.readouterr()
+  for command, said in (("calibrate", "no draw to calibrate"), ("live", "live mode streams"), ("export", "no network")):
+    extra = ["-o", str(tmp_path / "d.onnx")] if command == "export" else []
+    assert cli.main([command, str(run), *extra]) == 2 and said in capsys.readouterr().err
