@@ -1,35 +1,17 @@
 """``chorjax calibrate``: the sampling settings a run's dance depends on, chosen on its dancer's takes.
 
-The quickstart's draw is shaped by controls that were set by hand on cmu94 (noise smoothing 0.9, the scale
-temperature 1.0, component persistence 6 and crossfade 0.8, feet locked in contact). Another dancer needs
-others: salsa drawn with cmu94's settings moves at 0.6 of its speed, and locking its feet both slows it
-(speed 0.83 locked, 0.91 unlocked) and makes it tremble (jitter 1.40 locked, 0.97 unlocked; one salsa run,
-persistence 0, crossfade 0.8, noise smoothing 0.75).
-Calibration samples the trained model over a grid of the controls that set how much and how smoothly it
-moves: ``noise_smoothing`` (how correlated the drawn noise is over frames), ``sigma_temperature`` (how wide
-each draw is), ``persistence`` and ``crossfade`` (how long a mixture component holds, how its switches
-glide) and, for canonical runs, ``foot_lock``; where one of the three best settings' noise smoothing or sigma
-temperature is an end of the grid, it goes on past that end (``BEYOND``) while the objective falls. It keeps the setting
-whose samples move like the reference takes on four measures, each / the reference's: movement over half
-a second (which trembling cannot fake), jitter (the second difference, which over-smoothing pulls under
-1), mean joint speed and root travel (how far the dancer goes), each pooled over the reference's frames as
-``chorjax eval`` pools them (a long take weighs more), and whose poses go together as the reference's do:
-``poses``, the geometric FID (``chorjax eval``'s FID_g, windows of 2 s) of the sample against the
-reference over the reference's own (one half of its takes against the other). The objective,
-smallest wins: ``|log movement| + |log jitter| + |log speed| + |log root travel|``, plus the largest of
-those four again (every measure near, not only their sum: a setting with one of them 11% off loses to one with
-all four 5% off), ``+ max(log poses, 0)`` (poses nearer than another stretch of the same dance is no fault).
-Counting the largest twice changed the choice of 6 of the dancers benchmark's 15 runs; drawn again on their
-training takes (10,000 frames, 4 sampling seeds), the 5 of them so checked were off by 1.09-1.15x in their
-worst rate where the sum alone left 1.12-1.20x (experiments/dancers, 2026-11-27).
-
-The noise order (``sample.noise_order``: how many AR(1) filters the drawn noise passes, ``--noise-order``) is
-not searched: the smoothing is chosen for the run's order and recorded with it. The quickstart's 4 filters
-leave a third of two filters' frame-to-frame tremble at the same speed; with two, the smoothing that keeps
-the dance's speed left a model trembling at 1.2-1.3x its dancer's jitter over 10,000 frames, and smoothing
-harder made its poses wander off (experiments/dancers, 2026-11-27). The pace governor's gain (``sample.pace``,
-``--pace``) is recorded the same way: the settings that move like the takes under one gain are not those
-under another.
+Calibration draws the trained model over a grid of the controls that set how much and how smoothly it moves
+(``table.GRID``; ``table.CARRIED_GRID`` for an MDN that carries its noise): the noise smoothing, the scale
+temperature, persistence and crossfade and, for canonical runs, foot lock. Where one of the three best
+settings' value of a walked control is an end of the grid, it goes on past that end (``BEYOND``) while the
+objective falls. The objective, smallest wins, compares each setting's dancers with the reference takes, each
+measure over the reference's: ``|log movement| + |log jitter| + |log speed| + |log root travel|`` (movement over
+half a second, which trembling cannot fake; the second difference, which over-smoothing pulls under 1; mean
+joint speed; how far the root goes; each pooled over the frames as ``chorjax eval`` pools them), plus the
+largest of those four again (every measure near, not only their sum), plus ``max(log poses, 0)``: the
+geometric FID of the dancers against the reference over the reference's own (one half of its takes against
+the other). The noise order and the pace governor's gain are not searched: the settings are chosen under the
+run's (or ``--noise-order`` / ``--pace``) and recorded with them.
 
 The reference is the run's TRAINING takes (never the takes it is judged on: tuning on those would be
 tuning on the test); ``--data`` names others. The result goes to ``WORKDIR/calibration.json`` and is the
@@ -37,7 +19,7 @@ run's default from then on (``sample``, ``eval``, ``live``; a flag or key given 
 Each setting draws four dancers, each conditioned on one of the reference takes; a run conditioned on labels
 draws sixteen, on takes spread over the reference (a library's names sort by label: its first four takes are
 one action), and holds each dancer's poses to the training takes of its own labels (``PosesByLabel``), not to
-the whole library's.
+the whole library's. Why each part is there, measured: ``docs/perf-notes.md`` ("Calibration").
 """
 
 from __future__ import annotations
