@@ -681,6 +681,17 @@ def check_combinations(config: Config) -> None:
 FEATURES_GUESS = 256  # pose features per frame, more than any skeleton we read gives (mpii16 canonical: ~50)
 
 
+def training_bytes(config: Config) -> float:
+  """What one model's train step needs, estimated from the sizes alone (:func:`check_training_size`): the
+  parameters with Adam's two moments, and the activations the step keeps for its backward pass, in float32."""
+  m, t, d = config.model, config.train, config.data
+  h, layers, inputs = m.hidden_size, m.num_layers, FEATURES_GUESS
+  params = layers * 4 * h * (h + max(h, inputs)) + h * FEATURES_GUESS * (2 * m.num_mixtures + 1)
+  components = m.num_mixtures if m.head == "mdn" else 1
+  activations = t.batch_size * d.seq_length * (layers * h * 16 + components * FEATURES_GUESS * 6)
+  return 4.0 * (3 * params + activations)
+
+
 def check_training_size(config: Config, copies: int = 1) -> None:
   """A one-line ``UserError`` naming the keys when training would need more memory than this machine has,
   estimated from the sizes alone (before anything is allocated): the parameters with Adam's two moments,
@@ -688,14 +699,10 @@ def check_training_size(config: Config, copies: int = 1) -> None:
   head's: about 6 per feature and mixture component per frame, which rule small models); for ``copies``
   models trained together as one program (a list of seeds), all of them."""
   m, t, d = config.model, config.train, config.data
-  h, layers, inputs = m.hidden_size, m.num_layers, FEATURES_GUESS
-  params = layers * 4 * h * (h + max(h, inputs)) + h * FEATURES_GUESS * (2 * m.num_mixtures + 1)
-  components = m.num_mixtures if m.head == "mdn" else 1
-  activations = t.batch_size * d.seq_length * (layers * h * 16 + components * FEATURES_GUESS * 6)
   together = f" x {copies:,} points trained together" if copies > 1 else ""
   check_memory(
-    4.0 * (3 * params + activations) * copies,
-    f"model.hidden_size={h}, model.num_layers={layers}, train.batch_size={t.batch_size}, "
+    training_bytes(config) * copies,
+    f"model.hidden_size={m.hidden_size}, model.num_layers={m.num_layers}, train.batch_size={t.batch_size}, "
     f"data.seq_length={d.seq_length}{together}",
   )
   # the sample written at the end of training (as Run.check_drawn counts a draw), before training starts

@@ -805,3 +805,32 @@ def test_valid_input_that_was_refused_is_taken(shared_data, tmp_path, capsys):
   argv = ["data", "convert", str(shared_data / BVH), "-o", str(out), "--joints", "native", "--up-axis", "-x"]
   assert cli.main([*argv, "--scale", "0.001"]) == 0
   assert "up -x" in capsys.readouterr().out and len(list(out.glob("*.csv"))) == 1
+
+
+@pytest.mark.parametrize(
+  "sizes",
+  [
+    ["model.hidden_size=32", "model.num_layers=1", "train.batch_size=512", "data.seq_length=12"],  # the head rules
+    ["model.hidden_size=96", "model.num_layers=2", "train.batch_size=16", "data.seq_length=64"],
+    ["model.hidden_size=128", "model.num_layers=3", "train.batch_size=8", "data.seq_length=100", "model.head=mse"],
+  ],
+)
+def test_the_memory_estimate_covers_what_the_compiled_step_asks_for(sizes):
+  """``train.batch_size=100000`` passed the memory check, then XLA asked for 24.5 GB. The estimate the check
+  makes before anything is allocated (``config.training_bytes``) is compared with what XLA's compiled train
+  step needs (its arguments, outputs and temporaries): never less, and within 4x."""
+  import jax
+
+  from chorjax.config import load_config, training_bytes
+  from chorjax.data.dataset import load_dataset
+  from chorjax.families import family_of
+  from chorjax.families.recurrent.steps import train_step
+
+  cfg = load_config(QUICKSTART, [*sizes, "train.batch_parts=1"])
+  ds = load_dataset(cfg.data)
+  state, spec = family_of(cfg).create_state(cfg, ds)
+  _, sampler, _, _ = family_of(cfg).parts(cfg, ds)
+  stats = train_step.lower(state, sampler.batch(0), jax.random.key(0), spec).compile().memory_analysis()
+  needed = stats.argument_size_in_bytes + stats.output_size_in_bytes - stats.alias_size_in_bytes
+  needed += stats.temp_size_in_bytes
+  assert needed <= training_bytes(cfg) <= 4 * needed, (needed / 2**20, training_bytes(cfg) / 2**20)
