@@ -134,6 +134,9 @@ def test_calibrate_records_the_settings_and_the_run_uses_them_unless_told(run_di
   args = ["calibrate", str(run_dir), "--frames", "200", "--num", "2"]
   assert cli.main([*args, "--noise-order", "9"]) == 2 and "sample.noise_order" in capsys.readouterr().err
   assert cli.main([*args, "--pace", "-1"]) == 2 and "sample.pace" in capsys.readouterr().err
+  # the smallest search: one 60-frame dancer gave the pose measure one window, a line about --data and --window
+  assert cli.main(["calibrate", str(run_dir), "--frames", "60", "--num", "1"]) == 2
+  assert "two 60-frame windows" in capsys.readouterr().err
   assert not calibration_path(run_dir).exists()
   assert cli.main([*args, "--noise-order", "4", "--pace", "2"]) == 0
   saved = json.loads(calibration_path(run_dir).read_text())

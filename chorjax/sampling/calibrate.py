@@ -232,8 +232,7 @@ def calibrate(
   run = load_run(workdir).serving("calibrate")
   if num is None:
     num = LABELLED_DANCERS if run.labels is not None else CALIBRATION_DANCERS
-  if frames < 60 or num < 1:
-    raise UserError(f"--frames {frames} / --num {num}: need at least 60 frames and 1 dancer")
+  _check_size(frames, num)
   run.check_drawn(frames * num, f"--frames {frames} x --num {num}")
   reference, train = read_reference(run, list(data) if data else None)
   f = run.features
@@ -268,6 +267,16 @@ def calibrate(
   on = f"{'the takes given' if data else 'its training takes'} ({len(reference)})"
   log(f"calibrated on {on}: {best} ({said}); wrote {calibration_path(workdir)}")
   return result
+
+
+def _check_size(frames: int, num: int) -> None:
+  """Refuses a search whose dancers give the pose measure fewer than two 60-frame windows (1 s apart)."""
+  windows = num * ((frames - 60) // 30 + 1) if frames >= 60 else 0
+  if num < 1 or windows < 2:
+    raise UserError(
+      f"--frames {frames} / --num {num}: the pose measure needs two 60-frame windows in all "
+      "(at least --frames 90, or --frames 60 --num 2)"
+    )
 
 
 @contextlib.contextmanager
