@@ -138,3 +138,59 @@ def test_every_writer_round_trips_a_take_moved_and_scaled(tmp_path_factory, star
   idx = [back.skeleton.joint_names.index(n) for n in moved.skeleton.joint_names]
   height = float(np.ptp(pos[..., 1]))
   assert np.abs(np.asarray(back.positions)[:, idx] - pos).max() < 1e-3 * height + 1e-4 * float(np.abs(shift).max())
+
+
+SECTIONS = ["data", "model", "train", "sample", "gan", "patch", "modle"]
+KEYS = ["seq_length", "hidden_size", "batch_size", "pace", "val_tail", "labels", "size", "family", "nope"]
+
+
+@given(
+  config=st.dictionaries(st.sampled_from(SECTIONS), st.one_of(st.dictionaries(st.sampled_from(KEYS), HOSTILE), HOSTILE))
+)
+@settings(settings.get_profile(PROFILE))
+def test_a_config_given_as_a_dict_loads_or_is_refused_in_one_line(config):
+  """``chorjax.train(dict)`` reads the dict as a file's tables: a Config, or one UserError naming the key."""
+  from chorjax.config import load_config
+
+  _result_or_refused(lambda: load_config(config))
+
+
+CELLS = st.one_of(st.text(max_size=6), st.sampled_from(["take", "walk", "94_07_skeleton_3d", '"a,b"', "x=y", ""]))
+
+
+@given(rows=st.lists(st.lists(CELLS, min_size=1, max_size=3), min_size=1, max_size=4))
+@settings(settings.get_profile(PROFILE))
+def test_a_labels_csv_reads_or_is_refused_in_one_line(tmp_path_factory, rows):
+  """Whatever a labels CSV holds (``data.labels``): labels for the takes, or one UserError."""
+  import csv
+
+  from chorjax.data.labels import read_labels
+
+  path = tmp_path_factory.mktemp("labels") / "labels.csv"
+  with path.open("w", newline="", encoding="utf-8", errors="surrogateescape") as f:
+    csv.writer(f).writerows(rows)
+  _result_or_refused(lambda: read_labels(str(path), ["94_07_skeleton_3d", "94_08_skeleton_3d"]))
+
+
+@given(
+  values=st.lists(st.floats(allow_nan=True, allow_infinity=True, width=32), min_size=1, max_size=3),
+  frames=st.integers(0, 3),
+  suffix=st.sampled_from([".glb", ".bvh", ".csv", ".npz"]),
+)
+@settings(settings.get_profile(PROFILE))
+def test_any_positions_write_or_are_refused_in_one_line(tmp_path_factory, values, frames, suffix):
+  """A motion of 0-3 frames holding any float (NaN, inf, huge, tiny): written, or refused in one line."""
+  take = chorjax.read_motion(str(TAKE))
+  pos = np.resize(np.asarray(values, np.float32), (frames, take.skeleton.num_joints, 3))
+  target = tmp_path_factory.mktemp("odd") / f"m{suffix}"
+  _result_or_refused(lambda: take.replace(positions=pos).write(target))
+
+
+@given(
+  batch=st.one_of(st.integers(1, 2), HOSTILE),
+  controls=st.dictionaries(st.sampled_from(["pace", "clamp"]), HOSTILE, max_size=1),
+)
+@settings(settings.get_profile(PROFILE), max_examples=4)
+def test_run_export_writes_or_is_refused_in_one_line(run, tmp_path_factory, batch, controls):
+  path = tmp_path_factory.mktemp("export") / "dancer.onnx"
+  _result_or_refused(lambda: run.export(path, batch=batch, **controls))
