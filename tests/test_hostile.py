@@ -834,3 +834,44 @@ def test_the_memory_estimate_covers_what_the_compiled_step_asks_for(sizes):
   needed = stats.argument_size_in_bytes + stats.output_size_in_bytes - stats.alias_size_in_bytes
   needed += stats.temp_size_in_bytes
   assert needed <= training_bytes(cfg) <= 4 * needed, (needed / 2**20, training_bytes(cfg) / 2**20)
+
+
+def test_sidecars_and_amc_files_that_say_two_things_at_once_are_one_line(shared_data, tmp_path, capsys):
+  """Read silently before, or an internal error: a sidecar naming one joint twice or giving its rate as
+  text or a boolean, a sidecar that is a folder, an AMC frame number of 5,000 digits, an ASF bone under two
+  parents."""
+  import shutil
+
+  convert = ["data", "convert", str(shared_data / BVH), "-o", str(tmp_path / "nat"), "--joints", "native"]
+  assert cli.main(convert) == 0
+  (csv,) = (tmp_path / "nat").glob("*.csv")
+  side = csv.with_name(csv.stem + ".skeleton.json")
+  good = json.loads(side.read_text())
+  names = good["skeleton"]["joint_names"]
+  for change, said in (
+    ({"skeleton": {**good["skeleton"], "joint_names": [names[0], *names[:-1]]}}, "appears twice"),
+    ({"fps": "30"}, "fps: expected a number, got '30'"),
+    ({"fps": True}, "fps: expected a number, got True"),
+  ):
+    side.write_text(json.dumps({**good, **change}))
+    assert cli.main(["data", "info", str(csv)]) == 2
+    _one_line(capsys, side.name, said)
+  side.unlink()
+  side.mkdir()
+  assert cli.main(["data", "info", str(csv)]) == 2
+  _one_line(capsys, "not a file; a CSV's sidecar is the file NAME.skeleton.json")
+  cmu05 = shared_data / "asfamc" / "cmu05"
+  amc_dir = tmp_path / "amc"
+  amc_dir.mkdir()
+  (asf,) = cmu05.glob("*.asf")
+  shutil.copy(asf, amc_dir / asf.name)
+  lines = (cmu05 / "md_02.amc").read_text().splitlines()
+  first = next(i for i, line in enumerate(lines) if line.strip().isdigit())
+  (amc_dir / "big.amc").write_text("\n".join([*lines[:first], "9" * 5000, *lines[first + 1 :]]) + "\n")
+  assert cli.main(["data", "info", str(amc_dir / "big.amc")]) == 2
+  _one_line(capsys, "big.amc", "has 5000 digits")
+  text = asf.read_text().replace("    rhipjoint rfemur\n", "    rhipjoint rfemur lfemur\n")
+  assert "rfemur lfemur" in text
+  (amc_dir / asf.name).write_text(text)
+  assert cli.main(["data", "info", str(amc_dir / "big.amc")]) == 2
+  _one_line(capsys, asf.name, "'lfemur' is a child of 'lhipjoint' already")

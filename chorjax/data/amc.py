@@ -128,6 +128,10 @@ def read_asf(path) -> Asf:
         if words[0] in ("begin", "end"):
           continue
         for child in words[1:]:
+          if child in asf.parent and asf.parent[child] != words[0]:  # a tree: one parent a bone
+            raise UserError(
+              f"{path}:{lineno}: bone {child[:40]!r} is a child of {asf.parent[child][:40]!r} already (:hierarchy)"
+            )
           asf.parent[child] = words[0]
     except (ValueError, IndexError):
       raise UserError(f"{path}:{lineno}: malformed {words[0]!r} line") from None
@@ -181,6 +185,8 @@ def read_amc(path, asf_path=None, *, fps: float = 120.0, scale: float = 1.0, uni
       continue
     words = line.split()
     if len(words) == 1 and words[0].isascii() and words[0].isdigit():
+      if len(words[0].lstrip("0")) > 12:  # more frames than any take: Python refuses 4,300 digits and more
+        raise UserError(f"{path}:{lineno}: frame number {words[0][:20]}... has {len(words[0])} digits")
       if starts and int(words[0]) != number + 1:
         raise UserError(f"{path}:{lineno}: frame {words[0]} follows frame {number} (AMC frames count up by one)")
       number = int(words[0])

@@ -68,8 +68,11 @@ def sidecar_path(csv_path) -> Path:
 def has_sidecar(csv_path) -> bool:
   """Whether a sidecar lies beside ``csv_path`` (none can where its name would be longer than the file
   system allows: a CSV named with 250 characters)."""
+  side = sidecar_path(csv_path)
   try:
-    return sidecar_path(csv_path).is_file()
+    if side.exists() and not side.is_file():
+      raise UserError(f"{side}: not a file; a CSV's sidecar is the file NAME.skeleton.json beside it")
+    return side.is_file()
   except OSError:
     return False
 

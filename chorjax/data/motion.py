@@ -39,6 +39,9 @@ class Skeleton:
         raise ValueError(f"skeleton {self.name}: {field} must be joint indices ({low}..{j - 1})")
     if not all(isinstance(n, str) for n in self.joint_names):
       raise ValueError(f"skeleton {self.name}: joint names must be strings")
+    if len(set(self.joint_names)) != j:  # joints are found by name (mapping, retargeting, the add-on)
+      twice = next(n for n in self.joint_names if self.joint_names.count(n) > 1)
+      raise ValueError(f"skeleton {self.name}: joint name {twice!r} appears twice")
     if not any(p < 0 for p in self.parents):
       raise ValueError(f"skeleton {self.name}: needs a root (a joint whose parent is -1)")
     for i, t in enumerate(self.twins):

@@ -97,6 +97,8 @@ def read_sidecar(path) -> tuple[Skeleton, float, str, str]:
     data = load_json(read_text(path, "skeleton JSON"))
     sk = Skeleton.from_dict(data.get("skeleton", data))
     fps, up, units = data.get("fps", 30.0), data.get("up_axis", "y"), str(data.get("units", "arbitrary"))
+    if isinstance(fps, bool) or not isinstance(fps, int | float):  # "30" or true: not what a writer writes
+      raise ValueError(f"fps: expected a number, got {fps!r}")
   except (json.JSONDecodeError, KeyError, TypeError, ValueError, AttributeError) as e:
     raise UserError(f"{path}: not a skeleton file ({type(e).__name__}: {e})") from None
   return sk, check_rate(fps, f"{path}: fps"), check_up_axis(up, f"{path}: up_axis"), units
