@@ -8,7 +8,7 @@ one-line ``UserError`` that names the file, nothing else (no other exception, no
 Profiles (``CHORJAX_FUZZ``): ``ci`` (default: 40 examples per reader, a fixed seed, well under a minute) and
 ``long`` (10,000 examples per reader, random seeds), the local run reported in issue 40:
 
-    CHORJAX_FUZZ=long pytest tests/test_fuzz.py -p no:xdist -q
+    CHORJAX_FUZZ=long pytest tests/test_fuzz.py -n0 -q
 """
 
 import os

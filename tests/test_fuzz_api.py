@@ -5,7 +5,7 @@ never another exception; and every format chorjax writes reads back as it was wr
 Profiles as in tests/test_fuzz.py (``CHORJAX_FUZZ``): ``ci`` (default: a few examples per function, a fixed
 seed) and ``long`` (10,000 per function, random seeds):
 
-    CHORJAX_FUZZ=long pytest tests/test_fuzz_api.py -p no:xdist -q
+    CHORJAX_FUZZ=long pytest tests/test_fuzz_api.py -n0 -q
 """
 
 import os
