@@ -41,7 +41,6 @@ from chorjax.errors import (
   as_path,
 )
 from chorjax.evaluate import evaluate_to  # noqa: F401
-from chorjax.experiments import compare_to, run_sweep, train_command  # noqa: F401
 from chorjax.export import write_blender_addon, write_onnx, write_web  # noqa: F401
 from chorjax.live import run_live  # noqa: F401
 from chorjax.render.files import plot_file, render  # noqa: F401
@@ -56,6 +55,7 @@ from chorjax.sampling.controls import Controls  # noqa: F401
 from chorjax.sampling.table import CALIBRATED, PLAIN, RECORDS  # noqa: F401
 from chorjax.sampling.table import SWITCHES as CONTROL_SWITCHES  # noqa: F401
 from chorjax.scoring import score_to  # noqa: F401
+from chorjax.sweeps import compare_to, run_sweep, train_command  # noqa: F401
 
 __all__ = ["Motion", "Player", "Run", "UserError", "load_dataset", "load_run", "read_motion", "score", "train"]
 

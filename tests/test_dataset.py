@@ -97,7 +97,7 @@ def test_the_dancers_benchmark_holds_out_whole_takes_partners_together_and_nothi
   training takes only)."""
   from pathlib import Path
 
-  from chorjax.experiments import load_sweep, sweep_points
+  from chorjax.sweeps import load_sweep, sweep_points
 
   root = Path(__file__).resolve().parents[1]
   sweep = load_sweep(root / "experiments" / "dancers" / "sweep.toml")

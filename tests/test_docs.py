@@ -123,7 +123,7 @@ def _run_in_order(lines: list[str]) -> None:
 
 def test_the_guides_sweep_file_is_a_valid_sweep(tmp_path):
   from chorjax.config import load_config
-  from chorjax.experiments import load_sweep, sweep_points
+  from chorjax.sweeps import load_sweep, sweep_points
 
   (example,) = re.findall(r"```toml\n(.*?)```", (ROOT / "docs" / "guides" / "sweeps.md").read_text(), flags=re.S)
   (tmp_path / "configs").symlink_to(ROOT / "configs")
@@ -140,7 +140,7 @@ def test_every_experiment_sweep_loads_every_point():
   """The sweep files in experiments/ start from configs that change (the quickstart above all): each of their
   points must still be a valid config, or the experiment cannot be rerun as its README says."""
   from chorjax.config import load_config
-  from chorjax.experiments import load_sweep, sweep_points
+  from chorjax.sweeps import load_sweep, sweep_points
 
   sweeps = [load_sweep(f) | {"file": f} for f in sorted(ROOT.glob("experiments/*/*.toml"))]
   sweeps = [s for s in sweeps if "base" in s]

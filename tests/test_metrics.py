@@ -106,7 +106,7 @@ def test_novelty_zero_for_a_copied_window_and_positive_otherwise():
 def test_a_sweep_knows_a_run_sized_by_epochs_or_ended_by_patience_is_finished(tmp_path):
   """A point trained with `train.epochs` ends at the step its own config.json resolved (not the sweep's
   num_steps), and one that `train.patience` ended early has its end-of-run sample: neither is trained again."""
-  from chorjax.experiments import is_finished
+  from chorjax.sweeps import is_finished
 
   sized, ended, stopped = (tmp_path / n for n in ("sized", "ended", "stopped"))
   for run, step in ((sized, 3514), (ended, 750), (stopped, 750)):
@@ -334,7 +334,7 @@ def test_chorjax_metrics_separates_a_real_take_from_a_trembling_fake(tmp_path, t
 
 
 def test_sweep_candidates_cross_the_grid_and_bad_keys_are_named(tmp_path):
-  from chorjax.experiments import load_sweep, sweep_points
+  from chorjax.sweeps import load_sweep, sweep_points
 
   path = tmp_path / "s.toml"
   path.write_text(
@@ -358,8 +358,8 @@ def test_sweep_candidates_cross_the_grid_and_bad_keys_are_named(tmp_path):
 
 def test_older_metrics_files_state_the_controls_added_since_as_off():
   """Runs evaluated before a sampling control existed group with runs that state it off (compare)."""
-  from chorjax.experiments import group_runs
   from chorjax.scoring import upgrade
+  from chorjax.sweeps import group_runs
 
   old = {"movement_first_1000": 0.5, "sampling": {"pi_temperature": 0.2, "seed": 0}}
   new = {"movement_first": 0.5, "sampling": {"pi_temperature": 0.2, "clamp": False, "pace": 0.0, "seed": 0}}

@@ -8,9 +8,9 @@ from helpers import TINY, tiny_config
 
 from chorjax import cli
 from chorjax.errors import UserError
-from chorjax.experiments import load_sweep, sweep_groups
 from chorjax.points import NotAligned, check_group
 from chorjax.run import load_run
+from chorjax.sweeps import load_sweep, sweep_groups
 from chorjax.training import train_and_evaluate
 from chorjax.vectorized import train_vectorized
 
