@@ -55,7 +55,7 @@ from chorjax.sampling.controls import Controls  # noqa: F401
 from chorjax.sampling.table import CALIBRATED, PLAIN, RECORDS  # noqa: F401
 from chorjax.sampling.table import SWITCHES as CONTROL_SWITCHES  # noqa: F401
 from chorjax.scoring import score_to  # noqa: F401
-from chorjax.sweeps import compare_to, run_sweep, train_command  # noqa: F401
+from chorjax.sweeps import SWEEP_DESCRIPTION, SWEEP_FORMAT, compare_to, run_sweep, train_command  # noqa: F401
 
 __all__ = ["Motion", "Player", "Run", "UserError", "load_dataset", "load_run", "read_motion", "score", "train"]
 

@@ -59,6 +59,32 @@ SWEEP_KEYS = {"name", "base", "root", "grid", "set", "eval", "candidates", "vect
 EVAL_KEYS = {"data", "frames", "num", "seed", "seeds", "splits", "window", *Controls.names()}
 
 
+# What `chorjax sweep --help` says of a sweep and its file.
+SWEEP_DESCRIPTION = (
+  "Trains and evaluates every point of a grid over config keys; finished points are skipped,\n"
+  "so an interrupted sweep continues where it stopped (docs/guides/sweeps.md)."
+)
+SWEEP_FORMAT = """The sweep file (TOML):
+  name = "lr_sweep"                      # run directories are named NAME-KEY=VALUE-...
+  base = "../configs/quickstart.toml"    # the config every point starts from (relative to this file)
+  root = "runs/lr_sweep"                 # where the run directories go (relative to the working directory)
+  vectorize = ["train.seed"]             # points differing only in these train as one program (optional;
+                                         # train.seed, optim.lr, train.input_noise)
+  [set]                                  # keys set for every point (optional)
+  "train.num_steps" = 1000
+  [grid]                                 # every combination of these values is one point
+  "optim.lr" = [1e-3, 3e-3]
+  "train.seed" = [0, 1, 2]
+  [candidates.canonical]                 # named variants, each crossed with the grid (optional)
+  "data.representation" = "canonical"
+  [eval]                                 # chorjax eval after training (optional): data, frames,
+  data = ["cmu94"]                       # num, seed, seeds, splits, window and the sampling
+  seeds = [0, 1, 2, 3]                   # controls (pi_temperature, noise_smoothing, ...)
+
+Split over N cluster jobs: chorjax sweep FILE --shard I/N (job I of 0..N-1 runs points I, I+N, ...).
+Then: chorjax compare ROOT/* -o report.md"""
+
+
 def _fmt(v) -> str:
   return json.dumps(v) if isinstance(v, str) else ("true" if v is True else "false" if v is False else repr(v))
 

@@ -33,7 +33,7 @@ def _one_line(capsys, *parts) -> str:
 
 def test_an_unforeseen_exception_is_one_line_that_says_it_is_a_bug(monkeypatch, capsys):
   monkeypatch.delenv("CHORJAX_DEBUG", raising=False)
-  monkeypatch.setattr(cli, "_data_info", lambda args: [][1])
+  monkeypatch.setitem(cli.HANDLERS, "data_info", lambda args: [][1])
   assert cli.main(["data", "info", "cmu94"]) == 1
   _one_line(capsys, "internal error (IndexError: list index out of range)", "bug", "CHORJAX_DEBUG=1")
   monkeypatch.setenv("CHORJAX_DEBUG", "1")
