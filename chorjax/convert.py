@@ -98,6 +98,8 @@ def like_reference(motions, like: str) -> list:
   ref = read_takes([like])
   canon = lambda m: np.asarray(transforms.to_y_up(m.positions, m.up_axis))
   ref_size = np.mean([body_size(canon(r), r.skeleton) for r in ref])
+  if not (np.isfinite(ref_size) and ref_size > 0):  # every take scaled to nothing, written without a word
+    raise UserError(f"--like {like}: its joints have no extent (body size {ref_size:g}): nothing to scale to")
   motions = [to_up_axis(m, ref[0].up_axis) for m in motions]
   sizes = [body_size(canon(m), m.skeleton) for m in motions]
   for m, size in zip(motions, sizes, strict=True):

@@ -875,3 +875,15 @@ def test_sidecars_and_amc_files_that_say_two_things_at_once_are_one_line(shared_
   (amc_dir / asf.name).write_text(text)
   assert cli.main(["data", "info", str(amc_dir / "big.amc")]) == 2
   _one_line(capsys, asf.name, "'lfemur' is a child of 'lhipjoint' already")
+
+
+def test_a_reference_body_of_no_size_is_one_line(tmp_path, capsys):
+  """``data convert --like`` a take whose joints all sit at one point scaled every take to nothing, silently."""
+  from chorjax.data.dataset import bundled_path
+
+  zero = tmp_path / "zero.csv"
+  np.savetxt(zero, np.zeros((40, 48)), delimiter=",")
+  take = bundled_path("cmu94") / "94_03_skeleton_3d.csv"
+  assert cli.main(["data", "convert", str(take), "-o", str(tmp_path / "out"), "--like", str(zero)]) == 2
+  _one_line(capsys, "--like", "no extent")
+  assert not (tmp_path / "out").exists()
