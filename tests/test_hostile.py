@@ -887,3 +887,19 @@ def test_a_reference_body_of_no_size_is_one_line(tmp_path, capsys):
   assert cli.main(["data", "convert", str(take), "-o", str(tmp_path / "out"), "--like", str(zero)]) == 2
   _one_line(capsys, "--like", "no extent")
   assert not (tmp_path / "out").exists()
+
+
+def test_a_chain_two_thousand_joints_deep_goes_to_bvh_and_back(tmp_path):
+  """The BVH writer walked the hierarchy by recursion: a 2,000-joint chain was an internal error
+  (RecursionError)."""
+  import chorjax
+  from chorjax.data.motion import Motion, Skeleton
+
+  j = 2000
+  sk = Skeleton("chain", tuple(f"j{i}" for i in range(j)), (-1, *range(j - 1)), tuple(range(j)))
+  pos = np.zeros((5, j, 3), np.float32)
+  pos[:, :, 1], pos[:, :, 0] = np.arange(j) * 0.01, np.sin(np.arange(j) / 50) * 0.1
+  path = chorjax.Motion.of(Motion(pos, 30.0, sk)).write(tmp_path / "chain.bvh")
+  back = chorjax.read_motion(str(path))
+  order = [back.skeleton.joint_names.index(n) for n in sk.joint_names]
+  assert np.abs(np.asarray(back.positions)[:, order] - pos).max() < 1e-4 * j * 0.01 * 10

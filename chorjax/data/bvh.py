@@ -295,25 +295,26 @@ def write_bvh(motion: Motion, path, *, exact: bool = True, order: str = "zyx", o
     d = rest[k] - rest[sk.parents[k]]
     return d if exact else d / max(np.linalg.norm(d), 1e-12) * lengths[k]
 
-  def emit(k, depth):
-    ind = "  " * depth
-    leaf = not children[k]
+  with_channels = []  # MOTION columns follow the order channels are declared in
+  todo = [(sk.root, 0, False)]  # (joint, depth, closing): a stack, not recursion (chains thousands deep)
+  while todo:
+    k, depth, closing = todo.pop()
+    ind, leaf = "  " * depth, not children[k]
+    if closing:
+      if leaf:  # exact mode keeps leaves as joints (they carry positions); close with a zero End Site
+        lines.extend([f"{ind}  End Site", f"{ind}  {{", f"{ind}    OFFSET 0 0 0", f"{ind}  }}"])
+      lines.append(f"{ind}}}")
+      continue
     if leaf and sk.parents[k] >= 0 and not exact:
       lines.extend([f"{ind}End Site", f"{ind}{{", f"{ind}  OFFSET {_fmt(offset_of(k))}", f"{ind}}}"])
-      return
+      continue
     kind = "ROOT" if sk.parents[k] < 0 else "JOINT"
-    with_channels.append(k)  # MOTION columns follow the order channels are declared in
+    with_channels.append(k)
     lines.extend([f"{ind}{kind} {names[k]}", f"{ind}{{", f"{ind}  OFFSET {_fmt(offset_of(k))}"])
     six = sk.parents[k] < 0 or exact
     lines.append(f"{ind}  CHANNELS {6 if six else 3} " + ("Xposition Yposition Zposition " if six else "") + rot_names)
-    for c in children[k]:
-      emit(c, depth + 1)
-    if leaf:  # exact mode keeps leaves as joints (they carry positions); close with a zero End Site
-      lines.extend([f"{ind}  End Site", f"{ind}  {{", f"{ind}    OFFSET 0 0 0", f"{ind}  }}"])
-    lines.append(f"{ind}}}")
-
-  with_channels = []
-  emit(sk.root, 0)
+    todo.append((k, depth, True))
+    todo.extend((c, depth + 1, False) for c in reversed(children[k]))
   cols = []
   for k in with_channels:
     parent = sk.parents[k]
