@@ -129,6 +129,8 @@ def _write(motions, out: Path, character, joint_map, rigid: bool, force: bool) -
     if character is not None:
       return [(write_retargeted(to_mpii16(motions[0], joint_map), character, out), motions[0])]
     return [(write_bvh(motions[0], out, exact=not rigid), motions[0])]
+  if out.is_dir() and {"config.json", "checkpoints"} <= {p.name for p in out.iterdir()}:
+    raise UserError(f"-o {out}: a chorjax run's folder; write the converted takes into a folder of their own")
   targets = [out / f"{m.name}.csv" for m in motions]
   first: dict = {}
   for m, t in zip(motions, targets):  # two takes of one name would be one file: refused before any is written

@@ -2,6 +2,7 @@
 user's that must not be overwritten, names that would escape the runs folder, and a last-resort line for
 anything unforeseen. Each case: one line, exit 2 (or accepted where the input is valid), nothing written."""
 
+import contextlib
 import json
 import os
 import re
@@ -903,3 +904,43 @@ def test_a_chain_two_thousand_joints_deep_goes_to_bvh_and_back(tmp_path):
   back = chorjax.read_motion(str(path))
   order = [back.skeleton.joint_names.index(n) for n in sk.joint_names]
   assert np.abs(np.asarray(back.positions)[:, order] - pos).max() < 1e-4 * j * 0.01 * 10
+
+
+def test_no_command_changes_a_file_it_did_not_write(tmp_path, capsys):
+  """A folder of the user's files and a run itself, given as targets to export, train, sweep, data convert,
+  sample, render and the API, with --force and without: what chorjax may do is refuse or add its own files;
+  every file that was there keeps its bytes."""
+  import chorjax
+  from chorjax.data.dataset import bundled_path
+
+  run, user = tmp_path / "run", tmp_path / "user"
+  train_and_evaluate(tiny_config("log.tensorboard=false", "train.calibrate=false"), run)
+  (user / "nested").mkdir(parents=True)
+  (user / "a.txt").write_text("mine")
+  (user / "b.csv").write_text("1,2,3\n")
+  (user / "nested" / "c.bin").write_bytes(b"\x00\x01")
+  before = {p: p.read_bytes() for p in [*run.rglob("*"), *user.rglob("*")] if p.is_file()}
+  take = str(bundled_path("cmu94") / "94_03_skeleton_3d.csv")
+  sweep = tmp_path / "s.toml"
+  sweep.write_text(f'name = "s"\nbase = "{QUICKSTART}"\nroot = "{user}"\n[grid]\n"train.seed" = [0]\n')
+  tiny = ["train.num_steps=1", "model.hidden_size=8", "model.num_layers=1", "log.tensorboard=false"]
+  commands = [
+    ["export", str(run), "--web", str(user)],
+    ["export", str(run), "--web", str(user), "--force"],
+    ["export", str(run), "--web", str(run), "--force"],
+    ["train", QUICKSTART, *tiny, "--workdir", str(user)],
+    ["data", "convert", take, "-o", str(run), "--force"],
+    ["data", "convert", take, "-o", str(user), "--force"],
+    ["sample", str(run), "-o", str(user / "b.csv"), "--frames", "10"],
+    ["render", take, "-o", str(user / "a.txt")],
+    ["sweep", str(sweep), *tiny],
+  ]
+  for argv in commands:
+    with contextlib.suppress(SystemExit):
+      cli.main(argv)
+    capsys.readouterr()
+  with pytest.raises(chorjax.UserError):
+    chorjax.read_motion(take).write(user / "b.csv")
+  changed = [str(p) for p, data in before.items() if not p.is_file() or p.read_bytes() != data]
+  assert not changed, changed
+  assert {p for p in run.rglob("*") if p.is_file()} == {p for p in before if run in p.parents}  # nothing added
