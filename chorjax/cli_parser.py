@@ -60,19 +60,24 @@ def _key_flag(key: str, whose: str) -> str:
 
 def _add_sampling_args(p, seed: bool = True) -> None:
   """Sampling controls shared by `sample`, `eval` and `export`; unset ones come from the run's calibration.json
-  (`chorjax calibrate`), else its [sample] config."""
+  (`chorjax calibrate`), else its [sample] config. The help lists the draw's apart from decoding's."""
+  groups = {
+    "draw": p.add_argument_group("draw", "how each frame is drawn (sampling controls)"),
+    "decoding": p.add_argument_group("decoding", "how drawn features become joints"),
+  }
   for name, record in api.RECORDS.items():
+    flag, group = f"--{name.replace('_', '-')}", groups[record.role]
     if record.metavar:  # a number: its type is its default's
       kind = type(getattr(api.Controls(), name))
-      p.add_argument(f"--{name.replace('_', '-')}", type=kind, metavar=record.metavar, help=_control_help(name))
-  p.add_argument(
+      group.add_argument(flag, type=kind, metavar=record.metavar, help=_control_help(name))
+    else:
+      group.add_argument(flag, action=argparse.BooleanOptionalAction, help=_control_help(name))
+  groups["draw"].add_argument(
     "--plain",
     action="store_true",
     help="the model's own draw: temperatures 1 and every other draw control off; decoding (rigid bones, feet) "
     "as the run's",
   )
-  for name in api.CONTROL_SWITCHES:
-    p.add_argument(f"--{name.replace('_', '-')}", action=argparse.BooleanOptionalAction, help=_control_help(name))
   if seed:
     p.add_argument(
       "--seed", type=_seed, default=0, help="sampling seed: the same seed draws the same dance (default 0)"
