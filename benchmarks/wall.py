@@ -29,10 +29,9 @@ OUT = HERE / "results_wall.json"
 
 def machine() -> str:
   """This machine in words: core count and CPU model (family and model: VMs of one name differ)."""
-  info = dict(
-    line.split(":", 1) for line in Path("/proc/cpuinfo").read_text().splitlines() if ":" in line and line.strip()
-  )
-  info = {k.strip(): v.strip() for k, v in info.items()}
+  from chorjax.runtime import cpu_info
+
+  info = cpu_info()
   name = re.sub(r"\s+\d+-Core Processor$", "", info.get("model name", "CPU"))
   return f"{os.cpu_count()} CPU cores ({name} family {info.get('cpu family', '?')}, model {info.get('model', '?')})"
 

@@ -70,11 +70,13 @@ def has_sidecar(csv_path) -> bool:
   system allows: a CSV named with 250 characters)."""
   side = sidecar_path(csv_path)
   try:
-    if side.exists() and not side.is_file():
+    if side.is_file():
+      return True
+    if side.exists():  # a folder or a device where the sidecar would be
       raise UserError(f"{side}: not a file; a CSV's sidecar is the file NAME.skeleton.json beside it")
-    return side.is_file()
   except OSError:
-    return False
+    pass
+  return False
 
 
 def written_paths(motion_or_positions, path) -> list[Path]:

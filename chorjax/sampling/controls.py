@@ -21,7 +21,7 @@ import numpy as np
 from flax import nnx
 
 from chorjax.errors import UserError
-from chorjax.sampling.table import HEAD, NAMES, PLAIN, SWITCHES, TRACED, ControlFields  # noqa: F401  (PLAIN re-exported)
+from chorjax.sampling.table import HEAD, NAMES, PLAIN, SWITCHES, TRACED, ControlFields
 
 LABEL_PACE_WIDTH = 0.05  # two label combinations that differ in one value are 2 apart: each its own pace
 
@@ -57,6 +57,11 @@ class Controls(ControlFields):
 
   def replace(self, **changes) -> Controls:
     return dataclasses.replace(self, **changes)
+
+  def without_frame_draw(self) -> Controls:
+    """These controls with the frame-by-frame draw's at their neutral values (``PLAIN``), the clip to the
+    training range and decoding as they are: what a family that makes whole sequences applies (GAN, patch)."""
+    return self.replace(**{k: v for k, v in PLAIN.items() if k != "clamp"})
 
   def to_dict(self) -> dict:
     """``{name: value}`` in ``[sample]``'s order (what a sample's settings and an evaluation record)."""

@@ -29,7 +29,6 @@ from flax import nnx
 
 from chorjax.families.family import frame_io
 from chorjax.models.rnn import RecurrentCore
-from chorjax.sampling.table import PLAIN
 
 
 def _dense_stack(sizes, *, rngs: nnx.Rngs) -> nnx.List:
@@ -280,4 +279,4 @@ def gan_controls(controls):
   """Sampling ``controls`` (``SampleConfig.controls``) as a GAN applies them: the frame-by-frame MDN draw
   controls at their neutral values (temperatures 1, the rest off); ``clamp``, ``rigid_bones`` and
   ``foot_lock`` (decoding) as given."""
-  return controls.replace(**{k: v for k, v in PLAIN.items() if k != "clamp"})
+  return controls.without_frame_draw()

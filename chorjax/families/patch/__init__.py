@@ -98,9 +98,7 @@ class Patch(Family):
     return _keep, WindowSampler(ds.train, cfg.data.seq_length, 1, cfg.train.seed), {}, None
 
   def controls(self, controls):
-    from chorjax.sampling.table import PLAIN
-
-    return controls.replace(**{k: v for k, v in PLAIN.items() if k != "clamp"})  # nothing drawn frame by frame
+    return controls.without_frame_draw()  # nothing drawn frame by frame
 
   def dance(self, graphdef, params, features, motion, key, num_frames, controls, prime=None):
     """Each dancer one recombination of the takes (``motion`` only counts them; no prime)."""
