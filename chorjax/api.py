@@ -21,6 +21,7 @@ from typing import Any  # noqa: F401  (the inherited fields' annotations name th
 
 import numpy as np
 
+from chorjax import formats  # noqa: F401  (the formats each command reads, writes and draws)
 from chorjax.config import (  # noqa: F401
   Config,
   check_sample_control,
@@ -87,9 +88,10 @@ class Motion(_motion.Motion):
     skeleton's nodes and their animation) or ``.html`` (the player).
     An existing file is not replaced unless ``force``."""
     from chorjax.errors import check_output, refuse_existing
-    from chorjax.output import write_motions, written_paths
+    from chorjax.formats import suffixes, written_paths
+    from chorjax.output import write_motions
 
-    path, suffix = check_output(path)
+    path, suffix = check_output(path, suffixes("write"))
     if "\x00" in str(path):
       raise UserError(f"{path!r}: a file name cannot hold a NUL character")
     refuse_existing(written_paths(path, 1, self.skeleton), force, how="force=True")  # a sidecar is the user's too

@@ -9,6 +9,11 @@ import math
 from chorjax import api
 
 
+def _readable() -> str:
+  """The suffixes of the formats chorjax reads (asked when the parser is built: a registered format counts)."""
+  return ", ".join(api.formats.suffixes("read"))
+
+
 def _add_motion_args(p) -> None:
   """``--motion`` or ``--mix``: what conditions the dance (sample, live)."""
   ids = p.add_mutually_exclusive_group()
@@ -381,14 +386,17 @@ def _add_render_command(sub) -> None:
   """`chorjax render`."""
   render = sub.add_parser("render", help="draw motion files or samples as PNG, GIF, MP4 or an HTML player")
   render.add_argument(
-    "inputs", nargs="+", metavar="INPUT", help="motion files (.csv, .npz, .bvh, .amc, .c3d), folders or cmu94"
+    "inputs",
+    nargs="+",
+    metavar="INPUT",
+    help=f"motion files ({_readable()}), folders or cmu94",
   )
   render.add_argument(
     "-o",
     "--output",
     required=True,
-    metavar="OUT.(png|gif|mp4|html)",
-    help="the file to write; its suffix picks the format",
+    metavar="OUT",
+    help=f"the file to write; its suffix picks the format: {api.formats.listed('draw')}",
   )
   render.add_argument("--frames", type=int, help="render only the first N frames")
   render.add_argument("--fps", type=_rate, default=30.0, help="frame rate of CSV inputs (default 30)")
@@ -474,7 +482,7 @@ def _add_report_commands(sub) -> None:
   _add_calibrate_command(sub)
 
   me = sub.add_parser("metrics", help="score any motion files against real takes with the eval metrics")
-  me.add_argument("motions", nargs="+", metavar="MOTION", help="motion files (.csv, .npz, .bvh, .amc) or folders")
+  me.add_argument("motions", nargs="+", metavar="MOTION", help=f"motion files ({_readable()}) or folders")
   me.add_argument(
     "--data",
     nargs="+",

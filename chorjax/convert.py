@@ -9,12 +9,14 @@ from pathlib import Path
 
 import numpy as np
 
+from chorjax import formats
 from chorjax.errors import UserError, refuse_existing
 from chorjax.output import load_character
 
-# Names that say a file of a format data convert does not write: refused as -o (they would become a folder of
-# CSVs; a folder named like a take, x.csv, still holds the converted take)
-FILE_SUFFIXES = (".glb", ".gltf", ".html", ".png", ".gif", ".mp4", ".c3d", ".amc", ".asf", ".json")
+# Names that say a file of a format data convert does not write (every registered format's but CSV's, BVH's and
+# NPZ's, which a folder of converted CSVs may be named after, and a few more): refused as -o (they would become a folder of CSVs; a folder named like a take, x.csv, still
+# holds the converted take)
+OTHER_FILES = (".gltf", ".asf", ".json", ".onnx", ".zip")
 
 
 def convert(
@@ -42,7 +44,8 @@ def convert(
   from chorjax.data.dataset import read_motions, resolve_files
 
   out = Path(output)
-  if out.suffix.lower() in FILE_SUFFIXES and not out.is_dir():  # a file's name, not a folder for the CSVs
+  files = (*(s for s in formats.FORMATS if s not in (".csv", ".bvh", ".npz")), *OTHER_FILES)
+  if out.suffix.lower() in files and not out.is_dir():  # a file's name, not a folder for the CSVs
     raise UserError(
       f"-o {out}: data convert writes a folder of CSVs or one .bvh file; for {out.suffix} read the takes and "
       "write them with chorjax sample's or Motion.write's formats"

@@ -233,9 +233,6 @@ def check_array(values, where: str) -> None:
     raise UserError(f"{where}: {kind} value {a[idx]!r} at index {list(idx)} ({int(bad.sum())} such values)")
 
 
-WRITES = (".csv", ".npz", ".bvh", ".glb", ".html")  # what a dance may be written as
-
-
 def as_path(value, what: str = "path") -> Path:
   """``value`` as a ``Path``, or a one-line ``UserError`` when it is no path (None, a number, text holding a
   NUL byte, which no file system takes)."""
@@ -247,8 +244,8 @@ def as_path(value, what: str = "path") -> Path:
   return Path(text)
 
 
-def check_output(path, allowed=WRITES) -> tuple[Path, str]:
-  """The output path and its suffix, checked to be an allowed kind."""
+def check_output(path, allowed: tuple[str, ...]) -> tuple[Path, str]:
+  """The output path and its suffix, checked to be one of the ``allowed`` suffixes."""
   out = as_path(path, "output")
   suffix = out.suffix.lower()
   if suffix not in allowed:

@@ -119,11 +119,12 @@ def write_sample(
   settings, BVH, onto the character ``skeleton`` where given, or HTML). Everything that can be refused is
   refused before the draw; an existing file is not replaced unless ``force``. Returns the paths written."""
   from chorjax.errors import check_output, refuse_existing
-  from chorjax.output import as_motions, load_character, write_motions, written_paths
+  from chorjax.formats import suffixes, written_paths
+  from chorjax.output import as_motions, load_character, write_motions
   from chorjax.run import load_run
 
   check_counts(frames=frames, num=num, seed=seed)  # before any arithmetic on them
-  out, _ = check_output(output)
+  out, _ = check_output(output, suffixes("write"))
   character = load_character(skeleton, out)
   run = load_run(workdir, checkpoint).serving("sample")
   if character is not None and run.features.skeleton.name != "mpii16":
@@ -144,7 +145,8 @@ def write_inbetween(
   it (``frames``: one count for every target, or one for all) and the target; written to ``output`` as
   :func:`write_sample` writes. Returns the paths written."""
   from chorjax.errors import check_output, refuse_existing
-  from chorjax.output import as_motions, output_paths, write_motions
+  from chorjax.formats import output_paths, suffixes
+  from chorjax.output import as_motions, write_motions
   from chorjax.run import load_run
 
   to, frames = list(to), list(frames)
@@ -155,7 +157,7 @@ def write_inbetween(
   for n in frames:
     if n < 1:
       raise UserError(f"--frames {n}: must be at least 1")
-  out, _ = check_output(output)
+  out, _ = check_output(output, suffixes("write"))
   refuse_existing(output_paths(out, num), force)
   run = load_run(workdir, checkpoint).serving("inbetween")
   run.check_drawn(sum(frames) * num, f"--frames {' '.join(map(str, frames))} x --num {num}")

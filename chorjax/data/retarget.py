@@ -103,7 +103,7 @@ def _drivers(ch: Character) -> dict:
 
 def retarget(motion: Motion, character: Character) -> np.ndarray:
   """``[T, channels]`` MOTION rows that play ``motion`` (16 joints) on ``character``."""
-  from chorjax.data.dataset import to_up_axis
+  from chorjax.data.transforms import to_up_axis  # jax: only where a character is written
 
   if motion.skeleton.joint_names != MPII16.joint_names:
     raise UserError(f"{motion.source or motion.name}: retargeting takes the 16-joint layout")

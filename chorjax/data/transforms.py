@@ -129,6 +129,17 @@ def up_axis_matrix(up_axis: str) -> np.ndarray:
   return np.asarray(table[up_axis], np.float32)
 
 
+def to_up_axis(motion, up_axis: str):
+  """The same motion expressed with another up axis (a rotation; exact)."""
+  if motion.up_axis == up_axis:
+    return motion
+  m = up_axis_matrix(up_axis).T @ up_axis_matrix(motion.up_axis)
+  # in numpy: the matrix holds 0 and +-1 only, so the result is exact either way, and jax would compile the
+  # product once per take length (3.6 of the 4.6 s of reading 300 cached Bandai takes)
+  positions = np.asarray(motion.positions, np.float32) @ np.asarray(m, np.float32).T
+  return motion.replace(positions=positions, up_axis=up_axis)
+
+
 def to_y_up(pos_Tx_x3, up_axis: str):
   """Positions whose up axis is ``up_axis`` -> the same positions with y up (a rotation)."""
   return rotate(pos_Tx_x3, up_axis_matrix(up_axis))

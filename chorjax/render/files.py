@@ -10,7 +10,6 @@ from chorjax.errors import UserError
 
 MAX_SIDE = 7680  # pixels: 8K video's width
 MAX_POSES = 200  # strip: poses per row (a row of 200 is already wider than any screen)
-RENDERS = (".png", ".gif", ".mp4", ".html")
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -42,35 +41,23 @@ def render(
   ``.html`` (the player, ``columns`` side by side, ``title``), ``.gif``/``.mp4`` (``size``: ``WxH``),
   ``.png`` (the first take's trajectories, or its filmstrip with ``strip``: ``poses`` a row, ``every``
   frames apart). ``frames``: the first N frames only. Returns the path written."""
+  from chorjax import formats
   from chorjax.data.dataset import read_motions, resolve_files
   from chorjax.errors import check_output, refuse_existing
 
   if poses > MAX_POSES:
     raise UserError(f"--poses {poses}: at most {MAX_POSES} poses in a row")
-  out, suffix = check_output(output, RENDERS)
+  out, suffix = check_output(output, formats.suffixes("draw"))
   if strip and suffix != ".png":
     raise UserError(f"{out}: --strip draws a PNG")
   refuse_existing([out], force)
   motions = [m for spec in inputs for f in resolve_files(spec) for m in read_motions(f, fps=fps)]
   if frames:
     motions = [m.replace(positions=m.positions[:frames]) for m in motions]
-  if suffix == ".html":
-    from chorjax.render.html import write_player
-
-    return write_player(motions, out, title=title or out.stem, columns=columns)
-  if suffix in (".gif", ".mp4"):
-    from chorjax.render.video import write_animation
-
-    return write_animation(motions, out, size=parse_size(size))
-  if len(motions) > 1:
-    warn(f"note: {suffix} shows one motion; rendering {motions[0].name}")
-  if strip:
-    from chorjax.render.plot import plot_strip
-
-    return plot_strip(motions[0], out, every=every, poses=poses)
-  from chorjax.render.plot import plot_trajectories
-
-  return plot_trajectories(motions[0], out)
+  drawing = formats.Drawing(
+    size=parse_size(size), columns=columns, title=title, strip=strip, every=every, poses=poses, warn=warn
+  )
+  return formats.draw(motions, out, drawing)
 
 
 def plot_file(path, output, *, split: int = 200) -> Path:
