@@ -179,6 +179,16 @@ class ModelConfig:
     minimum=0,
     below=4,  # lags 1-3: where the residual was, where it was heading and how that was turning
   )
+  mdn_carry: str = _field(
+    "free",
+    "how the carried residuals may move (model.mdn_memory): 'free', or 'smooth' (they never tremble)",
+    more=(
+      "'free': each lag's partial autocorrelation anywhere in (-1, 1). 'smooth': the autoregression's "
+      "polynomial at -1 kept at least 1, lag by lag, so the residuals gain no power at the highest frequency: "
+      "they may wander, keep a velocity or turn, but not flip sign frame to frame as marker wobble does."
+    ),
+    choices=("free", "smooth"),
+  )
   min_scale: float = _field(1e-3, "floor of MDN scales (normalized units)", minimum=0.0)
   dropout: float = _field(0.0, "dropout rate between layers (same mask at every time step)", minimum=0.0, below=1.0)
   forget_bias: float = _field(1.0, "initial forget-gate bias of (LN-)LSTM cells (notebook: 5.0)")

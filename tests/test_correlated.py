@@ -15,7 +15,7 @@ from chorjax import cli
 from chorjax.data.dataset import load_dataset
 from chorjax.families.recurrent.recurrent_model import create_model
 from chorjax.metrics import roughness
-from chorjax.models.heads import mdn_log_prob
+from chorjax.models.heads import ar_coefficients, mdn_carry, mdn_log_prob
 from chorjax.sampling.controls import PLAIN
 from chorjax.training import train_and_evaluate
 
@@ -73,6 +73,25 @@ def test_a_drawn_frame_is_the_carried_mean_plus_its_scale_and_its_residual_is_re
     np.testing.assert_allclose(held, carried[:, 3], atol=1e-6)
 
 
+@pytest.mark.parametrize("memory", [1, 2, 3])
+def test_a_smooth_carry_never_gains_power_at_the_highest_frequency(memory):
+  """``model.mdn_carry = "smooth"``: whatever the network outputs, each lag's partial autocorrelation is in
+  (-1, 1) and the autoregression's polynomial at -1 is at least 1 (its power at a sign flip every frame at most
+  white noise's), lags of either sign still reached; ``"free"`` reaches below 1."""
+  raw = 2.0 * jax.random.normal(jax.random.key(0), (20_000, memory * 5))
+  for smooth in (True, False):
+    partial = mdn_carry(raw, 5, memory, smooth)
+    assert partial.shape == (20_000, memory, 1, 5) and float(jnp.abs(partial).max()) < 1
+    phi = ar_coefficients(list(jnp.moveaxis(partial, -3, 0)))
+    at_nyquist = 1 - sum(p * (-1.0) ** (k + 1) for k, p in enumerate(phi))  # 1 - sum_k phi_k (-1)^k
+    if smooth:
+      assert float(at_nyquist.min()) >= 1 - 1e-4
+      if memory > 1:  # the later lags take either sign
+        assert float(partial[:, 1:].min()) < -0.2 and float(partial[:, 1:].max()) > 0.2
+    else:
+      assert float(at_nyquist.min()) < 0.5
+
+
 def _plain_jitter(run_dir, tmp_path, name: str) -> float:
   """The jitter of 400 frames of ``chorjax sample RUN --plain``, whose settings say every draw control is off."""
   out = tmp_path / f"{name}.npz"
@@ -110,7 +129,9 @@ def test_what_a_correlated_draw_cannot_be_given_is_refused_in_one_line(tmp_path,
   err = capsys.readouterr().err
   assert code == 2 and "train.feedback" in err and len(err.strip().splitlines()) == 1
   assert not (tmp_path / "r").exists()
-  code = cli.main(["sample", str(tmp_path / "r"), "-o", str(tmp_path / "s.csv"), "--plain", "--noise-smoothing", "0.5"])
+  code = cli.main(
+    ["sample", str(tmp_path / "r"), "-o", str(tmp_path / "s.csv"), "--plain", "--noise-smoothing", "0.5"]
+  )
   err = capsys.readouterr().err
   assert code == 2 and "--plain" in err and "--noise-smoothing" in err
 

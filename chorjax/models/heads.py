@@ -69,13 +69,27 @@ def mdn_params(out_xP, num_mixtures: int, dim: int, isotropic: bool, min_scale: 
   return logpi, mu, scale
 
 
-def mdn_carry(out_xP, scales: int, memory: int):
+def mdn_carry(out_xP, scales: int, memory: int, smooth: bool = False):
   """A head's carry coefficients ``[..., M, 1, S]`` in (-1, 1) (``M = memory``), M per coordinate shared by
   every component: the partial autocorrelations of the residuals (the frame minus a component's mean) at lags
   1 to M, which :func:`ar_coefficients` turns into how much of each earlier frame's residual the components
   carry into this frame's means (:meth:`MDNHead.carried`). Shared, a component the draw switches to continues
-  from where the last frame was, as the one it leaves would."""
-  return jnp.tanh(out_xP[..., -memory * scales :].reshape(out_xP.shape[:-1] + (memory, 1, scales)))
+  from where the last frame was, as the one it leaves would.
+
+  ``smooth`` (``model.mdn_carry``): the autoregression's polynomial at -1, ``prod_k f_k`` with ``f_k = 1 -
+  kappa_k (-1)^k`` in (0, 2), stays at least 1 lag by lag: ``f_k`` is drawn between ``1 / (f_1 ... f_(k-1))``
+  and 2. So the residuals gain no power at the highest frequency (a flip of sign every frame), while a lag may
+  still take either sign where the others leave room."""
+  raw = out_xP[..., -memory * scales :].reshape(out_xP.shape[:-1] + (memory, 1, scales))
+  if not smooth:
+    return jnp.tanh(raw)
+  partial, gain = [], 1.0
+  for k in range(memory):
+    low = 1.0 / gain
+    f = low + (2.0 - low) * jax.nn.sigmoid(raw[..., k, :, :])
+    partial.append((1.0 - f) * (-1.0) ** (k + 1))
+    gain = gain * f
+  return jnp.stack(partial, axis=-3)
 
 
 def ar_coefficients(partial):
@@ -185,10 +199,11 @@ class MDNHead(nnx.Module):
     basis: bool = False,
     memory: int = 0,
     white: int = 0,
+    smooth: bool = False,
     rngs: nnx.Rngs,
   ):
     self.dim, self.num_mixtures, self.isotropic, self.min_scale = dim, num_mixtures, isotropic, min_scale
-    self.memory, self.white = memory, white
+    self.memory, self.white, self.smooth = memory, white, smooth
     self.out = nnx.Linear(hidden, self.num_outputs, rngs=rngs)
     self.basis = nnx.Param(jnp.eye(dim)) if basis else None  # a Param so checkpoints carry it; never trained
 
@@ -232,7 +247,7 @@ class MDNHead(nnx.Module):
     autocorrelations :func:`mdn_carry` predicts): the model's mean plus where its last residuals were, where
     they were heading and how that was turning. Returns ``(logpi, means, scale)``."""
     logpi, mu, scale = self.params(out_xP)
-    partial = jnp.moveaxis(mdn_carry(out_xP, self.num_scales, self.memory), -3, 0)
+    partial = jnp.moveaxis(mdn_carry(out_xP, self.num_scales, self.memory, self.smooth), -3, 0)
     if self.white:  # the last axes carry nothing: drawn white about the means
       partial = partial * (jnp.arange(self.num_scales) < self.num_scales - self.white)
     carried = mu

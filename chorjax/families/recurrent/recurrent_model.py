@@ -45,6 +45,7 @@ class ChorModel(nnx.Module):
         basis=cfg.pca_basis,
         memory=cfg.memory,
         white=white,
+        smooth=cfg.mdn_carry == "smooth",
         rngs=rngs,
       )
     else:
