@@ -28,6 +28,7 @@ from chorjax.config import (  # noqa: F401
   key_docs,
   key_help,
   load_config,
+  parse_override,
   reference_markdown,
   to_toml,
   toml_value,
@@ -53,7 +54,7 @@ from chorjax.sample import write_inbetween, write_sample  # noqa: F401
 # What every command does, as functions (the command line calls these and prints what they return).
 from chorjax.sampling.calibrate import CALIBRATION_DANCERS, LABELLED_DANCERS, calibrate_run  # noqa: F401
 from chorjax.sampling.controls import Controls  # noqa: F401
-from chorjax.sampling.table import CALIBRATED, PLAIN, RECORDS  # noqa: F401
+from chorjax.sampling.table import CALIBRATED, FLAGGED, PLAIN, RECORDS  # noqa: F401
 from chorjax.sampling.table import SWITCHES as CONTROL_SWITCHES  # noqa: F401
 from chorjax.scoring import score_to  # noqa: F401
 from chorjax.sweeps import SWEEP_DESCRIPTION, SWEEP_FORMAT, compare_to, run_sweep, train_command  # noqa: F401

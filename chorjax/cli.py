@@ -216,21 +216,25 @@ def _counts(args, **minimum) -> None:
 
 
 def _controls(args) -> dict:
-  """The sampling flags given on the command line, checked as the same keys are in a config file
-  (unset ones are None: the run's calibration, then its config)."""
-  numbers = [k for k in api.Controls.names() if k not in api.CONTROL_SWITCHES]
-  given = {k: getattr(args, k) for k in numbers}
-  for name, value in given.items():
-    if value is not None:
-      api.check_sample_control(name, value, f"--{name.replace('_', '-')}")
-  switches = {k: getattr(args, k) for k in api.CONTROL_SWITCHES}
-  chosen = {**given, **switches}
+  """The sampling flags and ``--set sample.KEY=VALUE`` keys given on the command line, checked as the same keys
+  are in a config file (unset ones are None: the run's calibration, then its config)."""
+  given = {k: getattr(args, k, None) for k in api.Controls.names()}
+  where = {k: f"--{k.replace('_', '-')}" for k in given}
+  for text in getattr(args, "set", []):
+    key, value = api.parse_override(text)
+    section, _, name = key.partition(".")
+    if section != "sample" or name not in given:
+      raise UserError(f"--set {text}: expected sample.KEY=VALUE, KEY a sampling control ({', '.join(given)})")
+    if given[name] is not None:
+      raise UserError(f"--set {text}: sample.{name} is given twice")
+    given[name], where[name] = value, f"--set sample.{name}"
+  given = {k: v if v is None else api.check_sample_control(k, v, where[k]) for k, v in given.items()}
   if getattr(args, "plain", False):
-    both = [k for k in api.PLAIN if chosen[k] is not None]
+    both = [k for k in api.PLAIN if given[k] is not None]
     if both:
-      raise UserError(f"--plain is the model's own draw: not with --{both[0].replace('_', '-')}")
-    chosen.update(api.PLAIN)
-  return chosen
+      raise UserError(f"--plain is the model's own draw: not with {where[both[0]]}")
+    given.update(api.PLAIN)
+  return given
 
 
 def reference_markdown() -> str:

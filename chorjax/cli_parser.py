@@ -64,19 +64,29 @@ def _key_flag(key: str, whose: str) -> str:
 
 
 def _add_sampling_args(p, seed: bool = True) -> None:
-  """Sampling controls shared by `sample`, `eval` and `export`; unset ones come from the run's calibration.json
-  (`chorjax calibrate`), else its [sample] config. The help lists the draw's apart from decoding's."""
+  """Sampling controls shared by `sample`, `eval`, `export` and `live`; unset ones come from the run's
+  calibration.json (`chorjax calibrate`), else its [sample] config. The help lists the draw's apart from
+  decoding's; the controls without a flag of their own are opt-ins, set by `--set sample.KEY=VALUE`."""
   groups = {
     "draw": p.add_argument_group("draw", "how each frame is drawn (sampling controls)"),
     "decoding": p.add_argument_group("decoding", "how drawn features become joints"),
   }
-  for name, record in api.RECORDS.items():
+  for name in api.FLAGGED:
+    record = api.RECORDS[name]
     flag, group = f"--{name.replace('_', '-')}", groups[record.role]
     if record.metavar:  # a number: its type is its default's
       kind = type(getattr(api.Controls(), name))
       group.add_argument(flag, type=kind, metavar=record.metavar, help=_control_help(name))
     else:
       group.add_argument(flag, action=argparse.BooleanOptionalAction, help=_control_help(name))
+  opt_in = ", ".join(n for n in api.RECORDS if n not in api.FLAGGED)
+  p.add_argument_group("opt-in", "draw controls the default draw leaves off").add_argument(
+    "--set",
+    action="append",
+    default=[],
+    metavar="sample.KEY=VALUE",
+    help=f"a [sample] key for this draw (repeatable; `chorjax config keys sample`): {opt_in}",
+  )
   groups["draw"].add_argument(
     "--plain",
     action="store_true",

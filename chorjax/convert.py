@@ -14,8 +14,8 @@ from chorjax.errors import UserError, refuse_existing
 from chorjax.output import load_character
 
 # Names that say a file of a format data convert does not write (every registered format's but CSV's, BVH's and
-# NPZ's, which a folder of converted CSVs may be named after, and a few more): refused as -o (they would become a folder of CSVs; a folder named like a take, x.csv, still
-# holds the converted take)
+# NPZ's, which a folder of converted CSVs may be named after, and a few more): refused as -o, they would become
+# a folder of CSVs (a folder named like a take, x.csv, still holds the converted take)
 OTHER_FILES = (".gltf", ".asf", ".json", ".onnx", ".zip")
 
 

@@ -38,8 +38,8 @@ def test_train_sample_score_and_write_through_the_api_equal_the_command_line(tmp
         "90",
         "--seed",
         "3",
-        "--pi-temperature",
-        "0.8",
+        "--set",
+        "sample.pi_temperature=0.8",
       ]
     )
     == 0

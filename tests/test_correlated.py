@@ -130,10 +130,10 @@ def test_what_a_correlated_draw_cannot_be_given_is_refused_in_one_line(tmp_path,
   assert code == 2 and "train.feedback" in err and len(err.strip().splitlines()) == 1
   assert not (tmp_path / "r").exists()
   code = cli.main(
-    ["sample", str(tmp_path / "r"), "-o", str(tmp_path / "s.csv"), "--plain", "--noise-smoothing", "0.5"]
+    ["sample", str(tmp_path / "r"), "-o", str(tmp_path / "s.csv"), "--plain", "--set", "sample.noise_smoothing=0.5"]
   )
   err = capsys.readouterr().err
-  assert code == 2 and "--plain" in err and "--noise-smoothing" in err
+  assert code == 2 and "--plain" in err and "sample.noise_smoothing" in err
 
 
 @pytest.mark.parametrize("prime", [False, True])

@@ -61,7 +61,12 @@ FAMILIES["cvae"] = [
   "inbetween.manifold_steps=2",
 ]
 
+
 # name -> (run, the command's arguments after the run directory; "{out}" is the output file)
+def _keys(*settings: str) -> list[str]:
+  return [a for s in settings for a in ("--set", f"sample.{s}")]
+
+
 SAMPLE = ["sample", "{run}", "-o", "{out}", "--frames", "24"]
 BETWEEN = ["inbetween", "{run}", "--from", f"{TAKE}:100:6", "--to", f"{TAKE}:130", "--frames", "9", "-o", "{out}"]
 COMMANDS = {
@@ -69,12 +74,13 @@ COMMANDS = {
   "quickstart_num2.csv": ("quickstart", [*SAMPLE, "--num", "2", "--motion", "1"]),
   "quickstart_plain.csv": (
     "quickstart",
-    [*SAMPLE, *"--noise-smoothing 0 --persistence 0 --crossfade 0 --pace 0 --scale-cap 0 --seed 1".split()],
+    [*SAMPLE, *_keys("noise_smoothing=0", "persistence=0", "crossfade=0", "scale_cap=0"), "--pace", "0", "--seed", "1"],
   ),
-  "quickstart_greedy.csv": ("quickstart", [*SAMPLE, "--greedy", "--no-foot-lock", "--no-ground"]),
+  "quickstart_greedy.csv": ("quickstart", [*SAMPLE, "--set", "sample.greedy=true", "--no-foot-lock", "--no-ground"]),
   "quickstart_controls.csv": (
     "quickstart",
-    [*SAMPLE, *"--pi-temperature 0.5 --sigma-temperature 0.7 --noise-order 2 --pace 1 --no-clamp-steps".split()],
+    [*SAMPLE, *_keys("pi_temperature=0.5", "noise_order=2", "clamp_steps=false"), "--sigma-temperature", "0.7"]
+    + ["--pace", "1"],
   ),
   "quickstart_mix_prime.csv": ("quickstart", [*SAMPLE, "--mix", "2:0.5,3:0.5", "--prime", f"{TAKE}:10:8"]),
   "quickstart.bvh": ("quickstart", [*SAMPLE, "--seed", "2"]),

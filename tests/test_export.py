@@ -141,7 +141,7 @@ def test_other_cells_and_heads_export_with_the_same_draw(cell, head, every_frame
     f"model.condition_every_frame={str(every_frame).lower()}",
     f"model.mdn_memory={memory}",
   )
-  assert cli.main(["export", str(run_dir), "-o", str(tmp_path / "d.onnx"), "--noise-smoothing", "0.5"]) == 0
+  assert cli.main(["export", str(run_dir), "-o", str(tmp_path / "d.onnx"), "--set", "sample.noise_smoothing=0.5"]) == 0
   dancer = OnnxDancer(tmp_path / "d.onnx")
   run = load_run(run_dir)
   frames = 120
@@ -180,7 +180,7 @@ def exit_code(args) -> int:
 def test_what_cannot_be_exported_is_refused_in_one_line_and_nothing_is_written(quickstart, tmp_path, capsys):
   out = ["-o", str(tmp_path / "d.onnx")]
   for flags, said in [
-    ([*out, "--greedy"], "greedy"),
+    ([*out, "--set", "sample.greedy=true"], "greedy"),
     (["-o", str(tmp_path / "d.glb")], "must end in .onnx"),
     ([*out, "--batch", "0"], "--batch"),
   ]:

@@ -154,7 +154,8 @@ def test_sample_cli_writes_csv_npz_with_blends_and_primes(run_dir, tmp_path, cap
         "3",
         "--prime",
         f"{TAKE}:100:10",
-        "--greedy",
+        "--set",
+        "sample.greedy=true",
         "--checkpoint",
         "3",
       ]
@@ -370,7 +371,16 @@ def test_sample_cli_smoothing_persistence_and_rigid_bones(run_dir, tmp_path, cap
   from chorjax.data.motion import bone_length_cv
 
   out = tmp_path / "s.npz"
-  flags = ["--frames", "200", "--noise-smoothing", "0.9", "--persistence", "4", "--pi-temperature", "1"]
+  flags = [
+    "--frames",
+    "200",
+    "--set",
+    "sample.noise_smoothing=0.9",
+    "--set",
+    "sample.persistence=4",
+    "--set",
+    "sample.pi_temperature=1",
+  ]
   assert cli.main(["sample", str(run_dir), "-o", str(out), *flags, "--rigid-bones"]) == 0
   m = read_npz(out)[0]
   assert bone_length_cv(m.positions, m.skeleton).max() < 1e-4
@@ -378,7 +388,11 @@ def test_sample_cli_smoothing_persistence_and_rigid_bones(run_dir, tmp_path, cap
   loose = tmp_path / "loose.npz"
   assert cli.main(["sample", str(run_dir), "-o", str(loose), *flags]) == 0
   assert bone_length_cv(read_npz(loose)[0].positions, m.skeleton).max() > 1e-3
-  for bad in (["--noise-smoothing", "1"], ["--persistence", "-1"], ["--pi-temperature", "nan"]):
+  for bad in (
+    ["--set", "sample.noise_smoothing=1"],
+    ["--set", "sample.persistence=-1"],
+    ["--set", "sample.pi_temperature=nan"],
+  ):
     assert cli.main(["sample", str(run_dir), "-o", str(tmp_path / "bad.csv"), *bad]) == 2
     assert capsys.readouterr().err.count("\n") == 1
   assert not (tmp_path / "bad.csv").exists()
@@ -445,7 +459,7 @@ def test_clamp_steps_holds_every_change_to_the_training_changes(loaded, run_dir,
   old = dataclasses.replace(loaded, features=dataclasses.replace(f, **dict.fromkeys(f.STEPS)))
   np.testing.assert_array_equal(old.ranged(old.sampling(clamp_steps=True)).features.step_high, f.step_high)
   out = tmp_path / "s.npz"
-  assert cli.main(["sample", str(run_dir), "-o", str(out), "--frames", "100", "--clamp-steps"]) == 0
+  assert cli.main(["sample", str(run_dir), "-o", str(out), "--frames", "100", "--set", "sample.clamp_steps=true"]) == 0
   assert json.loads(str(np.load(out)["meta"]))["settings"]["clamp_steps"] is True
 
 
@@ -516,9 +530,9 @@ def test_scale_cap_holds_draws_to_the_scales_the_model_predicts_on_its_data(load
   ceiled = loaded.ranged(controls).features.scale_ceiling
   np.testing.assert_allclose(ceiled, scale_ceiling(loaded.graphdef, loaded.params, train, seq, 0.9))
   out = tmp_path / "s.npz"
-  assert cli.main(["sample", str(run_dir), "-o", str(out), "--frames", "100", "--scale-cap", "0.95"]) == 0
+  assert cli.main(["sample", str(run_dir), "-o", str(out), "--frames", "100", "--set", "sample.scale_cap=0.95"]) == 0
   assert json.loads(str(np.load(out)["meta"]))["settings"]["scale_cap"] == 0.95
-  assert cli.main(["sample", str(run_dir), "-o", str(tmp_path / "t.npz"), "--scale-cap", "1.5"]) == 2
+  assert cli.main(["sample", str(run_dir), "-o", str(tmp_path / "t.npz"), "--set", "sample.scale_cap=1.5"]) == 2
   assert "scale_cap" in capsys.readouterr().err
 
 
@@ -538,7 +552,7 @@ def test_foot_lock_and_ground_need_the_canonical_representation(run_dir, tmp_pat
     "sample RUN -o OUT.csv --num -2",
     "sample RUN -o OUT.csv --mix 4:-1,5:2",
     "sample RUN -o OUT.csv --mix 4:nan",
-    "sample RUN -o OUT.csv --pi-temperature -1",
+    "sample RUN -o OUT.csv --set sample.pi_temperature=-1",
     "sample RUN -o OUT.csv --sigma-temperature inf",
     "eval RUN --data cmu94 -o OUT.json --num 0",
     "eval RUN --data cmu94 -o OUT.json --frames 1",

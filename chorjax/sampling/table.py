@@ -29,6 +29,8 @@ class Control:
 
   Attributes:
     role: "draw" (how a frame is drawn) or "decoding" (how drawn features become joints).
+    flag: a flag of its own on ``sample``, ``eval``, ``export`` and ``live`` (the three draw controls of the
+      default draw, and decoding's); the others are opt-ins, set as ``--set sample.KEY=VALUE``.
     metavar: the flag's metavar for a number (``--pace GAIN``); None for an on/off switch.
     plain: the value in the model's own draw (``--plain``); decoding keeps the run's.
     grid: the values calibration tries for a white-noise MDN (empty: not searched).
@@ -41,6 +43,7 @@ class Control:
   """
 
   role: str = "draw"
+  flag: bool = False
   metavar: str | None = None
   plain: Any = _RUN
   grid: tuple = ()
@@ -78,6 +81,7 @@ class ControlFields:
     # held-out jitter 1.35 -> 0.88, FID_g 2.7 -> 1.8x). The white grid's ends bound 29 of the 39 chosen
     # temperatures of the benchmark's runs (0.9: 24, most on cmu94 and salsa; 1.2: 5).
     Control(
+      flag=True,
       metavar="S",
       plain=1.0,
       grid=(0.9, 1.0, 1.2),
@@ -135,7 +139,7 @@ class ControlFields:
   pace: float = control(
     0.0,
     "pace governor gain g: scale temperature x m = (training / own pace)^g in 0.5-2, persistence x min(m, 1/m)^2",
-    Control(metavar="GAIN", plain=0.0, recorded=True),
+    Control(flag=True, metavar="GAIN", plain=0.0, recorded=True),
     more=(
       "The pace is how far the joints move relative to the root in half a second, turning included (the "
       "pose features where the run has no canonical features), averaged over about 5 s: a dancer who slows "
@@ -161,14 +165,14 @@ class ControlFields:
   rigid_bones: bool = control(
     False,
     "decode with the training takes' mean bone lengths: bones cannot stretch",
-    Control(role="decoding"),
+    Control(role="decoding", flag=True),
     more="Each bone keeps its direction.",
     resumable=True,
   )
   foot_lock: bool = control(
     False,
     "canonical runs: a foot in contact with the floor does not slide",
-    Control(role="decoding", grid=(True, False), carried_grid=(True, False)),  # canonical runs only
+    Control(role="decoding", flag=True, grid=(True, False), carried_grid=(True, False)),  # canonical runs only
     more=(
       "The body travels by what its legs do: the slide of the feet in contact, averaged over 17 frames, is taken "
       "back, so a slide that lasts is gone while a foot's tremble does not shake the whole body."
@@ -178,7 +182,7 @@ class ControlFields:
   ground: bool = control(
     False,
     "canonical runs: feet in contact with the floor stand on the training floor, no floating",
-    Control(role="decoding"),
+    Control(role="decoding", flag=True),
     more=(
       "The body is moved up or down to the floor smoothly (averaged over 17 frames), never faster than the takes' "
       "fastest vertical root step."
@@ -188,7 +192,7 @@ class ControlFields:
   clamp: bool = control(
     False,
     "clip every generated frame to the training features' range before it is fed back",
-    Control(plain=False),
+    Control(flag=True, plain=False),
     more="Feature by feature: the model is never fed a frame unlike its training inputs.",
     resumable=True,
   )
@@ -209,6 +213,8 @@ RECORDS = _records()
 NAMES = tuple(RECORDS)
 SWITCHES = tuple(n for n, c in RECORDS.items() if c.metavar is None)  # the on/off controls
 DECODING = tuple(n for n, c in RECORDS.items() if c.role == "decoding")
+FLAGGED = tuple(n for n, c in RECORDS.items() if c.flag)  # a flag each; the others: --set sample.KEY=VALUE
+DRAW_FLAGS = tuple(n for n in FLAGGED if RECORDS[n].role == "draw")
 TRACED = tuple(n for n, c in RECORDS.items() if c.traced)
 HEAD = tuple(n for n, c in RECORDS.items() if c.head)
 # The model's own draw (``--plain``): full temperature, white noise, nothing held, smoothed, governed or clipped;

@@ -22,44 +22,31 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results.json"
+
+
+def _keys(**controls) -> list[str]:
+  """``--set sample.KEY=VALUE`` for each of the draw's opt-in controls."""
+  return [a for k, v in controls.items() for a in ("--set", f"sample.{k}={json.dumps(v)}")]
+
+
+# the opt-in controls (no flag of their own) as the model's own draw has them
+OPT_INS_OFF = _keys(
+  pi_temperature=1, noise_smoothing=0, noise_order=1, persistence=0, crossfade=0, scale_cap=0, clamp_steps=False
+)
 VARIANTS = {
   "shipped": [],
   "plain": ["--plain"],
   # the own draw, but always the most likely component: what switching components costs
-  "plain, most likely component": [
-    "--pi-temperature",
-    "0",
-    "--sigma-temperature",
-    "1",
-    "--noise-smoothing",
-    "0",
-    "--noise-order",
-    "1",
-    "--persistence",
-    "0",
-    "--crossfade",
-    "0",
-    "--pace",
-    "0",
-    "--scale-cap",
-    "0",
-    "--no-clamp",
-    "--no-clamp-steps",
-  ],
+  "plain, most likely component": [*OPT_INS_OFF, *_keys(pi_temperature=0), "--sigma-temperature", "1", "--pace", "0"]
+  + ["--no-clamp"],
   # the own draw with every frame clipped to the training range (sample.clamp): what keeps it in bounds
-  "plain, clamped": [
-    *("--pi-temperature", "1", "--sigma-temperature", "1", "--noise-smoothing", "0", "--noise-order", "1"),
-    *("--persistence", "0", "--crossfade", "0", "--pace", "0", "--scale-cap", "0", "--clamp", "--no-clamp-steps"),
-  ],
+  "plain, clamped": [*OPT_INS_OFF, "--sigma-temperature", "1", "--pace", "0", "--clamp"],
   # and held to the training takes' pace (sample.pace 2): the draw of at most three controls, measured
-  "plain, clamped, paced": [
-    *("--pi-temperature", "1", "--sigma-temperature", "1", "--noise-smoothing", "0", "--noise-order", "1"),
-    *("--persistence", "0", "--crossfade", "0", "--pace", "2", "--scale-cap", "0", "--clamp", "--no-clamp-steps"),
-  ],
-  "no noise filter": ["--noise-smoothing", "0", "--noise-order", "1"],
+  "plain, clamped, paced": [*OPT_INS_OFF, "--sigma-temperature", "1", "--pace", "2", "--clamp"],
+  "no noise filter": _keys(noise_smoothing=0, noise_order=1),
   "no pace governor": ["--pace", "0"],
-  "no persistence, crossfade": ["--persistence", "0", "--crossfade", "0"],
-  "no clamps, scale cap": ["--no-clamp", "--no-clamp-steps", "--scale-cap", "0"],
+  "no persistence, crossfade": _keys(persistence=0, crossfade=0),
+  "no clamps, scale cap": ["--no-clamp", *_keys(clamp_steps=False, scale_cap=0)],
 }
 # ratios to the held-out takes' own figures, and FIDs over the training takes' own distance
 COLUMNS = ("jitter", "speed", "root_travel", "movement_min", "movement_max", "fid_k", "fid_g", "root_step_max")
@@ -219,9 +206,22 @@ def main() -> None:
     for variant in args.variants:
       if variant in results.get(name, {}):
         continue
-      results.setdefault(name, {})[variant] = measure(run, variant, args.frames, args.seeds)
-      RESULTS.write_text(json.dumps(results, indent=1) + "\n")
-      print(name, variant, results[name][variant], flush=True)
+      figures = measure(run, variant, args.frames, args.seeds)
+      results = record(name, variant, figures)
+      print(name, variant, figures, flush=True)
+
+
+def record(name: str, variant: str, figures: dict) -> dict:
+  """Adds one run's figures for one draw to ``results.json`` under a lock, merged with what the file holds now
+  (several ablations may run side by side). Returns the whole file."""
+  import fcntl
+
+  with open(RESULTS.with_suffix(".lock"), "w") as lock:
+    fcntl.flock(lock, fcntl.LOCK_EX)
+    results = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
+    results.setdefault(name, {})[variant] = figures
+    RESULTS.write_text(json.dumps(results, indent=1) + "\n")
+  return results
 
 
 if __name__ == "__main__":
