@@ -46,7 +46,7 @@ from chorjax.evaluate import evaluate_to  # noqa: F401
 from chorjax.export import write_blender_addon, write_onnx, write_web  # noqa: F401
 from chorjax.live import run_live  # noqa: F401
 from chorjax.render.files import plot_file, render  # noqa: F401
-from chorjax.reports import METRIC_KEYS, check_report, metric_lines, takes_table  # noqa: F401
+from chorjax.reports import check_report, metric_keys, metric_lines, takes_table  # noqa: F401
 from chorjax.run import Run as _Run
 from chorjax.runtime import keep_compiled_programs, keep_freed_memory  # noqa: F401
 from chorjax.sample import write_inbetween, write_sample  # noqa: F401

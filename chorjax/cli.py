@@ -174,7 +174,7 @@ def _eval(args) -> int:
   _counts(args, frames=2, num=1)
   kw = {k: getattr(args, k) for k in ("frames", "num", "checkpoint", "seed", "seeds")}
   result, out = api.evaluate_to(args.workdir, args.data, args.output, force=args.force, **kw, **_controls(args))
-  print("\n".join(api.metric_lines(result, ("heldout_loss", *api.METRIC_KEYS))))
+  print("\n".join(api.metric_lines(result, ("heldout_loss", *api.metric_keys()))))
   print(f"wrote {out}")
   return 0
 
@@ -190,7 +190,7 @@ def _metrics(args) -> int:
   _counts(args, window=4, splits=1)
   kw = {"window": args.window, "splits": args.splits, "seed": args.seed}
   result, out = api.score_to(args.motions, args.data, args.output, force=args.force, **kw)
-  print("\n".join(api.metric_lines(result, api.METRIC_KEYS)))
+  print("\n".join(api.metric_lines(result, api.metric_keys())))
   if out is not None:
     print(f"wrote {out}")
   return 0

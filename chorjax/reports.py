@@ -7,33 +7,19 @@ from pathlib import Path
 
 import numpy as np
 
+from chorjax.scoring import METRICS
 from chorjax.single_take import KEYS as SINGLE_TAKE_KEYS
 
 # printed only where measured: the single-take measures (takes of up to two minutes; two samples for inter_)
 WHERE_MEASURED = tuple(k for k in SINGLE_TAKE_KEYS if k != "coverage_together")
-# The keys `chorjax metrics` and `chorjax eval` print (every one is in the JSON; see chorjax/scoring.py).
-METRIC_KEYS = (
-  "movement_first",
-  "movement_last",
-  "movement_min",
-  "movement_max",
-  "jitter",
-  "jitter_max",
-  "bone_cv_mean",
-  "bone_cv_max",
-  "root_step_max",
-  "fid_k",
-  "div_k",
-  "fid_g",
-  "div_g",
-  "pfc",
-  "foot_sliding",
-  "airborne",
-  "novelty",
-  "speed",
-  "root_travel",
-  *WHERE_MEASURED,
-)
+
+
+def metric_keys() -> tuple[str, ...]:
+  """The keys `chorjax metrics` and `chorjax eval` print, metric by metric (every one is in the JSON): what each
+  metric registered in chorjax/scoring.py says it prints, asked when printing (a metric registered counts)."""
+  return tuple(k for m in METRICS.values() for k in m.printed)
+
+
 INFO_COLUMNS = ("take", "frames", "joints", "fps", "x range", "y range", "z range")
 BONE_COLUMNS = ("bone len (mean)", "bone CV median", "bone CV max")
 CHECK_COLUMNS = ("take", "frames", "fps", "seconds", "joints", "up", "units", "bone CV", "held", "jumps")

@@ -51,6 +51,8 @@ Keys (a value, or ``{"mean", "sd"}`` over several motions or reference splits):
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -89,51 +91,62 @@ def upgrade(result: dict) -> dict:
   return out
 
 
-def _movement_and_jitter(motions, reference, skeleton: Skeleton, fps: float, segment: int, train=None) -> dict:
-  """The movement and jitter keys; with ``train`` (the training takes, where the reference is held-out
-  takes), ``movement_min_train`` / ``movement_max_train``: the calmest and the busiest segment of real dance
-  by this dancer, in segments of ``segment`` frames (a take shorter than that is one)."""
-  lag = max(round(0.5 * fps), 1)
-  ref_disp, ref_rough = metrics.reference_rates(reference, skeleton.root, lag)
-  curve = lambda m, length: metrics.movement_curve(m, skeleton.root, lag, ref_disp, length)
-  real = np.concatenate([curve(t, segment) for t in train]) if train else None
-  segment = min(segment, min(len(m) for m in motions))
-  moves = [curve(m, segment) for m in motions]
-  jitters = [metrics.jitter_curve(m, ref_rough, segment) for m in motions]
-  each = {
-    "movement_min": [float(c.min()) for c in moves],
-    "movement_max": [float(c.max()) for c in moves],
-    "jitter_max": [float(c.max()) for c in jitters],
-  }
-  return {
-    "segment_frames": segment,
-    "per_motion": each,
-    "movement_first": spread([c[0] for c in moves]),
-    "movement_last": spread([c[-1] for c in moves]),
-    **{k: spread(v) for k, v in each.items()},
-    "jitter": spread([metrics.roughness(m) / ref_rough for m in motions]),
-    "movement_curve": np.mean([c for c in moves if len(c) == len(moves[0])], axis=0).tolist(),
-    "movement_lag_frames": lag,
-    "movement_min_train": None if real is None else float(real.min()),
-    "movement_max_train": None if real is None else float(real.max()),
-  }
+@dataclasses.dataclass
+class Judged:
+  """What every metric reads: the motions and the reference takes (``[T, J, 3]`` each, y-up), their skeleton and
+  rate, the training takes and the real takes that are not training takes where known (None otherwise), the
+  options of :func:`score`, and the reference's mean body size (``size``)."""
+
+  motions: list
+  reference: list
+  skeleton: Skeleton
+  fps: float
+  train: list | None
+  unseen: list | None
+  window: int
+  splits: int
+  segment: int
+  seed: int
+  size: float
+
+  def kinetic(self, windows):
+    """Windows ``[N, W, J, 3]`` -> FID_k's rows (kinetic features, in body sizes)."""
+    return [metrics.kinetic_features(w / self.size, self.fps) for w in windows]
+
+  def distribution(self, motions, features, floor: float, diversity: bool = True) -> tuple:
+    """:func:`_distribution` of ``motions`` against the reference with the options."""
+    return _distribution(motions, self.reference, features, self.window, self.splits, self.seed, floor, None, diversity)
 
 
-def _root_steps(motions, reference, skeleton: Skeleton) -> dict:
-  """The largest per-frame root displacement of each motion / the largest in the reference (teleports)."""
-  largest = lambda p: float(np.linalg.norm(np.diff(p[:, skeleton.root], axis=0), axis=-1).max())
-  ref = max(largest(t) for t in reference)
-  each = [largest(m) / ref for m in motions]
-  return {"root_step_max": spread(each), "per_motion": {"root_step_max": each}}
+@dataclasses.dataclass(frozen=True)
+class Metric:
+  """One metric: ``measure`` maps a :class:`Judged` to its keys (and ``per_motion`` entries, merged);
+  ``printed``: the keys ``chorjax metrics`` and ``chorjax eval`` print, in order (every key is in the JSON)."""
+
+  name: str
+  printed: tuple[str, ...]
+  measure: Callable[[Judged], dict]
+
+  @property
+  def summary(self) -> str:
+    """The first line of ``measure``'s docstring: what the docs say of it."""
+    return (self.measure.__doc__ or "").strip().splitlines()[0]
 
 
-def _bones(motions, skeleton: Skeleton) -> dict:
-  cvs = [bone_length_cv(m, skeleton) for m in motions]
-  return {
-    "bone_cv_mean": spread([c.mean() for c in cvs]),
-    "bone_cv_max": spread([c.max() for c in cvs]),
-    "bone_cv_median": spread([np.median(c) for c in cvs]),
-  }
+METRICS: dict[str, Metric] = {}  # by name, in the order they are printed
+
+
+def metric(name: str, *printed: str):
+  """Registers the decorated function as the metric ``name`` (``printed``: its keys ``chorjax metrics``
+  prints). A new metric is one function and this line; ``score``, the reports and ``docs/metrics.md`` follow."""
+
+  def register(measure: Callable[[Judged], dict]) -> Callable[[Judged], dict]:
+    if name in METRICS:
+      raise ValueError(f"metric {name!r} is registered twice")
+    METRICS[name] = Metric(name, printed, measure)
+    return measure
+
+  return register
 
 
 def _window_rows(takes, window: int, hop: int, features) -> list:
@@ -236,38 +249,153 @@ class PoseDistribution:
     return float(np.mean(fids) / max(np.mean(reals), 1e-9))
 
 
-def _novelty(motions, reference, train, unseen, skeleton: Skeleton, size: float, window: int) -> dict:
-  wins = lambda takes, hop: np.concatenate([metrics.windows(t, window, hop) for t in takes]) / size
-  if train:
-    train_w = wins(train, window // 4)
-    real = metrics.novelty(wins(unseen, window // 4), train_w, skeleton.root) if unseen else None
-    return {"novelty": metrics.novelty(wins(motions, window), train_w, skeleton.root), "novelty_real": real}
-  others = lambda i: [t for k, t in enumerate(reference) if k != i]
+# The metrics, in the order ``chorjax metrics`` prints them.
+
+
+@metric("movement", "movement_first", "movement_last", "movement_min", "movement_max", "jitter", "jitter_max")
+def movement(j: Judged) -> dict:
+  """Movement over 0.5 s and jitter, segment by segment, against the reference's (and the training takes').
+
+  With the training takes (where the reference is held-out takes), ``movement_min_train`` /
+  ``movement_max_train``: the calmest and the busiest segment of real dance by this dancer, in segments of
+  ``segment`` frames (a take shorter than that is one)."""
+  skeleton, train = j.skeleton, j.train if j.unseen else None
+  lag = max(round(0.5 * j.fps), 1)
+  ref_disp, ref_rough = metrics.reference_rates(j.reference, skeleton.root, lag)
+  curve = lambda m, length: metrics.movement_curve(m, skeleton.root, lag, ref_disp, length)
+  real = np.concatenate([curve(t, j.segment) for t in train]) if train else None
+  segment = min(j.segment, min(len(m) for m in j.motions))
+  moves = [curve(m, segment) for m in j.motions]
+  jitters = [metrics.jitter_curve(m, ref_rough, segment) for m in j.motions]
+  each = {
+    "movement_min": [float(c.min()) for c in moves],
+    "movement_max": [float(c.max()) for c in moves],
+    "jitter_max": [float(c.max()) for c in jitters],
+  }
+  return {
+    "segment_frames": segment,
+    "per_motion": each,
+    "movement_first": spread([c[0] for c in moves]),
+    "movement_last": spread([c[-1] for c in moves]),
+    **{k: spread(v) for k, v in each.items()},
+    "jitter": spread([metrics.roughness(m) / ref_rough for m in j.motions]),
+    "movement_curve": np.mean([c for c in moves if len(c) == len(moves[0])], axis=0).tolist(),
+    "movement_lag_frames": lag,
+    "movement_min_train": None if real is None else float(real.min()),
+    "movement_max_train": None if real is None else float(real.max()),
+  }
+
+
+@metric("bones", "bone_cv_mean", "bone_cv_max")
+def bones(j: Judged) -> dict:
+  """Each bone's length CV over a motion: mean, median and max over bones (0: rigid bones)."""
+  cvs = [bone_length_cv(m, j.skeleton) for m in j.motions]
+  return {
+    "bone_cv_mean": spread([c.mean() for c in cvs]),
+    "bone_cv_max": spread([c.max() for c in cvs]),
+    "bone_cv_median": spread([np.median(c) for c in cvs]),
+  }
+
+
+@metric("root steps", "root_step_max")
+def root_steps(j: Judged) -> dict:
+  """The largest per-frame root displacement of each motion / the largest in the reference (teleports)."""
+  largest = lambda p: float(np.linalg.norm(np.diff(p[:, j.skeleton.root], axis=0), axis=-1).max())
+  ref = max(largest(t) for t in j.reference)
+  each = [largest(m) / ref for m in j.motions]
+  return {"root_step_max": spread(each), "per_motion": {"root_step_max": each}}
+
+
+@metric("kinetic FID", "fid_k", "div_k")
+def kinetic_fid(j: Judged) -> dict:
+  """Frechet distance on kinetic window features (and the reference halves' own), diversity of both."""
+  fid, real, div, div_real = j.distribution(j.motions, j.kinetic, 1e-10)
+  return {"fid_k": spread(fid), "fid_k_real": spread(real), "div_k": div, "div_k_real": div_real}
+
+
+@metric("geometric FID", "fid_g", "div_g")
+def geometric_fid(j: Judged) -> dict:
+  """Frechet distance on geometric (pose question) window features (and the reference's own), diversity."""
+  fid, real, div, div_real = j.distribution(j.motions, _pose_features(j.skeleton, j.size), GEO_STD_FLOOR)
+  return {"fid_g": spread(fid), "fid_g_real": spread(real), "div_g": div, "div_g_real": div_real}
+
+
+@metric("feet", "pfc", "foot_sliding", "airborne")
+def feet(j: Judged) -> dict:
+  """EDGE's physical foot contact score, the feet's slide in contact, the frames every foot is in the air."""
+  sk, fps, size = j.skeleton, j.fps, j.size
+  return {
+    "pfc": spread([metrics.pfc(m, sk, fps, size) for m in j.motions]),
+    "data_pfc": float(np.mean([metrics.pfc(t, sk, fps, size) for t in j.reference])),
+    "foot_sliding": spread([metrics.foot_sliding(m, sk, fps, size) for m in j.motions]),
+    "data_foot_sliding": float(np.mean([metrics.foot_sliding(t, sk, fps, size) for t in j.reference])),
+    "airborne": spread([metrics.airborne(m, sk, size) for m in j.motions]),
+    "airborne_real": float(np.mean([metrics.airborne(t, sk, size) for t in j.reference])),
+  }
+
+
+@metric("novelty", "novelty")
+def novelty(j: Judged) -> dict:
+  """RMS joint distance from each window to its nearest training window (or reference window)."""
+  root, window = j.skeleton.root, j.window
+  wins = lambda takes, hop: np.concatenate([metrics.windows(t, window, hop) for t in takes]) / j.size
+  if j.train:
+    train_w = wins(j.train, window // 4)
+    real = metrics.novelty(wins(j.unseen, window // 4), train_w, root) if j.unseen else None
+    return {"novelty": metrics.novelty(wins(j.motions, window), train_w, root), "novelty_real": real}
+  others = lambda i: [t for k, t in enumerate(j.reference) if k != i]
   real = (
-    [
-      metrics.novelty(wins([t], window // 4), wins(others(i), window // 4), skeleton.root)
-      for i, t in enumerate(reference)
-    ]
-    if len(reference) > 1
+    [metrics.novelty(wins([t], window // 4), wins(others(i), window // 4), root) for i, t in enumerate(j.reference)]
+    if len(j.reference) > 1
     else [float("nan")]
   )
   return {
-    "novelty": metrics.novelty(wins(motions, window), wins(reference, window // 4), skeleton.root),
+    "novelty": metrics.novelty(wins(j.motions, window), wins(j.reference, window // 4), root),
     "novelty_real": spread(real),
   }
 
 
-def _travel_and_train_reference(motions, reference, skeleton, train, unseen, features, window, splits, seed) -> dict:
-  """``root_travel`` (the root's path per frame / the reference's) and, when the reference is held-out takes
-  and the training takes are given, ``fid_k_train`` / ``fid_g_train``: the training takes scored as a sample."""
-  travel = lambda p: metrics.root_travel(p, skeleton.root)
-  ref_travel = metrics.pooled_root_travel(reference, skeleton.root)
-  out: dict = {"root_travel": spread([float(travel(m).mean() / max(ref_travel, 1e-12)) for m in motions])}
-  for name, feats, floor in (("fid_k_train", features[0], 1e-10), ("fid_g_train", features[1], GEO_STD_FLOOR)):
-    out[name] = (
-      spread(_distribution(train, reference, feats, window, splits, seed, floor)[0]) if train and unseen else None
-    )
+@metric("speed", "speed")
+def speed(j: Judged) -> dict:
+  """Mean joint speed per frame / the reference's (trembling is fast too: read it with jitter)."""
+  reference = metrics.pooled_speed(j.reference)
+  speeds = spread([metrics.speed_ratio(m, reference) for m in j.motions])
+  return {"speed_ratio": speeds, "speed": speeds}  # speed_ratio: the name before `speed`, kept for older readers
+
+
+@metric("root travel", "root_travel")
+def root_travel(j: Judged) -> dict:
+  """The root's path length per frame / the reference's (a dancer who stays on one spot: 0)."""
+  travel = lambda p: metrics.root_travel(p, j.skeleton.root)
+  ref_travel = metrics.pooled_root_travel(j.reference, j.skeleton.root)
+  return {"root_travel": spread([float(travel(m).mean() / max(ref_travel, 1e-12)) for m in j.motions])}
+
+
+@metric("training takes")
+def training_takes(j: Judged) -> dict:
+  """The training takes scored as a sample against held-out takes: fid_k_train and fid_g_train."""
+  out: dict = {}
+  geo = _pose_features(j.skeleton, j.size)
+  for name, feats, floor in (("fid_k_train", j.kinetic, 1e-10), ("fid_g_train", geo, GEO_STD_FLOOR)):
+    out[name] = spread(j.distribution(j.train, feats, floor)[0]) if j.train and j.unseen else None
   return out
+
+
+SINGLE_TAKE_FRAMES = 3600  # the single-take measures for takes of up to two minutes at 30 fps (one take: 10-60 s)
+
+
+@metric("one take", "coverage", "global_diversity", "local_diversity", "inter_diversity")
+def one_take(j: Judged) -> dict:
+  """Coverage and diversities against the one take the motions were drawn from (chorjax.single_take).
+
+  Against the training takes (``chorjax metrics``: the reference), where those hold at most
+  ``SINGLE_TAKE_FRAMES`` frames; else None each."""
+  from chorjax.single_take import KEYS, single_take
+
+  takes = j.train if j.train is not None else j.reference
+  if sum(len(t) for t in takes) > SINGLE_TAKE_FRAMES:
+    return dict.fromkeys(KEYS)
+  return single_take(j.motions, takes, j.skeleton, j.size)
 
 
 def _check_reference(reference, skeleton: Skeleton, fps: float, size: float) -> None:
@@ -317,57 +445,14 @@ def score(
   """
   size = float(np.mean([metrics.body_size(t, skeleton) for t in reference]))
   _check_reference(reference, skeleton, fps, size)
-  kin = lambda ws: [metrics.kinetic_features(w / size, fps) for w in ws]
-  geo = _pose_features(skeleton, size)
-  fid_k, fid_k_real, div_k, div_k_real = _distribution(motions, reference, kin, window, splits, seed, 1e-10)
-  fid_g, fid_g_real, div_g, div_g_real = _distribution(motions, reference, geo, window, splits, seed, GEO_STD_FLOOR)
-  speed = metrics.pooled_speed(reference)
-  speeds = spread([metrics.speed_ratio(m, speed) for m in motions])
-  moving, steps = (
-    _movement_and_jitter(motions, reference, skeleton, fps, segment, train if unseen else None),
-    _root_steps(motions, reference, skeleton),
-  )
-  return {
-    **moving,
-    **_bones(motions, skeleton),
-    **steps,
-    "per_motion": {**moving["per_motion"], **steps["per_motion"]},
-    "fid_k": spread(fid_k),
-    "fid_k_real": spread(fid_k_real),
-    "div_k": div_k,
-    "div_k_real": div_k_real,
-    "fid_g": spread(fid_g),
-    "fid_g_real": spread(fid_g_real),
-    "div_g": div_g,
-    "div_g_real": div_g_real,
-    "pfc": spread([metrics.pfc(m, skeleton, fps, size) for m in motions]),
-    "data_pfc": float(np.mean([metrics.pfc(t, skeleton, fps, size) for t in reference])),
-    "foot_sliding": spread([metrics.foot_sliding(m, skeleton, fps, size) for m in motions]),
-    "data_foot_sliding": float(np.mean([metrics.foot_sliding(t, skeleton, fps, size) for t in reference])),
-    "airborne": spread([metrics.airborne(m, skeleton, size) for m in motions]),
-    "airborne_real": float(np.mean([metrics.airborne(t, skeleton, size) for t in reference])),
-    **_novelty(motions, reference, train, unseen, skeleton, size, window),
-    **_single_take(motions, train if train is not None else reference, skeleton, size),
-    "speed_ratio": speeds,  # the name before `speed`, kept for older readers; NOT a freeze measure
-    "speed": speeds,
-    **_travel_and_train_reference(motions, reference, skeleton, train, unseen, (kin, geo), window, splits, seed),
-    "body_size": size,
-    "window": window,
-    "splits": splits,
-  }
-
-
-SINGLE_TAKE_FRAMES = 3600  # the single-take measures for takes of up to two minutes at 30 fps (one take: 10-60 s)
-
-
-def _single_take(motions, takes, skeleton: Skeleton, size: float) -> dict:
-  """``single_take.single_take`` of the motions against the takes they were drawn from (the training takes, or
-  ``chorjax metrics``' reference), where those hold at most ``SINGLE_TAKE_FRAMES`` frames; else None each."""
-  from chorjax.single_take import KEYS, single_take
-
-  if sum(len(t) for t in takes) > SINGLE_TAKE_FRAMES:
-    return dict.fromkeys(KEYS)
-  return single_take(motions, takes, skeleton, size)
+  judged = Judged(motions, reference, skeleton, fps, train, unseen, window, splits, segment, seed, size)
+  out: dict = {}
+  per_motion: dict = {}
+  for m in METRICS.values():
+    measured = m.measure(judged)
+    per_motion.update(measured.pop("per_motion", {}))
+    out.update(measured)
+  return {**out, "per_motion": per_motion, "body_size": size, "window": window, "splits": splits}
 
 
 def score_files(motion_specs, data_specs, **kw) -> dict:

@@ -9,6 +9,7 @@ import pytest
 from chorjax import cli
 from chorjax.config import SampleConfig, key_docs, valid_keys
 from chorjax.sampling.controls import Controls
+from chorjax.sampling.table import DECODING, FLAGGED
 
 MAX_HELP = 160  # characters: one or two lines of a terminal; the reasoning goes to `more` (the docs)
 
@@ -36,15 +37,29 @@ def test_config_keys_prints_every_key_of_a_prefix_with_default_and_help(capsys):
   assert "did you mean 'sample'" in capsys.readouterr().err
 
 
-def _sampling_actions() -> dict[str, argparse.Action]:
-  """`chorjax sample`'s sampling flags, by the control they set."""
+def _sample_actions() -> dict[str, argparse.Action]:
+  """`chorjax sample`'s flags, by what they set."""
   parser = cli.build_parser()
   sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-  actions = {a.dest: a for a in sub.choices["sample"]._actions}
-  return {name: actions[name] for name in Controls.names()}
+  return {a.dest: a for a in sub.choices["sample"]._actions}
 
 
-@pytest.mark.parametrize("name", Controls.names())
+def _sampling_actions() -> dict[str, argparse.Action]:
+  """`chorjax sample`'s sampling flags, by the control they set."""
+  return {name: _sample_actions()[name] for name in FLAGGED}
+
+
+def test_the_draw_has_three_flags_and_the_opt_ins_one_key_value_flag():
+  """`chorjax sample --help`: three draw flags (and --plain) beside decoding's; every other control is named by
+  the help of --set sample.KEY=VALUE, and has no flag of its own."""
+  actions = _sample_actions()
+  draw = [n for n in Controls.names() if n in actions and n not in DECODING]
+  assert draw == ["sigma_temperature", "pace", "clamp"]
+  opt_ins = [n for n in Controls.names() if n not in FLAGGED]
+  assert opt_ins and all(n not in actions and n in actions["set"].help for n in opt_ins)
+
+
+@pytest.mark.parametrize("name", FLAGGED)
 def test_a_sampling_flag_says_its_keys_help_and_defers_to_the_run(name):
   action = _sampling_actions()[name]
   help_text = key_docs(f"sample.{name}")[0]["help"]
@@ -94,7 +109,7 @@ def test_every_flag_that_sets_a_key_says_the_keys_help_and_does_not_override_it(
   flags = _flags_that_set_keys()
   commands = {c for c, *_ in flags}
   assert {"sample", "eval", "live", "calibrate", "train"} <= commands, commands
-  assert len(flags) >= 14 * 3 + 2 + 4
+  assert len(flags) >= len(FLAGGED) * 4 + 2 + 4  # sample, eval, export and live each; calibrate's; train's
   for command, flag, action, key in flags:
     assert action.help.startswith(key_docs(key)[0]["help"]), (command, flag)
     assert action.default in (None, False), (command, flag, action.default)  # unset: the run's or config's value
@@ -149,7 +164,7 @@ def test_the_site_builds_strictly_offline_with_every_flag_key_metric_and_api_nam
   import subprocess
   import sys
 
-  from chorjax.reports import METRIC_KEYS
+  from chorjax.reports import metric_keys
 
   site = tmp_path / "site"
   env = {
@@ -179,7 +194,7 @@ def test_the_site_builds_strictly_offline_with_every_flag_key_metric_and_api_nam
   for row in key_docs():
     assert row["key"] in keys_page and row["help"].strip(), row["key"]
     assert html.unescape(row["help"]).split("`")[0][:40] in keys_page, row["key"]
-  missing = [k for k in METRIC_KEYS if k not in metrics_page]
+  missing = [k for k in metric_keys() if k not in metrics_page]
   assert not missing, f"metrics without a definition on the metrics page: {missing}"
   names = ("train", "load_run", "read_motion", "load_dataset", "score", "Motion.write", "Motion.show", "Run.sample")
   for name in names:

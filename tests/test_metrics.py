@@ -16,7 +16,7 @@ from chorjax.data.dataset import bundled_path, load_dataset, read_takes
 from chorjax.data.motion import bone_length_cv
 from chorjax.data.skeletons import MPII16
 from chorjax.evaluate import held_out
-from chorjax.reports import METRIC_KEYS, WHERE_MEASURED
+from chorjax.reports import WHERE_MEASURED, metric_keys
 from chorjax.scoring import mean_of, score
 
 TAKE = read_csv(bundled_path("cmu94") / "94_05_skeleton_3d.csv")
@@ -145,7 +145,7 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
   m = json.loads((runs[0] / "eval" / "metrics.json").read_text())
   for key in (
     "heldout_loss",
-    *(k for k in METRIC_KEYS if k not in WHERE_MEASURED),  # not single-take: nine takes, five minutes
+    *(k for k in metric_keys() if k not in WHERE_MEASURED),  # not single-take: nine takes, five minutes
     "fid_k_real",
     "fid_g_real",
     "novelty_real",
@@ -512,3 +512,37 @@ def test_chorjax_metrics_reports_the_single_take_measures_against_a_short_refere
   assert cli.main([*args, "cmu94", "-o", str(tmp_path / "b.json")]) == 0  # ten takes, 5 minutes: not one take
   assert "coverage" not in capsys.readouterr().out
   assert json.loads((tmp_path / "b.json").read_text())["coverage"] is None
+
+
+def test_a_metric_is_one_function_and_one_registration(tmp_path, capsys):
+  """A metric registered with ``@metric`` is measured by ``score``, written by ``chorjax metrics`` and printed
+  in its place; the docs' table is the registry's (every metric's name, printed keys and first docstring line)."""
+  from pathlib import Path
+
+  from chorjax import scoring
+
+  @scoring.metric("stillness", "stillness")
+  def stillness(j):
+    """The share of frames whose root does not move."""
+    still = [float(np.mean(np.linalg.norm(np.diff(m[:, j.skeleton.root], axis=0), axis=-1) < 1e-9)) for m in j.motions]
+    return {"stillness": scoring.spread(still)}
+
+  try:
+    take = bundled_path("cmu94") / "94_01_skeleton_3d.csv"
+    frozen = tmp_path / "frozen.csv"
+    frozen.write_text("\n".join([take.read_text().splitlines()[0]] * 300) + "\n")
+    out = tmp_path / "m.json"
+    refs = [str(bundled_path("cmu94") / f"94_0{k}_skeleton_3d.csv") for k in (3, 4)]
+    assert cli.main(["metrics", str(frozen), str(take), "--data", *refs, "-o", str(out)]) == 0
+    assert json.loads(out.read_text())["stillness"] == {"mean": 0.5, "sd": pytest.approx(np.sqrt(0.5))}
+    lines = capsys.readouterr().out.splitlines()
+    assert [line.split()[0] for line in lines if line.startswith(("root_travel", "stillness"))] == [
+      "root_travel",
+      "stillness",
+    ]
+  finally:
+    scoring.METRICS.pop("stillness")
+  text = (Path(__file__).resolve().parents[1] / "docs" / "metrics.md").read_text()
+  for m in scoring.METRICS.values():
+    printed = ", ".join(f"`{k}`" for k in m.printed) or "-"
+    assert f"| {m.name} | {printed} | {m.summary} |" in text, m.name
