@@ -11,6 +11,7 @@ import pytest
 from flax import nnx
 from helpers import tiny_config
 
+from benchmarks import lafan1
 from chorjax import cli
 from chorjax.data.dataset import bundled_path, load_dataset
 from chorjax.data.npz import read_npz
@@ -85,7 +86,7 @@ def test_an_untrained_model_is_linear_interpolation_and_its_embeddings(setup):
   sampler = ib.TransitionSampler(ib.training_takes(ds, ()), space, cfg.inbetween, 4, seed=0)
   win = sampler.batch(0)["window"]
   out = ib.model_transitions(graphdef, params, cfg.inbetween, win[:, :4], win[:, 10], 6, jax.random.key(0))
-  assert np.allclose(out, ib.linear(win[:, :4], win[:, 10], 6), atol=1e-6)  # the decoder starts at zero
+  assert np.allclose(out, lafan1.linear(win[:, :4], win[:, 10], 6), atol=1e-6)  # the decoder starts at zero
   emb = tta_embedding(jnp.array([1, 30]), 32)
   assert emb.shape == (2, 32) and not np.allclose(emb[0], emb[1])
   assert np.allclose(noise_strength(jnp.array([3.0, 5.0, 17.5, 30.0, 40.0])), [0, 0, 0.5, 1, 1])
@@ -111,8 +112,8 @@ def test_rollout_gives_each_row_its_own_length(setup):
   target, z = ctx[:, -1] + 1.0, jnp.zeros((2, 32))
   out = np.asarray(rollout(model, ctx, target, jnp.array([5, 3]), 7, z))
   assert out.shape == (2, 7, 48)
-  assert np.allclose(out[0, :5], ib.linear(np.asarray(ctx[:1]), np.asarray(target[:1]), 5)[0], atol=1e-6)
-  assert np.allclose(out[1, :3], ib.linear(np.asarray(ctx[1:]), np.asarray(target[1:]), 3)[0], atol=1e-6)
+  assert np.allclose(out[0, :5], lafan1.linear(np.asarray(ctx[:1]), np.asarray(target[:1]), 5)[0], atol=1e-6)
+  assert np.allclose(out[1, :3], lafan1.linear(np.asarray(ctx[1:]), np.asarray(target[1:]), 3)[0], atol=1e-6)
   assert np.allclose(out[1, 3:], target[1], atol=1e-6)  # past its target a row stays there
 
 
@@ -175,11 +176,16 @@ def test_metrics_on_known_cases():
 
 def test_benchmark_on_the_held_out_take_ranks_the_baselines(setup):
   _cfg, ds, space = setup
-  std = ib.window_std(ib.training_takes(ds, ()), space, 10)
-  res = ib.benchmark(
-    {"zero": ib.zero_velocity, "linear": ib.linear}, ib.held_out_takes(ds), space, ds.features.skeleton.feet, 10, std
+  std = lafan1.window_std(ib.training_takes(ds, ()), space, 10)
+  res = lafan1.benchmark(
+    {"zero": lafan1.zero_velocity, "linear": lafan1.linear},
+    ib.held_out_takes(ds),
+    space,
+    ds.features.skeleton.feet,
+    10,
+    std,
   )
-  for n in ib.BENCHMARK_LENGTHS:
+  for n in lafan1.BENCHMARK_LENGTHS:
     assert res["linear"][n]["l2p"] < res["zero"][n]["l2p"]
     assert res["linear"][n]["arrival_step"] < 1.0 < res["zero"][n]["arrival_step"]
   assert res["linear"][5]["l2p"] < res["linear"][30]["l2p"] < res["linear"][45]["l2p"]

@@ -22,6 +22,8 @@ from pathlib import Path
 import jax
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # benchmarks/, beside chorjax/
+from benchmarks import lafan1
 from chorjax.data.dataset import conform, load_dataset, read_takes, to_rate
 from chorjax.data.features import leg_length
 from chorjax.families.inbetween import inbetweening as ib
@@ -72,7 +74,7 @@ def nearest_transitions(train_takes, space: ib.Space, context: int, k: int = 20)
 
   def fn(ctx, target, n):
     if n not in cache:
-      wins, _ = ib.benchmark_windows(train_takes, context, n, hop=2)
+      wins, _ = lafan1.benchmark_windows(train_takes, context, n, hop=2)
       local = ib.local_windows(space, wins, context)
       cache[n] = (local, key_of(local[:, :context], local[:, context + n]))
     local, keys = cache[n]
@@ -89,7 +91,7 @@ def nearest_transitions(train_takes, space: ib.Space, context: int, k: int = 20)
 
 
 def methods_of(runs, nearest=None) -> dict:
-  out = {"zero velocity": ib.zero_velocity, "linear interpolation": ib.linear}
+  out = {"zero velocity": lafan1.zero_velocity, "linear interpolation": lafan1.linear}
   if nearest is not None:
     out["nearest 20 training transitions"] = nearest
   for r in runs:
@@ -168,8 +170,8 @@ def strip(runs, take, path: Path, context: int = 10, frames: int = 30, start: in
   ctx, target = local[:, :context], local[:, context + frames]
   rows = {
     "real": local[0, context - 1 : context + frames + 1],
-    "zero velocity": ib.zero_velocity(ctx, target, frames)[0],
-    "linear interpolation": ib.linear(ctx, target, frames)[0],
+    "zero velocity": lafan1.zero_velocity(ctx, target, frames)[0],
+    "linear interpolation": lafan1.linear(ctx, target, frames)[0],
   }
   for name, members in groups_of(runs).items():
     run = next((r for r in runs if str(r.workdir) == members[0]), None)
@@ -200,25 +202,27 @@ def main() -> None:
   context = first.config.inbetween.context
   space = ib.Space.of(first.features)
   ds = load_dataset(first.config.data)
-  std = ib.window_std(ib.training_takes(ds, ()), space, context)
+  std = lafan1.window_std(ib.training_takes(ds, ()), space, context)
   methods = methods_of(runs, nearest_transitions(ib.training_takes(ds, ("mirror", "reverse")), space, context))
   sets = held_out(first)
   takes = [t for ts in sets.values() for t in ts]
   feet = first.features.skeleton.feet
-  results = ib.benchmark(methods, takes, space, feet, context, std)
-  per_set = {name: ib.benchmark(methods, ts, space, feet, context, std, lengths=(5, 30)) for name, ts in sets.items()}
+  results = lafan1.benchmark(methods, takes, space, feet, context, std)
+  per_set = {
+    name: lafan1.benchmark(methods, ts, space, feet, context, std, lengths=(5, 30)) for name, ts in sets.items()
+  }
   out = Path(args.out)
   out.mkdir(parents=True, exist_ok=True)
   (out / "results.json").write_text(json.dumps({"all": results, "by_set": per_set}, indent=1, default=float))
   strip(runs, takes[0], out / "strip_30.png", context)
-  windows = len(ib.benchmark_windows(takes, context, max(ib.BENCHMARK_LENGTHS))[0])
+  windows = len(lafan1.benchmark_windows(takes, context, max(lafan1.BENCHMARK_LENGTHS))[0])
   lines = [
     "# In-betweening: held-out transitions",
     "",
     f"{windows} windows every 40 frames of {len(takes)} held-out takes ({', '.join(sets)}); {context} context "
     "frames; L2P as LaFAN1 (local positions / the training windows' per-coordinate std).",
     f"Machine: {machine_info()}.",
-    *table(results, groups_of(runs), ib.BENCHMARK_LENGTHS),
+    *table(results, groups_of(runs), lafan1.BENCHMARK_LENGTHS),
     "",
     *set_table(per_set, groups_of(runs)),
   ]

@@ -18,6 +18,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).parent))
 from evaluate import BASELINES, cell, groups_of, held_out, methods_of
 
+from benchmarks import lafan1
 from chorjax.data.dataset import load_dataset
 from chorjax.families.inbetween import inbetweening as ib
 from chorjax.run import load_run
@@ -34,13 +35,13 @@ def main() -> None:
   context, space = first.config.inbetween.context, ib.Space.of(first.features)
   ds = load_dataset(first.config.data)
   train = ib.training_takes(ds, ())
-  std, feet = ib.window_std(train, space, context), first.features.skeleton.feet
+  std, feet = lafan1.window_std(train, space, context), first.features.skeleton.feet
   methods = methods_of(runs)
   sets = {f"cmu94 training takes ({len(train)})": train, **held_out(first)}
   print("| system | takes | " + " | ".join(f"{n} frames" for n in LENGTHS) + " |")
   print("|---|---|" + "---|" * len(LENGTHS))
   results = {
-    name: ib.benchmark(methods, takes, space, feet, context, std, lengths=LENGTHS) for name, takes in sets.items()
+    name: lafan1.benchmark(methods, takes, space, feet, context, std, lengths=LENGTHS) for name, takes in sets.items()
   }
   for group, members in groups_of(runs).items():
     if group in BASELINES:

@@ -15,8 +15,8 @@ step into the target included). The validation loss: the pose L1 on fixed window
 without noise.
 
 Writing (:func:`write_transitions`): context and target go in as data-space positions and come out
-unchanged, the generated frames between them. Baselines for the evaluation: :func:`zero_velocity` and
-:func:`linear`.
+unchanged, the generated frames between them. The evaluation (LaFAN1's protocol, its baselines) is
+``benchmarks/lafan1.py``.
 """
 
 from __future__ import annotations
@@ -38,13 +38,9 @@ from chorjax.errors import UserError
 from chorjax.families.inbetween import cvae_training as cvae
 from chorjax.families.inbetween.cvae_model import transition_model
 from chorjax.families.inbetween.lstm_model import balanced, rollout, transition_l1, up_to_target, window_target
-from chorjax.metrics import foot_skate, l2p, npss, position_error
 from chorjax.optimizer import create_optimizer, step_key
 
 VAL_LENGTHS = (5, 15, 30)  # transition lengths of the validation windows (cycled; at most max_frames)
-BENCHMARK_LENGTHS = (5, 15, 30, 45)  # the LaFAN1 protocol's transition lengths
-BENCHMARK_HOP = 40  # its windows start every 40 frames
-FOOT_HEIGHT = 0.1  # leg lengths above the floor from which a foot counts as off the ground (skating)
 
 
 # ---------------------------------------------------------------- the local space
@@ -148,14 +144,14 @@ class TransitionSampler:
     return {"window": local_windows(self.space, wins, self.ib.context), "length": lengths.astype(np.int32)}
 
 
-def _windows(takes, span: int, hop: int) -> list[tuple[int, np.ndarray]]:
+def spans(takes, span: int, hop: int) -> list[tuple[int, np.ndarray]]:
   """``(take index, frames)`` of every window of ``span`` frames, every ``hop`` frames of each take."""
   return [(i, t[s : s + span]) for i, t in enumerate(takes) for s in range(0, len(t) - span + 1, hop)]
 
 
 def validation_batch(takes, space: Space, ib, max_windows: int, hop: int = 40) -> dict:
   """Fixed held-out windows (every ``hop`` frames, at most ``max_windows``), lengths cycling ``VAL_LENGTHS``."""
-  wins = [w for _, w in _windows(takes, ib.context + ib.max_frames + 1, hop)]
+  wins = [w for _, w in spans(takes, ib.context + ib.max_frames + 1, hop)]
   if not wins:
     return {}
   keep = np.unique(np.linspace(0, len(wins) - 1, min(max_windows, len(wins))).astype(int))
@@ -275,18 +271,6 @@ def validation_loss(params, batch, spec: InbetweenSpec | cvae.CvaeSpec):
 # ---------------------------------------------------------------- writing transitions
 
 
-def zero_velocity(context_BxCxK, target_BxK, frames: int) -> np.ndarray:
-  """The zero-velocity baseline: the last context frame held until the target."""
-  return np.repeat(np.asarray(context_BxCxK)[:, -1:], frames, 1)
-
-
-def linear(context_BxCxK, target_BxK, frames: int) -> np.ndarray:
-  """The linear-interpolation baseline: every joint on the straight line from the last context frame."""
-  alpha = (np.arange(1, frames + 1, dtype=np.float32) / (frames + 1))[None, :, None]
-  last = np.asarray(context_BxCxK)[:, -1:]
-  return last + alpha * (np.asarray(target_BxK)[:, None] - last)
-
-
 @functools.partial(jax.jit, static_argnums=(0, 5))
 def _transitions(graphdef, params, context_BxCxK, target_BxK, z_BxE, frames: int):
   length = jnp.full((context_BxCxK.shape[0],), frames, jnp.int32)
@@ -351,52 +335,3 @@ def end_sample(graphdef, params, ds, cfg: Config) -> tuple:
   )
   real = take.replace(positions=pos[: pieces.shape[1]], name=f"original: {name}")
   return real, pieces, f"in-between, key poses of {name} every {seg + 1} frames"
-
-
-# ---------------------------------------------------------------- the evaluation (LaFAN1's protocol, adapted)
-
-
-def benchmark_windows(takes, context: int, longest: int, hop: int = BENCHMARK_HOP) -> tuple[np.ndarray, np.ndarray]:
-  """Windows of ``context + longest + 1`` canonical frames every ``hop`` frames of each take, and the
-  index of the take each comes from."""
-  wins = _windows(takes, context + longest + 1, hop)
-  if not wins:
-    raise UserError(f"no take holds a window of {context + longest + 1} frames")
-  return np.stack([w for _, w in wins]), np.array([i for i, _ in wins])
-
-
-def window_std(takes, space: Space, context: int, longest: int = max(BENCHMARK_LENGTHS)) -> np.ndarray:
-  """``[K]`` the standard deviation of every local coordinate over the windows of ``takes`` (the training
-  takes): L2P's normalization."""
-  wins, _ = benchmark_windows(takes, context, longest)
-  local = local_windows(space, wins, context)[:, context:]
-  return np.maximum(local.reshape(-1, local.shape[-1]).std(0), 1e-6).astype(np.float32)
-
-
-def benchmark(methods: dict, takes, space: Space, feet, context: int, std_K, lengths=BENCHMARK_LENGTHS) -> dict:
-  """``{method: {length: {l2p, position_error, npss, foot_skate, foot_skate_real, arrival_step}}}`` over the
-  windows of ``takes`` (canonical positions) every 40 frames: each method (``fn(context [B, C, K], target
-  [B, K], frames) -> [B, frames, K]``, local poses) writes every window's transition of each length.
-  ``position_error`` is in leg lengths; ``arrival_step`` is the mean joint step from the last written frame
-  into the target over the takes' own mean frame-to-frame step (1 = as far as the dancer moves in a frame)."""
-  wins, which = benchmark_windows(takes, context, max(lengths))
-  local = local_windows(space, wins, context)
-  floor = np.array([np.percentile(t[:, list(feet), 1], 5) for t in takes], np.float32)[which] / space.size
-  data_step = np.mean([np.linalg.norm(np.diff(t, axis=0), axis=-1).mean() for t in takes]) / space.size
-  joints = lambda x: x.reshape(*x.shape[:-1], -1, 3)
-  out: dict = {}
-  for name, fn in methods.items():
-    out[name] = {}
-    for n in lengths:
-      ctx, target, real = local[:, :context], local[:, context + n], local[:, context : context + n]
-      pred = np.asarray(fn(ctx, target, n), np.float32)
-      arrival = np.linalg.norm(joints(target[:, None] - pred[:, -1:]), axis=-1).mean()
-      out[name][n] = {
-        "l2p": l2p(pred, real, std_K),
-        "position_error": position_error(pred, real),
-        "npss": npss(pred, real),
-        "foot_skate": foot_skate(joints(np.concatenate([ctx[:, -1:], pred], 1)), feet, floor, FOOT_HEIGHT),
-        "foot_skate_real": foot_skate(joints(local[:, context - 1 : context + n]), feet, floor, FOOT_HEIGHT),
-        "arrival_step": float(arrival / data_step),
-      }
-  return out
