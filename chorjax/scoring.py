@@ -78,8 +78,8 @@ def mean_of(value) -> float:
 def upgrade(result: dict) -> dict:
   """A metrics dict in today's key names (older files named the first and last segment after 1,000 frames)
   and with every sampling control stated (older files lack the ones added since: they were off)."""
-  from chorjax.config import SampleConfig
   from chorjax.sampling.controls import Controls
+  from chorjax.sections import SampleConfig
 
   out = dict(result)
   for old, new in (("movement_first_1000", "movement_first"), ("movement_last_1000", "movement_last")):
@@ -457,8 +457,8 @@ def score(
 
 def score_files(motion_specs, data_specs, **kw) -> dict:
   """``chorjax metrics``: :func:`score_motions` of motion files against real takes, any formats."""
-  from chorjax.config import DataConfig
   from chorjax.data.dataset import read_takes
+  from chorjax.sections import DataConfig
 
   data_cfg = DataConfig()
   reference = read_takes(list(data_specs), data_cfg)

@@ -7,9 +7,10 @@ import dataclasses
 import pytest
 
 from chorjax import cli
-from chorjax.config import SampleConfig, key_docs, valid_keys
+from chorjax.config import key_docs, valid_keys
 from chorjax.sampling.controls import Controls
 from chorjax.sampling.table import DECODING, FLAGGED
+from chorjax.sections import SampleConfig
 
 MAX_HELP = 160  # characters: one or two lines of a terminal; the reasoning goes to `more` (the docs)
 

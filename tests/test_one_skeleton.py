@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from chorjax import cli
-from chorjax.config import DataConfig
 from chorjax.data import amc as amc_reader
 from chorjax.data.bvh import read_bvh
 from chorjax.data.check import check_paths, drop_leading_rest, find_jumps
 from chorjax.data.dataset import conform, read_takes, resolve_files, to_rate, to_up_axis
 from chorjax.data.mapping import HEAD_TOP_FROM_EYES, TARGETS, find_mapping, to_mpii16
 from chorjax.data.skeletons import MPII16
+from chorjax.sections import DataConfig
 
 UPPER = [
   TARGETS.index(n)

@@ -2,7 +2,7 @@
 
 :class:`ControlFields` is the table: one field per control, its default, help and checks as a ``[sample]``
 key, and a :class:`Control` record of what the draw does with it. Everything that names the controls is made
-from it: the ``[sample]`` keys (``config.SampleConfig`` inherits the fields), the flags of ``sample``,
+from it: the ``[sample]`` keys (``sections.SampleConfig`` inherits the fields), the flags of ``sample``,
 ``eval``, ``export`` and ``live`` (``cli``), the controls a draw resolves (``controls.Controls``), the model's
 own draw (:data:`PLAIN`), what calibration searches (:data:`GRID`, :data:`CARRIED_GRID`, the ladders past
 their ends) and what ``calibration.json`` may hold (:data:`CALIBRATED`). A control is a *draw* control (how
