@@ -217,7 +217,7 @@ def main(argv=None):
 
   torch.set_num_threads(os.cpu_count() or 1)
   reps = 5 if args.quick else 15
-  from chorjax.sweeps import machine_info
+  from chorjax.compare import machine_info
 
   res = {
     "machine": {

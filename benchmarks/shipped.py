@@ -82,7 +82,7 @@ def measure(reps: int) -> dict:
   each. The caller sets up the process (``keep_freed_memory``, torch's threads)."""
   import torch
 
-  from chorjax.sweeps import machine_info
+  from chorjax.compare import machine_info
 
   res = {"machine": machine_info(), "jax": jax.__version__, "torch": torch.__version__, "reps": reps}
   for shape in SHAPES:

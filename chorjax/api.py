@@ -22,6 +22,7 @@ from typing import Any  # noqa: F401  (the inherited fields' annotations name th
 import numpy as np
 
 from chorjax import formats  # noqa: F401  (the formats each command reads, writes and draws)
+from chorjax.compare import compare_to  # noqa: F401
 from chorjax.config import (  # noqa: F401
   Config,
   check_sample_control,
@@ -57,7 +58,7 @@ from chorjax.sampling.controls import Controls  # noqa: F401
 from chorjax.sampling.table import CALIBRATED, FLAGGED, PLAIN, RECORDS  # noqa: F401
 from chorjax.sampling.table import SWITCHES as CONTROL_SWITCHES  # noqa: F401
 from chorjax.scoring import score_to  # noqa: F401
-from chorjax.sweeps import SWEEP_DESCRIPTION, SWEEP_FORMAT, compare_to, run_sweep, train_command  # noqa: F401
+from chorjax.sweeps import SWEEP_DESCRIPTION, SWEEP_FORMAT, run_sweep, train_command  # noqa: F401
 
 __all__ = ["Motion", "Player", "Run", "UserError", "load_dataset", "load_run", "read_motion", "score", "train"]
 
