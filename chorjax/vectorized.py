@@ -38,21 +38,17 @@ from chorjax.config import Config
 from chorjax.data.dataset import WindowSampler, dataset_notes, eval_windows, load_dataset
 from chorjax.errors import UserError
 from chorjax.families import family_of
+from chorjax.loop import Loop, MetricsLog, TrainingDiverged, best_checkpoint_hook, stop_on_signals
 from chorjax.points import NotAligned, check_group
 from chorjax.run import run_meta
 from chorjax.training import (
-  Loop,
-  MetricsLog,
-  TrainingDiverged,
   _check_saved_config,
   _keep_aside,
   _restore_or_init,
   _truncate_metrics,
   _write_config,
-  best_checkpoint_hook,
   check_workdir,
   sized_to_data,
-  stop_on_signals,
   workdir_lock,
 )
 

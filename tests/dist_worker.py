@@ -30,7 +30,7 @@ cfg = tiny_config(
 )
 try:
   summary = train_and_evaluate(cfg, workdir, parallel=setup_parallel(cfg))
-except Interrupted as e:  # a signal: every process stops after the same step (chorjax.training.agreed_stop)
+except Interrupted as e:  # a signal: every process stops after the same step (chorjax.loop.agreed_stop)
   print(json.dumps({"process": pid, "stopped": str(e)}), flush=True)
   sys.exit(e.code)
 print(json.dumps({"process": pid, "losses": summary["train_losses"]}), flush=True)
