@@ -9,11 +9,6 @@ import math
 from chorjax import api
 
 
-def _readable() -> str:
-  """The suffixes of the formats chorjax reads (asked when the parser is built: a registered format counts)."""
-  return ", ".join(api.formats.suffixes("read"))
-
-
 def _add_motion_args(p) -> None:
   """``--motion`` or ``--mix``: what conditions the dance (sample, live)."""
   ids = p.add_mutually_exclusive_group()
@@ -395,11 +390,12 @@ def _shard(text: str) -> tuple[int, int]:
 def _add_render_command(sub) -> None:
   """`chorjax render`."""
   render = sub.add_parser("render", help="draw motion files or samples as PNG, GIF, MP4 or an HTML player")
+  readable = ", ".join(api.formats.suffixes("read"))  # asked as the parser is built: a registered format counts
   render.add_argument(
     "inputs",
     nargs="+",
     metavar="INPUT",
-    help=f"motion files ({_readable()}), folders or cmu94",
+    help=f"motion files ({readable}), folders or cmu94",
   )
   render.add_argument(
     "-o",
@@ -492,7 +488,8 @@ def _add_report_commands(sub) -> None:
   _add_calibrate_command(sub)
 
   me = sub.add_parser("metrics", help="score any motion files against real takes with the eval metrics")
-  me.add_argument("motions", nargs="+", metavar="MOTION", help=f"motion files ({_readable()}) or folders")
+  readable = ", ".join(api.formats.suffixes("read"))
+  me.add_argument("motions", nargs="+", metavar="MOTION", help=f"motion files ({readable}) or folders")
   me.add_argument(
     "--data",
     nargs="+",

@@ -7,6 +7,7 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "chorjax"
 MAX_FUNCTION_LINES = 70
+MAX_MODULE_LINES = 600  # a module a reader takes in at one sitting
 
 
 def _module_name(path: Path) -> str:
@@ -97,6 +98,15 @@ def test_no_function_is_longer_than_70_lines():
         if n > MAX_FUNCTION_LINES:
           long.append(f"{path.relative_to(PACKAGE.parent)}:{node.lineno} {node.name} ({n} lines)")
   assert not long, "functions over 70 lines: " + ", ".join(long)
+
+
+def test_no_module_is_longer_than_600_lines():
+  long = [
+    f"{p.relative_to(PACKAGE.parent)} ({n})"
+    for p in PACKAGE.rglob("*.py")
+    if (n := len(p.read_text().splitlines())) > MAX_MODULE_LINES
+  ]
+  assert not long, "modules over 600 lines (split by role): " + ", ".join(long)
 
 
 FAMILIES = PACKAGE / "families"

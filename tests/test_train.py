@@ -24,8 +24,8 @@ from chorjax.data.csv import read_csv
 from chorjax.data.dataset import WindowSampler, load_dataset
 from chorjax.errors import UserError
 from chorjax.families.recurrent.steps import create_train_state, eval_step, parted_train_step, train_step
-from chorjax.run import load_run
 from chorjax.loop import due
+from chorjax.run import load_run
 from chorjax.training import train_and_evaluate, workdir_lock
 
 ROOT = Path(__file__).resolve().parents[1]
