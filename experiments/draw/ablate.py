@@ -30,14 +30,14 @@ def _keys(**controls) -> list[str]:
 
 
 # the opt-in controls (no flag of their own) as the model's own draw has them
-OPT_INS_OFF = _keys(
-  pi_temperature=1, noise_smoothing=0, noise_order=1, persistence=0, crossfade=0, scale_cap=0, clamp_steps=False
-)
+OFF = {"pi_temperature": 1, "noise_smoothing": 0, "noise_order": 1, "persistence": 0, "crossfade": 0}
+OFF |= {"scale_cap": 0, "clamp_steps": False}
+OPT_INS_OFF = _keys(**OFF)
 VARIANTS = {
   "shipped": [],
   "plain": ["--plain"],
   # the own draw, but always the most likely component: what switching components costs
-  "plain, most likely component": [*OPT_INS_OFF, *_keys(pi_temperature=0), "--sigma-temperature", "1", "--pace", "0"]
+  "plain, most likely component": [*_keys(**{**OFF, "pi_temperature": 0}), "--sigma-temperature", "1", "--pace", "0"]
   + ["--no-clamp"],
   # the own draw with every frame clipped to the training range (sample.clamp): what keeps it in bounds
   "plain, clamped": [*OPT_INS_OFF, "--sigma-temperature", "1", "--pace", "0", "--clamp"],
