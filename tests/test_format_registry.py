@@ -68,6 +68,14 @@ def test_a_new_format_is_read_written_and_drawn_by_the_commands(toy, tmp_path, c
   heights = np.asarray((tmp_path / "heights.toy").read_text().split(), float)
   assert heights.size == len(TAKE.read_text().splitlines()) and np.ptp(heights) > 0
   assert ".toy" in _render_help(capsys)  # the help asks the registry
+  # the API: read_motion, Motion.write and render read and write it alike
+  import chorjax
+
+  taken = chorjax.read_motion(tmp_path / "s_0.toy")
+  assert taken.positions.shape == (40, 16, 3)
+  again = taken.write(tmp_path / "again.toy")
+  np.testing.assert_allclose(chorjax.read_motion(again).positions, taken.positions, atol=1e-6)
+  assert chorjax.api.render([str(again)], tmp_path / "again_heights.toy").read_text().count(" ") == 39
   formats.unregister(toy)
   assert cli.main(["data", "info", str(tmp_path / "s_0.toy")]) == 2
   assert ".toy" in capsys.readouterr().err

@@ -515,8 +515,9 @@ def test_chorjax_metrics_reports_the_single_take_measures_against_a_short_refere
 
 
 def test_a_metric_is_one_function_and_one_registration(tmp_path, capsys):
-  """A metric registered with ``@metric`` is measured by ``score``, written by ``chorjax metrics`` and printed
-  in its place; the docs' table is the registry's (every metric's name, printed keys and first docstring line)."""
+  """A metric registered with ``@metric`` is measured by ``score``, written by ``chorjax metrics`` and ``chorjax
+  eval`` and printed in its place; the docs' table is the registry's (every metric's name, printed keys and
+  first docstring line)."""
   from pathlib import Path
 
   from chorjax import scoring
@@ -540,6 +541,16 @@ def test_a_metric_is_one_function_and_one_registration(tmp_path, capsys):
       "root_travel",
       "stillness",
     ]
+    # and chorjax eval's report: a tiny run's sample judged on two takes
+    from helpers import tiny_config
+
+    from chorjax.training import train_and_evaluate
+
+    train_and_evaluate(tiny_config("log.tensorboard=false", "train.calibrate=false"), tmp_path / "run")
+    ev = ["eval", str(tmp_path / "run"), "--data", *refs, "--frames", "300", "-o", str(tmp_path / "e.json")]
+    assert cli.main(ev) == 0
+    assert "stillness" in json.loads((tmp_path / "e.json").read_text())
+    assert any(line.startswith("stillness") for line in capsys.readouterr().out.splitlines())
   finally:
     scoring.METRICS.pop("stillness")
   text = (Path(__file__).resolve().parents[1] / "docs" / "metrics.md").read_text()
