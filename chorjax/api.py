@@ -25,7 +25,6 @@ from chorjax import formats  # noqa: F401  (the formats each command reads, writ
 from chorjax.compare import compare_to  # noqa: F401
 from chorjax.config import (  # noqa: F401
   Config,
-  check_sample_control,
   key_docs,
   key_help,
   load_config,
@@ -55,7 +54,7 @@ from chorjax.sample import write_inbetween, write_sample  # noqa: F401
 # What every command does, as functions (the command line calls these and prints what they return).
 from chorjax.sampling.calibrate import CALIBRATION_DANCERS, LABELLED_DANCERS, calibrate_run  # noqa: F401
 from chorjax.sampling.controls import Controls  # noqa: F401
-from chorjax.sampling.table import CALIBRATED, FLAGGED, PLAIN, RECORDS  # noqa: F401
+from chorjax.sampling.table import CALIBRATED, FLAGGED, PLAIN, RECORDS, check_sample_control  # noqa: F401
 from chorjax.sampling.table import SWITCHES as CONTROL_SWITCHES  # noqa: F401
 from chorjax.scoring import score_to  # noqa: F401
 from chorjax.sweeps import SWEEP_DESCRIPTION, SWEEP_FORMAT, run_sweep, train_command  # noqa: F401

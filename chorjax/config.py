@@ -8,9 +8,7 @@ the line and the key, and suggesting the closest valid key. Dotted overrides suc
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import json
-import math
 import re
 import tomllib
 import typing
@@ -19,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from chorjax.errors import UserError, check_draw, check_memory, load_toml, read_text
+from chorjax.fields import check_value, field_choices, suggest
 from chorjax.registry import family_of
 from chorjax.registry import sections as family_sections
 from chorjax.sections import (
@@ -30,16 +29,6 @@ from chorjax.sections import (
   SampleConfig,
   TrainConfig,
 )
-
-
-def field_choices(meta, registered: bool = True) -> tuple | None:
-  """A field's allowed values (``meta``: its metadata); a callable's are read now (the families, with those
-  registered in this process where ``registered``)."""
-  choices: Any = meta.get("choices")
-  if callable(choices):
-    return tuple(typing.cast(Sequence, choices(registered)))
-  return tuple(choices) if choices else None
-
 
 _BASE_SECTIONS = {
   "data": DataConfig,
@@ -167,61 +156,10 @@ def resumable_keys() -> list[str]:
   ]
 
 
-def suggest(key: str, options: Sequence[str]) -> str:
-  """ "; did you mean 'x'?" for the closest of ``options``, or ""."""
-  close = difflib.get_close_matches(key, options, n=1, cutoff=0.5)
-  return f"; did you mean {close[0]!r}?" if close else ""
-
-
-def check_sample_control(name: str, value, where: str):
-  """``value`` checked as ``[sample] name`` is in a config file (type, range, finite); ``where`` names
-  its source in the error (e.g. the command-line flag)."""
-  field = {f.name: f for f in dataclasses.fields(SampleConfig)}[name]
-  return _check_value(where, f"sample.{name}", field, value)
-
-
-def _short(value: Any) -> str:
-  """``repr(value)``, cut to 60 characters: an error line names the value, it does not reprint a huge one."""
-  text = repr(value)
-  return text if len(text) <= 60 else text[:57] + "..."
-
-
 def _check_value(where: str, key: str, field: dataclasses.Field, value: Any):
   """Returns ``value`` converted to the field's type, or raises a UserError naming ``key``."""
   hint = typing.get_type_hints(section_classes()[key.split(".")[0]])[field.name]
-  meta = field.metadata
-  if hint is bool:
-    ok = isinstance(value, bool)
-  elif hint is int:
-    ok = isinstance(value, int) and not isinstance(value, bool)
-  elif hint is float:
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-    value = float(value) if ok else value
-  elif hint is str:
-    ok = isinstance(value, str)
-  elif hint is tuple:
-    ok = isinstance(value, (list, tuple)) and all(isinstance(v, (str, int)) and not isinstance(v, bool) for v in value)
-    value = tuple(value) if ok else value
-  else:  # pragma: no cover - schema error
-    raise TypeError(hint)
-  if not ok:
-    tname = "list" if hint is tuple else hint.__name__
-    raise UserError(f"{where}: key {key!r}: expected {tname}, got {type(value).__name__} {_short(value)}")
-  if hint is float and not math.isfinite(value):
-    raise UserError(f"{where}: key {key!r}: {value!r} is not a finite number")
-  items = value if isinstance(value, tuple) else (value,)  # a list (a tuple by now): each element
-  choices = field_choices(meta)
-  for item in items:
-    if choices and item not in choices:
-      raise UserError(
-        f"{where}: key {key!r}: {item!r} is not one of {', '.join(map(repr, choices))}"
-        + suggest(str(item), [str(c) for c in choices])
-      )
-  if meta.get("minimum") is not None and value < meta["minimum"]:
-    raise UserError(f"{where}: key {key!r}: {value!r} is below the minimum {meta['minimum']}")
-  if meta.get("below") is not None and not value < meta["below"]:
-    raise UserError(f"{where}: key {key!r}: {value!r} must be below {meta['below']}")
-  return value
+  return check_value(where, key, field, hint, value)
 
 
 def _line_of(text: str, section: str, key: str) -> int | None:

@@ -149,7 +149,7 @@ class Stream:
   def set(self, pi_temperature=None, sigma_temperature=None, mix=None) -> None:
     """New temperatures (from the next chunk) and/or a new motion mix (``"4:0.5,5:0.5"``): the model is
     conditioned on it and re-primed with the frames it just danced, so the dance changes without a jump."""
-    from chorjax.config import check_sample_control
+    from chorjax.sampling.table import check_sample_control
 
     given = {"pi_temperature": pi_temperature, "sigma_temperature": sigma_temperature}
     checked = {k: check_sample_control(k, v, f"set {k}") for k, v in given.items() if v is not None}

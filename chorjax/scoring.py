@@ -504,7 +504,7 @@ OPTIONS = {"window": (4, 10_000), "splits": (1, 1_000), "segment": (1, 2**31 - 1
 def check_options(kw: dict) -> None:
   """Refuses, in one line naming it, an option :func:`score` does not take (with the closest name) or a value
   outside ``OPTIONS`` (a bool, a float and text included): the CLI's flags and the API's keywords alike."""
-  from chorjax.config import suggest
+  from chorjax.fields import suggest
 
   for name, value in kw.items():
     if name not in OPTIONS:

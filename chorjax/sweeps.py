@@ -43,8 +43,9 @@ import json
 import tomllib
 from pathlib import Path
 
-from chorjax.config import check_training_size, load_config, plain_name, suggest, valid_keys
+from chorjax.config import check_training_size, load_config, plain_name, valid_keys
 from chorjax.errors import UserError, load_toml, read_text
+from chorjax.fields import suggest
 from chorjax.sampling.controls import Controls
 
 SWEEP_KEYS = {"name", "base", "root", "grid", "set", "eval", "candidates", "vectorize"}

@@ -297,8 +297,8 @@ def calibrate_run(workdir, data=None, *, force: bool = False, noise_order=None, 
   """``chorjax calibrate``: :func:`calibrate` (``kw``: ``frames``, ``num``, ``seed``), refused before any draw
   where the run already has a calibration.json (unless ``force``) or ``noise_order`` / ``pace`` are not what
   ``[sample]`` allows."""
-  from chorjax.config import check_sample_control
   from chorjax.errors import refuse_existing
+  from chorjax.sampling.table import check_sample_control
 
   refuse_existing([calibration_path(workdir)], force)
   if noise_order is not None:

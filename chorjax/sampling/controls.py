@@ -46,7 +46,7 @@ class Controls(ControlFields):
       if name not in names:
         close = difflib.get_close_matches(name, names, n=1)
         raise UserError(f"{name!r} is not a sampling control" + (f"; did you mean {close[0]!r}?" if close else ""))
-    from chorjax.config import check_sample_control
+    from chorjax.sampling.table import check_sample_control
 
     # checked as the same keys are in a config file: a value the CLI or a calibration.json gives that no
     # [sample] could hold is refused here too (the API's keywords, a calibration edited by hand)

@@ -13,9 +13,10 @@ feet), which the draw's count leaves out.
 from __future__ import annotations
 
 import dataclasses
+import typing
 from typing import Any
 
-from chorjax.fields import config_field
+from chorjax.fields import check_value, config_field
 
 # The most AR(1) filters the MDN noise can pass (``sample.noise_order``): a stream's state holds this many, so
 # the order may change between chunks of an endless dance.
@@ -229,3 +230,10 @@ RECORDED = tuple(n for n, c in RECORDS.items() if c.recorded)  # not searched: w
 # older calibration may hold fewer: noise_smoothing and sigma_temperature alone, or no noise_order or pace, which
 # were then the run's sample.noise_order and sample.pace)
 CALIBRATED = tuple(n for n, c in RECORDS.items() if c.grid or c.carried_grid or c.recorded)
+
+
+def check_sample_control(name: str, value, where: str):
+  """``value`` checked as ``[sample] name`` is in a config file (type, range, finite); ``where`` names
+  its source in the error (e.g. the command-line flag)."""
+  field = {f.name: f for f in dataclasses.fields(ControlFields)}[name]
+  return check_value(where, f"sample.{name}", field, typing.get_type_hints(ControlFields)[name], value)
