@@ -80,7 +80,7 @@ def _add_sampling_args(p, seed: bool = True) -> None:
     action="append",
     default=[],
     metavar="sample.KEY=VALUE",
-    help=f"a [sample] key for this draw (repeatable; `chorjax config keys sample`): {opt_in}",
+    help=f"a [sample] key for this draw (repeatable; `chorjax config keys sample`; default: none, the run's): {opt_in}",
   )
   groups["draw"].add_argument(
     "--plain",
