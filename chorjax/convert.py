@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from chorjax import formats
-from chorjax.errors import UserError, refuse_existing
+from chorjax.errors import UserError, is_run_folder, refuse_existing
 from chorjax.output import load_character
 
 # Names that say a file of a format data convert does not write (every registered format's but CSV's, BVH's and
@@ -132,7 +132,7 @@ def _write(motions, out: Path, character, joint_map, rigid: bool, force: bool) -
     if character is not None:
       return [(write_retargeted(to_mpii16(motions[0], joint_map), character, out), motions[0])]
     return [(write_bvh(motions[0], out, exact=not rigid), motions[0])]
-  if out.is_dir() and {"config.json", "checkpoints"} <= {p.name for p in out.iterdir()}:
+  if is_run_folder(out):
     raise UserError(f"-o {out}: a chorjax run's folder; write the converted takes into a folder of their own")
   targets = [out / f"{m.name}.csv" for m in motions]
   first: dict = {}

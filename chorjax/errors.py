@@ -254,6 +254,11 @@ def check_output(path, allowed: tuple[str, ...]) -> tuple[Path, str]:
   return out, suffix
 
 
+def is_run_folder(path) -> bool:
+  """Whether the folder ``path`` holds a chorjax run (its config or its checkpoints: a run that has started)."""
+  return Path(path).is_dir() and bool({p.name for p in Path(path).iterdir()} & {"config.json", "checkpoints"})
+
+
 def refuse_existing(paths, force: bool, how: str = "--force") -> None:
   """A UserError for the first of ``paths`` that exists, unless ``force`` (``how`` says how to allow it)."""
   for p in paths:

@@ -28,7 +28,7 @@ from chorjax import checkpoint as ckpt
 from chorjax import end_of_run
 from chorjax.config import Config, config_diff, config_from_dict, resumable_keys
 from chorjax.data.dataset import Dataset, dataset_notes, load_dataset
-from chorjax.errors import UserError, atomic_write, load_json
+from chorjax.errors import UserError, atomic_write, is_run_folder, load_json
 from chorjax.families import family_of
 from chorjax.loop import (
   Loop,
@@ -223,8 +223,7 @@ def check_workdir(workdir: Path, force: bool) -> None:
 
 def _is_run(workdir: Path) -> bool:
   """Whether a folder is a run (or still empty but for a lock a refused start left)."""
-  names = {p.name for p in workdir.iterdir()}
-  return bool(names & {"config.json", "checkpoints"}) or names <= {".lock"}
+  return is_run_folder(workdir) or {p.name for p in workdir.iterdir()} <= {".lock"}
 
 
 def _restore_or_init(cfg: Config, workdir: Path, ds: Dataset, manager, parallel) -> tuple[dict, Any, int]:

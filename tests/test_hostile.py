@@ -944,3 +944,17 @@ def test_no_command_changes_a_file_it_did_not_write(tmp_path, capsys):
   changed = [str(p) for p, data in before.items() if not p.is_file() or p.read_bytes() != data]
   assert not changed, changed
   assert {p for p in run.rglob("*") if p.is_file()} == {p for p in before if run in p.parents}  # nothing added
+
+
+def test_data_convert_never_writes_into_a_run_that_has_started(tmp_path, capsys):
+  """A run folder is one with its config or its checkpoints (as training reads it): data convert refuses to
+  write takes into one that holds only its config (a start that stopped before its first checkpoint)."""
+  from chorjax.data.dataset import bundled_path
+
+  started = tmp_path / "started"
+  started.mkdir()
+  (started / "config.json").write_text("{}")
+  take = str(bundled_path("cmu94") / "94_03_skeleton_3d.csv")
+  assert cli.main(["data", "convert", take, "-o", str(started), "--force"]) == 2
+  assert "a chorjax run's folder" in capsys.readouterr().err
+  assert [p.name for p in started.iterdir()] == ["config.json"]
