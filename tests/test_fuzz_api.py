@@ -190,7 +190,35 @@ def test_any_positions_write_or_are_refused_in_one_line(tmp_path_factory, values
   batch=st.one_of(st.integers(1, 2), HOSTILE),
   controls=st.dictionaries(st.sampled_from(["pace", "clamp"]), HOSTILE, max_size=1),
 )
-@settings(settings.get_profile(PROFILE), max_examples=4)
+@settings(settings.get_profile(PROFILE), max_examples=4 if PROFILE == "api_ci" else 10_000)  # an export: seconds
 def test_run_export_writes_or_is_refused_in_one_line(run, tmp_path_factory, batch, controls):
   path = tmp_path_factory.mktemp("export") / "dancer.onnx"
   _result_or_refused(lambda: run.export(path, batch=batch, **controls))
+
+
+@given(
+  content=st.one_of(
+    st.binary(max_size=2000),
+    st.sampled_from([b"", b"PK\x03\x04", b"\x93NUMPY", b"PK\x05\x06" + bytes(18)]),
+  ),
+  cut=st.integers(0, 4000),
+)
+@settings(settings.get_profile(PROFILE))
+def test_a_cache_entry_of_any_bytes_gives_back_the_take_read_anew(tmp_path_factory, content, cut):
+  """The read cache (``data.cache``): an entry replaced by any bytes, or a real entry cut short, is made again
+  from the take, never trusted: the take read through it is the take."""
+  import contextlib
+  import io
+
+  from chorjax.data.cache import Cache
+  from chorjax.data.dataset import read_motions
+
+  root = tmp_path_factory.mktemp("cache")
+  fresh = read_motions(TAKE)[0]
+  with contextlib.redirect_stderr(io.StringIO()):
+    Cache(root).motions(TAKE, {}, lambda: read_motions(TAKE))
+    (entry,) = root.rglob("*.npz")
+    entry.write_bytes(content if cut % 2 else entry.read_bytes()[:cut])
+    again = Cache(root).motions(TAKE, {}, lambda: read_motions(TAKE))[0]
+  np.testing.assert_array_equal(again.positions, fresh.positions)
+  assert again.skeleton == fresh.skeleton and again.fps == fresh.fps
