@@ -244,13 +244,18 @@ def as_path(value, what: str = "path") -> Path:
   return Path(text)
 
 
+def either(words) -> str:
+  """``a, b or c`` (one word alone as itself): the choices an error line names."""
+  words = list(words)
+  return words[0] if len(words) == 1 else f"{', '.join(words[:-1])} or {words[-1]}"
+
+
 def check_output(path, allowed: tuple[str, ...]) -> tuple[Path, str]:
   """The output path and its suffix, checked to be one of the ``allowed`` suffixes."""
   out = as_path(path, "output")
   suffix = out.suffix.lower()
   if suffix not in allowed:
-    kinds = allowed[0] if len(allowed) == 1 else f"{', '.join(allowed[:-1])} or {allowed[-1]}"
-    raise UserError(f"{out}: output must end in {kinds}")
+    raise UserError(f"{out}: output must end in {either(allowed)}")
   return out, suffix
 
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from chorjax.errors import UserError
+from chorjax.errors import UserError, either
 
 
 @dataclass(frozen=True)
@@ -99,8 +99,7 @@ def suffixes(role: str) -> tuple[str, ...]:
 
 def listed(role: str) -> str:
   """``role``'s suffixes as a phrase: ``.csv, .npz or .bvh``."""
-  names = suffixes(role)
-  return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} or {names[-1]}"
+  return either(suffixes(role))
 
 
 def format_of(path, role: str) -> Format:
@@ -152,7 +151,7 @@ def draw(motions: Sequence, out: Path, drawing: Drawing | None = None) -> Path:
 # The formats chorjax ships. Their modules are numpy only; the drawers' (matplotlib, imageio, the player's
 # jax transforms) are imported when a picture is drawn, so reading a take never loads them.
 from chorjax.data import amc, bvh, c3d, csv, gltf, npz  # noqa: E402
-from chorjax.data.skeletons import MPII16, get_skeleton  # noqa: E402
+from chorjax.data.skeletons import get_skeleton  # noqa: E402
 
 
 def _per_motion(write_one: Callable[[Any, Path], Path]):
@@ -212,7 +211,7 @@ register(
     (".csv",),
     read=lambda p, r: [csv.read_csv(p, skeleton=get_skeleton(r.skeleton), fps=r.fps, up_axis=r.up_axis)],
     write=_per_motion(csv.write_csv),
-    beside=lambda skeleton, p: [csv.sidecar_path(p)] if skeleton.joint_names != MPII16.joint_names else [],
+    beside=csv.sidecars,
   )
 )
 register(Format("NPZ", (".npz",), read=lambda p, r: npz.read_npz(p), write=_write_npz, whole=True))

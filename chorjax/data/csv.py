@@ -79,11 +79,16 @@ def has_sidecar(csv_path) -> bool:
   return False
 
 
+def sidecars(skeleton, path) -> list[Path]:
+  """The sidecar :func:`write_csv` puts beside the CSV ``path`` for a motion of ``skeleton``: one for any
+  skeleton but the 16-joint one, none for that."""
+  return [sidecar_path(path)] if skeleton.joint_names != MPII16.joint_names else []
+
+
 def written_paths(motion_or_positions, path) -> list[Path]:
   """What :func:`write_csv` writes for it at ``path``: the CSV, and the sidecar beside it where it needs one."""
   m = motion_or_positions
-  own = isinstance(m, Motion) and m.skeleton.joint_names != MPII16.joint_names
-  return [Path(path), *([sidecar_path(path)] if own else [])]
+  return [Path(path), *(sidecars(m.skeleton, path) if isinstance(m, Motion) else [])]
 
 
 def write_csv(motion_or_positions, path, *, overwrite: bool = True) -> Path:
