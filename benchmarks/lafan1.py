@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 
 from chorjax.errors import UserError
+from chorjax.evaluation.metrics import foot_skate, l2p, npss, position_error
 from chorjax.families.inbetween import inbetweening as ib
-from chorjax.metrics import foot_skate, l2p, npss, position_error
 
 BENCHMARK_LENGTHS = (5, 15, 30, 45)  # the LaFAN1 protocol's transition lengths
 BENCHMARK_HOP = 40  # its windows start every 40 frames

@@ -43,7 +43,7 @@ def main(argv=None) -> dict:
   import jax
 
   from chorjax.api import load_run
-  from chorjax.export import OnnxDancer, sample_numbers
+  from chorjax.export.dancer import OnnxDancer, sample_numbers
   from chorjax.models import motion_weight_vector
 
   run = load_run(args.run)

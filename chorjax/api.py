@@ -21,7 +21,6 @@ from typing import Any  # noqa: F401  (the inherited fields' annotations name th
 
 import numpy as np
 
-from chorjax import formats  # noqa: F401  (the formats each command reads, writes and draws)
 from chorjax.compare import compare_to  # noqa: F401
 from chorjax.config import (  # noqa: F401
   Config,
@@ -33,7 +32,6 @@ from chorjax.config import (  # noqa: F401
   to_toml,
   toml_value,
 )
-from chorjax.convert import convert  # noqa: F401
 from chorjax.data import motion as _motion
 from chorjax.data.features import Features  # noqa: F401
 from chorjax.data.motion import Skeleton  # noqa: F401
@@ -42,11 +40,16 @@ from chorjax.errors import (
   UserError,
   as_path,
 )
-from chorjax.evaluate import evaluate_to  # noqa: F401
-from chorjax.export import write_blender_addon, write_onnx, write_web  # noqa: F401
-from chorjax.live import run_live  # noqa: F401
+from chorjax.evaluation.evaluate import evaluate_to  # noqa: F401
+from chorjax.evaluation.reports import check_report, metric_keys, metric_lines, takes_table  # noqa: F401
+from chorjax.evaluation.scoring import score_to  # noqa: F401
+from chorjax.export.blender import write_blender_addon  # noqa: F401
+from chorjax.export.dancer import write_onnx  # noqa: F401
+from chorjax.export.web import write_web  # noqa: F401
+from chorjax.io import formats  # noqa: F401  (the formats each command reads, writes and draws)
+from chorjax.io.convert import convert  # noqa: F401
+from chorjax.live.server import run_live  # noqa: F401
 from chorjax.render.files import plot_file, render  # noqa: F401
-from chorjax.reports import check_report, metric_keys, metric_lines, takes_table  # noqa: F401
 from chorjax.run import Run as _Run
 from chorjax.runtime import keep_compiled_programs, keep_freed_memory  # noqa: F401
 from chorjax.sample import write_inbetween, write_sample  # noqa: F401
@@ -56,7 +59,6 @@ from chorjax.sampling.calibrate import CALIBRATION_DANCERS, LABELLED_DANCERS, ca
 from chorjax.sampling.controls import Controls  # noqa: F401
 from chorjax.sampling.table import CALIBRATED, FLAGGED, PLAIN, RECORDS, check_sample_control  # noqa: F401
 from chorjax.sampling.table import SWITCHES as CONTROL_SWITCHES  # noqa: F401
-from chorjax.scoring import score_to  # noqa: F401
 from chorjax.sweeps import SWEEP_DESCRIPTION, SWEEP_FORMAT, run_sweep, train_command  # noqa: F401
 
 __all__ = ["Motion", "Player", "Run", "UserError", "load_dataset", "load_run", "read_motion", "score", "train"]
@@ -89,8 +91,8 @@ class Motion(_motion.Motion):
     skeleton's nodes and their animation) or ``.html`` (the player).
     An existing file is not replaced unless ``force``."""
     from chorjax.errors import check_output, refuse_existing
-    from chorjax.formats import suffixes, written_paths
-    from chorjax.output import write_motions
+    from chorjax.io.formats import suffixes, written_paths
+    from chorjax.io.output import write_motions
 
     path, suffix = check_output(path, suffixes("write"))
     if "\x00" in str(path):
@@ -192,8 +194,8 @@ class Run(_Run):
   def export(self, path, *, batch: int = 1, force: bool = False, **controls) -> list[Path]:
     """The dancer as an ONNX model at ``path`` (``.onnx``) with its JSON sidecar, as ``chorjax export``:
     ``batch`` dancers a call, ``controls`` the sampling controls (unset: the run's own). Returns the paths
-    written (:class:`chorjax.export.OnnxDancer` runs it)."""
-    from chorjax.export import export_onnx
+    written (:class:`chorjax.export.dancer.OnnxDancer` runs it)."""
+    from chorjax.export.dancer import export_onnx
 
     return export_onnx(self, path, batch=batch, controls=controls, force=force)
 
@@ -215,8 +217,8 @@ def train(config, workdir=None, overrides: Sequence[str] | None = None, *, force
   """Trains ``config`` (a TOML path, a loaded ``chorjax.config.Config`` or a ``{section: {key: value}}``
   dict; ``overrides``: ``"key=value"`` strings) in ``workdir`` (default ``runs/<name>``), resuming from its
   latest checkpoint as ``chorjax train`` does, and returns the run at the checkpoint it keeps."""
-  from chorjax.end_of_run import standard
-  from chorjax.training import default_workdir, train_and_evaluate
+  from chorjax.train.end_of_run import standard
+  from chorjax.train.training import default_workdir, train_and_evaluate
 
   cfg = load_config(config, list(overrides or []))
   workdir = Path(workdir) if workdir is not None else default_workdir(cfg)
@@ -247,7 +249,7 @@ def score(motions, data, **kw) -> dict:
   """The metrics of ``chorjax metrics`` (same keys, same ruler) for ``motions`` (a Motion, a list of them,
   or file paths) against the real takes of ``data`` (a bundled name, folder or file, or a list of them;
   or Motions). ``kw``: ``window``, ``splits``, ``seed``."""
-  from chorjax.scoring import score_motions
+  from chorjax.evaluation.scoring import score_motions
 
   as_list = lambda x: list(x) if isinstance(x, list | tuple) else [x]
   read = lambda x: [x] if isinstance(x, _motion.Motion) else load_dataset(x)

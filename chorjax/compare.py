@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 
 from chorjax.errors import UserError, atomic_write, load_json
+from chorjax.evaluation.scoring import mean_of, upgrade
 from chorjax.families import family_of
 from chorjax.runtime import cpu_info
-from chorjax.scoring import mean_of, upgrade
 
 # metric -> (label, how to pick the winner)
 COLUMNS = [
@@ -64,14 +64,14 @@ def machine_info() -> str:
 
 
 def _read_run(workdir: Path) -> dict:
-  from chorjax.evaluate import metrics_path
+  from chorjax.evaluation.evaluate import metrics_path
 
   cfg_path, ev_path = workdir / "config.json", metrics_path(workdir)
   if not cfg_path.exists():
     raise UserError(f"{workdir}: not a run directory (no config.json)")
   if not ev_path.exists():
     raise UserError(f"{ev_path}: missing; run `chorjax eval {workdir} --data ...` first")
-  from chorjax.training import metrics_row
+  from chorjax.train.training import metrics_row
 
   history = workdir / "metrics.jsonl"
   rows = (
@@ -308,7 +308,7 @@ def _table(groups) -> list[str]:
 def _strips(groups, stem: Path) -> list[str]:
   """Each group's first run's evaluation sample as a filmstrip (start, middle, end)."""
   from chorjax.data.npz import read_npz
-  from chorjax.evaluate import metrics_path, sample_path
+  from chorjax.evaluation.evaluate import metrics_path, sample_path
   from chorjax.render.plot import plot_strip
 
   lines = []

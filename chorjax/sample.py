@@ -119,8 +119,8 @@ def write_sample(
   settings, BVH, onto the character ``skeleton`` where given, or HTML). Everything that can be refused is
   refused before the draw; an existing file is not replaced unless ``force``. Returns the paths written."""
   from chorjax.errors import check_output, refuse_existing
-  from chorjax.formats import suffixes, written_paths
-  from chorjax.output import as_motions, load_character, write_motions
+  from chorjax.io.formats import suffixes, written_paths
+  from chorjax.io.output import as_motions, load_character, write_motions
   from chorjax.run import load_run
 
   check_counts(frames=frames, num=num, seed=seed)  # before any arithmetic on them
@@ -145,8 +145,8 @@ def write_inbetween(
   it (``frames``: one count for every target, or one for all) and the target; written to ``output`` as
   :func:`write_sample` writes. Returns the paths written."""
   from chorjax.errors import check_output, refuse_existing
-  from chorjax.formats import output_paths, suffixes
-  from chorjax.output import as_motions, write_motions
+  from chorjax.io.formats import output_paths, suffixes
+  from chorjax.io.output import as_motions, write_motions
   from chorjax.run import load_run
 
   to, frames = list(to), list(frames)

@@ -26,7 +26,7 @@ of different recipes is one file::
     "train.seed" = [0, 1, 2]
 
 ``vectorize = ["train.seed", "optim.lr", "train.input_noise"]`` (any of them) trains the points that
-differ only in those keys as one vectorized program (``chorjax.points``): one run's cost for
+differ only in those keys as one vectorized program (``chorjax.train.points``): one run's cost for
 several seeds on a CPU whose cores one small model leaves idle.
 
 Every point is an ordinary run directory (``<root>/<name>-<key>=<value>...``) with its evaluation in
@@ -108,7 +108,7 @@ def load_sweep(path) -> dict:
     for key in body:
       if key not in valid_keys():
         raise UserError(f"{path}: [candidates.{name}] key {key!r} is not a config key{suggest(key, valid_keys())}")
-  from chorjax.points import VECTOR_KEYS
+  from chorjax.train.points import VECTOR_KEYS
 
   vec = sweep.get("vectorize", [])
   if not isinstance(vec, list) or any(k not in VECTOR_KEYS for k in vec):
@@ -147,7 +147,7 @@ def is_finished(workdir: Path, num_steps: int, with_eval: bool) -> bool:
   step, that step read from the run's own config where ``train.epochs`` resolved it, or the end-of-run sample
   that a finished run writes (also where ``train.patience`` ended it early)."""
   from chorjax import checkpoint as ckpt
-  from chorjax.evaluate import metrics_path
+  from chorjax.evaluation.evaluate import metrics_path
 
   with contextlib.suppress(OSError, ValueError, KeyError, TypeError):
     num_steps = json.loads((Path(workdir) / "config.json").read_text())["train"]["num_steps"]
@@ -170,13 +170,13 @@ def sweep_groups(sweep: dict) -> list[list[tuple[str, list[str]]]]:
 def run_sweep(path, log=print, shard: tuple[int, int] = (0, 1)) -> list[Path]:
   """Trains (and evaluates) every point of a sweep; returns the point workdirs.
 
-  Points that differ only in the ``vectorize`` keys train together (``chorjax.points``); points
+  Points that differ only in the ``vectorize`` keys train together (``chorjax.train.points``); points
   whose checkpoints are at different steps fall back to training one by one. ``shard = (i, n)``: only
   the groups (points, without ``vectorize``) whose index is ``i`` modulo ``n`` (0-based ``i``), so ``n``
   jobs with no coordinator split a sweep (a job array), each skipping what is already finished;
   ``compare`` over the shared root merges them."""
   from chorjax import checkpoint as ckpt
-  from chorjax.evaluate import evaluate, metrics_path, write_metrics
+  from chorjax.evaluation.evaluate import evaluate, metrics_path, write_metrics
 
   sweep = load_sweep(path)
   ev = sweep.get("eval")
@@ -216,10 +216,10 @@ def _release_compiled() -> None:
 
 def _train_points(points, log) -> None:
   """Trains ``(name, overrides, cfg, workdir)`` points: together when there are several, else alone."""
-  from chorjax.end_of_run import standard
-  from chorjax.points import NotAligned
-  from chorjax.training import train_and_evaluate
-  from chorjax.vectorized import train_vectorized
+  from chorjax.train.end_of_run import standard
+  from chorjax.train.points import NotAligned
+  from chorjax.train.training import train_and_evaluate
+  from chorjax.train.vectorized import train_vectorized
 
   if len(points) > 1:
     log(f"{', '.join(n for n, *_ in points)}: training together ({' '.join(points[0][1])} ...)")
@@ -238,11 +238,11 @@ def train_command(config, overrides=(), *, workdir=None, force: bool = False, lo
   (``train.seed=[0,1,2]``) trains one run directory a point (``WORKDIR/seed=0`` ...) as one program, else
   one run (data-parallel over processes where ``[parallel]`` says). ``log`` hears a line a run trained.
   Returns the runs' summaries (:func:`train_and_evaluate`)."""
-  from chorjax import end_of_run
-  from chorjax.parallel import setup_parallel
-  from chorjax.points import expand_overrides
-  from chorjax.training import default_workdir, train_and_evaluate
-  from chorjax.vectorized import train_vectorized
+  from chorjax.train import end_of_run
+  from chorjax.train.parallel import setup_parallel
+  from chorjax.train.points import expand_overrides
+  from chorjax.train.training import default_workdir, train_and_evaluate
+  from chorjax.train.vectorized import train_vectorized
 
   overrides, points = expand_overrides(list(overrides))
   if len(points) == 1:  # a one-element list is that value, checked as the value alone is

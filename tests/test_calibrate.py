@@ -19,7 +19,7 @@ from chorjax.sampling import calibrate
 from chorjax.sampling.calibrate import calibration_path, search
 from chorjax.sampling.calibration_file import CALIBRATED, chosen_calibration_row
 from chorjax.sampling.controls import Draw, Pacing
-from chorjax.training import train_and_evaluate
+from chorjax.train.training import train_and_evaluate
 
 GRID = {"noise_smoothing": (0.6, 0.75, 0.85, 0.95), "sigma_temperature": (0.8, 0.9, 1.0, 1.15, 1.3, 1.5)}
 # What the commands below search: every control of the shipped grid, two values of two (the whole grid,
@@ -255,7 +255,7 @@ def test_the_pose_measure_holds_real_takes_near_one_and_a_frozen_dancer_far_from
   """``poses`` on real cmu94 takes: the held-out takes score near the training takes' own halves; a dancer
   frozen in one of their poses scores far worse; the training takes themselves score nearest."""
   from chorjax.data.dataset import load_dataset
-  from chorjax.scoring import PoseDistribution
+  from chorjax.evaluation.scoring import PoseDistribution
 
   ds = load_dataset(tiny_config().data)
   y_up = lambda m: np.asarray(to_y_up(m.positions, ds.features.up_axis))
@@ -274,8 +274,8 @@ def test_the_governor_holds_what_the_judge_measures_turning_included(run_dir):
   by that measure: told half or twice the free dancer's pace, it holds back or pushes on."""
   from chorjax.data.dataset import load_dataset
   from chorjax.data.features import Features, take_joint_pace
+  from chorjax.evaluation.metrics import displacement
   from chorjax.families.recurrent.generation import generate
-  from chorjax.metrics import displacement
 
   run = load_run(run_dir)
   f, m, lag = run.features, run.features.joint_motion, run.features.pace_lag
@@ -309,7 +309,7 @@ def test_calibration_measures_a_dance_as_the_judge_does():
   travel from both. (Calibration once averaged speed and travel per take: martial's short, fast training takes
   then weighed as much as its long ones, and a dancer calibrated to speed 1.15 was judged 1.25.)"""
   from chorjax.data.dataset import load_dataset
-  from chorjax.scoring import score
+  from chorjax.evaluation.scoring import score
 
   ds = load_dataset(tiny_config().data)
   f = ds.features
@@ -328,7 +328,7 @@ def test_calibration_measures_a_dance_as_the_judge_does():
 def test_an_evaluation_over_seeds_drawn_side_by_side_is_the_one_drawn_seed_after_seed(run_dir, monkeypatch):
   """``chorjax eval --seeds``' draws run side by side (``runtime.side_by_side``, as calibration's): every
   figure and the first dancer are what drawing the seeds one after another gives."""
-  from chorjax.evaluate import evaluate
+  from chorjax.evaluation.evaluate import evaluate
 
   results = {}
   for drawers in (1, 2):

@@ -13,11 +13,11 @@ from helpers import TINY, tiny_config
 
 from chorjax import cli
 from chorjax.data.dataset import load_dataset
+from chorjax.evaluation.metrics import roughness
 from chorjax.families.recurrent.recurrent_model import create_model
-from chorjax.metrics import roughness
 from chorjax.models.heads import ar_coefficients, mdn_carry, mdn_log_prob
 from chorjax.sampling.controls import PLAIN
-from chorjax.training import train_and_evaluate
+from chorjax.train.training import train_and_evaluate
 
 
 def _model_and_window(frames: int = 20, memory: int = 2):

@@ -17,10 +17,10 @@ from chorjax.data.csv import read_csv
 from chorjax.data.dataset import bundled_path
 from chorjax.data.features import Features
 from chorjax.errors import UserError
-from chorjax.export import OnnxDancer, sample_numbers
+from chorjax.export.dancer import OnnxDancer, sample_numbers
 from chorjax.models import motion_weight_vector
 from chorjax.sample import sample_dancers
-from chorjax.training import train_and_evaluate
+from chorjax.train.training import train_and_evaluate
 
 ROOT = Path(__file__).resolve().parents[1]
 NODE_MODULES = ROOT / ".venv" / "node"  # .ci/run: npm install --prefix .venv/node gltf-validator onnxruntime-web
@@ -285,7 +285,7 @@ def test_the_web_page_dances_offline_and_draws_what_onnxruntime_draws(quickstart
 
   from helpers import headless
 
-  from chorjax.export import page_numbers
+  from chorjax.export.web import page_numbers
 
   ort_web = NODE_MODULES / "node_modules" / "onnxruntime-web" / "dist"
   if not ort_web.is_dir():
@@ -356,7 +356,7 @@ def test_a_run_moved_away_from_its_deleted_takes_samples_exports_and_goes_live(t
   still samples, exports and streams; a scale quantile it never recorded names the missing takes in one line."""
   import shutil
 
-  from chorjax.live import Stream
+  from chorjax.live.server import Stream
 
   takes = tmp_path / "takes"
   shutil.copytree(bundled_path("cmu94"), takes)

@@ -184,7 +184,7 @@ def cli_toml() -> str:
 def test_a_toy_family_streams_through_the_api_and_the_live_command(toy_run):
   from websockets.sync.client import connect
 
-  from chorjax.live import Stream
+  from chorjax.live.server import Stream
   from chorjax.models import motion_weight_vector
 
   sampling = toy_run.sampling()
@@ -233,8 +233,8 @@ def test_an_unknown_family_is_one_line_naming_the_known_ones():
 
 
 def test_the_end_of_a_run_is_the_hooks_handed_to_training(tmp_path):
-  from chorjax import end_of_run
-  from chorjax.training import train_and_evaluate
+  from chorjax.train import end_of_run
+  from chorjax.train.training import train_and_evaluate
 
   seen = []
   hook = lambda run: seen.append(run) or {"mine": str(run.workdir)}
@@ -260,7 +260,7 @@ def test_the_patch_family_recombines_one_take_without_training(tmp_path, capsys)
   import shutil
 
   from chorjax.data.dataset import bundled_path
-  from chorjax.scoring import score_motions
+  from chorjax.evaluation.scoring import score_motions
 
   take = tmp_path / "phrase.csv"
   shutil.copy(bundled_path("cmu94") / "94_03_skeleton_3d.csv", take)

@@ -1,4 +1,4 @@
-"""The format registry (``chorjax.formats``): every format declared once, and a new one is one registration that
+"""The format registry (``chorjax.io.formats``): every format declared once, and a new one is one registration that
 ``chorjax data info``, ``sample -o``, ``render`` and the help then handle."""
 
 import json
@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 from helpers import tiny_config
 
-from chorjax import cli, formats
+from chorjax import cli
 from chorjax.data.dataset import bundled_path
 from chorjax.data.motion import Motion, Skeleton
-from chorjax.training import train_and_evaluate
+from chorjax.io import formats
+from chorjax.train.training import train_and_evaluate
 
 TAKE = bundled_path("cmu94") / "94_07_skeleton_3d.csv"
 

@@ -16,12 +16,12 @@ from chorjax import cli
 from chorjax.config import load_config
 from chorjax.data.dataset import WindowSampler, load_dataset
 from chorjax.errors import UserError
+from chorjax.evaluation.scoring import mean_of
 from chorjax.families.gan.adversarial import create_gan_state, critic_loss, critic_step, generator_loss, generator_step
 from chorjax.families.gan.networks import Critic, GanModel, Generator, pose_layer
 from chorjax.models.rnn import RecurrentCore
 from chorjax.run import load_run
-from chorjax.scoring import mean_of
-from chorjax.training import train_and_evaluate
+from chorjax.train.training import train_and_evaluate
 
 GAN = [
   *GAN_NETWORKS,

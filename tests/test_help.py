@@ -165,7 +165,7 @@ def test_the_site_builds_strictly_offline_with_every_flag_key_metric_and_api_nam
   import subprocess
   import sys
 
-  from chorjax.reports import metric_keys
+  from chorjax.evaluation.reports import metric_keys
 
   site = tmp_path / "site"
   env = {

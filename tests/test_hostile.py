@@ -18,7 +18,7 @@ from helpers import TINY, tiny_config
 from chorjax import cli
 from chorjax.data.bvh import read_bvh
 from chorjax.errors import UserError
-from chorjax.training import train_and_evaluate
+from chorjax.train.training import train_and_evaluate
 
 BVH = "bvh/cmu131/131_01.bvh"
 QUICKSTART = str(Path(__file__).resolve().parents[1] / "configs" / "quickstart.toml")
@@ -548,7 +548,7 @@ def test_saved_state_nested_too_deep_is_one_line(tmp_path, capsys):
   import asyncio
 
   from chorjax.data.dataset import bundled_path
-  from chorjax.live import Live
+  from chorjax.live.server import Live
 
   deep = "[" * 5000 + "]" * 5000
   w = tmp_path / "run"

@@ -15,12 +15,12 @@ from benchmarks import lafan1
 from chorjax import cli
 from chorjax.data.dataset import bundled_path, load_dataset
 from chorjax.data.npz import read_npz
+from chorjax.evaluation.metrics import foot_skate, l2p, npss, position_error
 from chorjax.families.inbetween import inbetweening as ib
 from chorjax.families.inbetween.cvae_model import transition_model
 from chorjax.families.inbetween.lstm_model import noise_strength, rollout, tta_embedding
-from chorjax.metrics import foot_skate, l2p, npss, position_error
 from chorjax.run import load_run
-from chorjax.training import train_and_evaluate
+from chorjax.train.training import train_and_evaluate
 
 IB = [
   "model.family=inbetween",

@@ -16,10 +16,10 @@ from chorjax.data.dataset import WindowSampler, dataset_notes, load_dataset
 from chorjax.data.features import takes_joint_pace
 from chorjax.data.labels import read_labels
 from chorjax.errors import UserError
-from chorjax.export import OnnxDancer, sample_numbers
-from chorjax.live import Stream
+from chorjax.export.dancer import OnnxDancer, sample_numbers
+from chorjax.live.server import Stream
 from chorjax.sample import sample_dancers
-from chorjax.training import train_and_evaluate
+from chorjax.train.training import train_and_evaluate
 
 ARCHIVE = "bandai-motion.tar.xz"
 TAKES = [f"dataset-2_{a}_{s}_{t:03d}" for a in ("walk", "run") for s in ("elderly", "active") for t in (1, 2)]
@@ -191,8 +191,8 @@ def test_calibration_holds_each_labelled_dancer_to_the_poses_of_its_own_labels(l
   each as a dancer under its own labels, are nearer than under another pair's (pooled over the library, the
   labels would not count); a pair with too few takes leaves the pooled distribution in its place."""
   from chorjax.data.transforms import to_y_up
+  from chorjax.evaluation.scoring import PoseDistribution
   from chorjax.sampling.calibrate import PosesByLabel
-  from chorjax.scoring import PoseDistribution
 
   run = load_run(labelled_run)
   ds = load_dataset(run.config.data)

@@ -25,10 +25,10 @@ from chorjax.data.csv import read_csv
 from chorjax.data.dataset import bundled_path, load_dataset
 from chorjax.data.npz import read_npz
 from chorjax.errors import UserError
-from chorjax.live import Stream
+from chorjax.live.server import Stream
 from chorjax.models import motion_weight_vector
 from chorjax.run import load_run
-from chorjax.training import train_and_evaluate
+from chorjax.train.training import train_and_evaluate
 
 TAKE = bundled_path("cmu94") / "94_07_skeleton_3d.csv"
 FPS = 20.0
@@ -434,7 +434,7 @@ def test_osc_input_takes_turns_and_osc_pauses_the_stream(live_run):
 def test_only_the_served_page_and_programs_without_an_origin_may_connect():
   from websockets.datastructures import Headers
 
-  from chorjax.live_guard import origin_refusal
+  from chorjax.live.guard import origin_refusal
 
   h = lambda **kw: Headers([(k.replace("_", "-").title(), v) for k, v in kw.items()])
   assert origin_refusal(h(host="127.0.0.1:8765"), "127.0.0.1") is None  # a script, a creative tool
@@ -465,7 +465,7 @@ def test_a_mix_of_huge_weights_is_normalized_and_bad_ones_are_one_line():
 def test_off_loopback_the_host_must_name_this_server_and_headers_must_be_well_formed():
   from websockets.datastructures import Headers
 
-  from chorjax.live_guard import header_refusal, origin_refusal
+  from chorjax.live.guard import header_refusal, origin_refusal
 
   names = {"127.0.0.1", "localhost", "::1", "[::1]", "studio", "10.0.0.5"}  # a server on 0.0.0.0
   h = lambda **kw: Headers([(k.replace("_", "-").title(), v) for k, v in kw.items()])
@@ -485,7 +485,7 @@ def test_off_loopback_the_host_must_name_this_server_and_headers_must_be_well_fo
 
 
 def test_a_client_s_budget_refills_at_its_rate():
-  from chorjax.live_guard import Budget
+  from chorjax.live.guard import Budget
 
   now = [0.0]
   budget = Budget(clock=lambda: now[0])

@@ -8,16 +8,16 @@ import scipy.linalg
 from helpers import TINY
 
 from chorjax import cli
-from chorjax import metrics as M
 from chorjax.config import load_config
 from chorjax.data import transforms as tf
 from chorjax.data.csv import read_csv
 from chorjax.data.dataset import bundled_path, load_dataset, read_takes
 from chorjax.data.motion import bone_length_cv
 from chorjax.data.skeletons import MPII16
-from chorjax.evaluate import held_out
-from chorjax.reports import WHERE_MEASURED, metric_keys
-from chorjax.scoring import mean_of, score
+from chorjax.evaluation import metrics as M
+from chorjax.evaluation.evaluate import held_out
+from chorjax.evaluation.reports import WHERE_MEASURED, metric_keys
+from chorjax.evaluation.scoring import mean_of, score
 
 TAKE = read_csv(bundled_path("cmu94") / "94_05_skeleton_3d.csv")
 POS = np.asarray(tf.rotate(TAKE.positions, tf.up_axis_matrix("-y")))  # y-up
@@ -359,7 +359,7 @@ def test_sweep_candidates_cross_the_grid_and_bad_keys_are_named(tmp_path):
 def test_older_metrics_files_state_the_controls_added_since_as_off():
   """Runs evaluated before a sampling control existed group with runs that state it off (compare)."""
   from chorjax.compare import group_runs
-  from chorjax.scoring import upgrade
+  from chorjax.evaluation.scoring import upgrade
 
   old = {"movement_first_1000": 0.5, "sampling": {"pi_temperature": 0.2, "seed": 0}}
   new = {"movement_first": 0.5, "sampling": {"pi_temperature": 0.2, "clamp": False, "pace": 0.0, "seed": 0}}
@@ -447,7 +447,7 @@ def test_patched_cost_is_the_least_cost_cut_into_long_enough_pieces():
   ``shortest`` frames, each matched along a diagonal of the columns within one take."""
   import functools
 
-  from chorjax.single_take import patched_cost
+  from chorjax.evaluation.single_take import patched_cost
 
   rng = np.random.default_rng(0)
   for t, u, shortest, starts in ((7, 5, 2, (0,)), (9, 6, 3, (0, 3)), (8, 8, 1, (0, 2, 5))):
@@ -472,10 +472,10 @@ def test_single_take_measures_tell_a_replay_a_variation_and_another_dance_apart(
   """On cmu94: the take itself is covered whole with no diversity; the take danced 10% faster is covered
   whole and barely diverse; another take of the dancer covers none of it and is far; a frozen pose covers
   nothing; two samples that are one dance have no diversity between them."""
-  from chorjax import metrics
   from chorjax.data.skeletons import MPII16
   from chorjax.data.transforms import resample
-  from chorjax.single_take import KEYS, single_take
+  from chorjax.evaluation import metrics
+  from chorjax.evaluation.single_take import KEYS, single_take
 
   take, other = _cmu94(1), _cmu94(2)
   size = metrics.body_size(take, MPII16)
@@ -520,7 +520,7 @@ def test_a_metric_is_one_function_and_one_registration(tmp_path, capsys):
   first docstring line)."""
   from pathlib import Path
 
-  from chorjax import scoring
+  from chorjax.evaluation import scoring
 
   @scoring.metric("stillness", "stillness")
   def stillness(j):
@@ -544,7 +544,7 @@ def test_a_metric_is_one_function_and_one_registration(tmp_path, capsys):
     # and chorjax eval's report: a tiny run's sample judged on two takes
     from helpers import tiny_config
 
-    from chorjax.training import train_and_evaluate
+    from chorjax.train.training import train_and_evaluate
 
     train_and_evaluate(tiny_config("log.tensorboard=false", "train.calibrate=false"), tmp_path / "run")
     ev = ["eval", str(tmp_path / "run"), "--data", *refs, "--frames", "300", "-o", str(tmp_path / "e.json")]

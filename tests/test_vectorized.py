@@ -8,11 +8,11 @@ from helpers import TINY, tiny_config
 
 from chorjax import cli
 from chorjax.errors import UserError
-from chorjax.points import NotAligned, check_group
 from chorjax.run import load_run
 from chorjax.sweeps import load_sweep, sweep_groups
-from chorjax.training import train_and_evaluate
-from chorjax.vectorized import train_vectorized
+from chorjax.train.points import NotAligned, check_group
+from chorjax.train.training import train_and_evaluate
+from chorjax.train.vectorized import train_vectorized
 
 BASE = ["train.num_steps=4", "log.tensorboard=false", "train.eval_every=2", "train.checkpoint_every=2"]
 POINTS = [

@@ -15,7 +15,6 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from chorjax import formats
 from chorjax.data import transforms
 from chorjax.data.cache import Cache, cache_root, in_processes, workers_for
 from chorjax.data.features import Features, feature_dim, floor_height, takes_joint_pace
@@ -23,6 +22,7 @@ from chorjax.data.labels import Labels, read_labels, search_name, take_condition
 from chorjax.data.motion import Motion, bone_lengths
 from chorjax.data.transforms import to_up_axis
 from chorjax.errors import UserError
+from chorjax.io import formats
 
 BUNDLED = ("cmu94",)
 

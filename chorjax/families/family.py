@@ -133,7 +133,7 @@ class Family:
     raise NotImplementedError
 
   def stream(self):
-    """``(start_stream, continue_stream)``: live mode's endless draw (``chorjax.live``):
+    """``(start_stream, continue_stream)``: live mode's endless draw (``chorjax.live.server``):
     ``start_stream(graphdef, params, motion [B, M], draw, prime [B, P, D] or None) -> state`` and
     ``continue_stream(graphdef, params, state, key, draw, *, num_frames) -> (state, frames [B, N, D])``,
     ``draw`` the run's ``Controls.draw`` (its temperatures may change between chunks)."""
@@ -150,11 +150,11 @@ class Family:
 
   def frame_numbers(self, graphdef, params, key, frames: int, batch: int) -> tuple:
     """``(gumbel [T, B, K], normal [T, B, N])``: the random numbers each frame of :meth:`dance` with ``key``
-    is drawn with, as :meth:`frame_program` takes them (``chorjax.export.sample_numbers``)."""
+    is drawn with, as :meth:`frame_program` takes them (``chorjax.export.dancer.sample_numbers``)."""
     raise NotImplementedError
 
   def vector_step(self) -> tuple[Callable, Callable] | None:
-    """``(step, loss)`` for training grid points as one vectorized program (``chorjax.vectorized``): the
+    """``(step, loss)`` for training grid points as one vectorized program (``chorjax.train.vectorized``): the
     un-jitted ``step(state, batch, key, spec, lr_scale, noise) -> (state, metrics)`` with the learning-rate
     scale and the input noise traced, and ``loss(params, windows, graphdef)`` on ``data.dataset`` windows; or
     None where the family trains its points apart."""

@@ -41,9 +41,9 @@ def render(
   ``.html`` (the player, ``columns`` side by side, ``title``), ``.gif``/``.mp4`` (``size``: ``WxH``),
   ``.png`` (the first take's trajectories, or its filmstrip with ``strip``: ``poses`` a row, ``every``
   frames apart). ``frames``: the first N frames only. Returns the path written."""
-  from chorjax import formats
   from chorjax.data.dataset import read_motions, resolve_files
   from chorjax.errors import check_output, refuse_existing
+  from chorjax.io import formats
 
   if poses > MAX_POSES:
     raise UserError(f"--poses {poses}: at most {MAX_POSES} poses in a row")

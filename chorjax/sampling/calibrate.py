@@ -34,9 +34,9 @@ from collections.abc import Sequence
 import jax
 import numpy as np
 
-from chorjax import metrics, scoring
 from chorjax.data.transforms import to_y_up
 from chorjax.errors import UserError, atomic_write
+from chorjax.evaluation import metrics, scoring
 from chorjax.runtime import side_by_side
 from chorjax.sampling.calibration_file import calibration_path, read_calibration  # noqa: F401  (re-exported)
 from chorjax.sampling.table import BEYOND, CALIBRATED, CARRIED_BEYOND, CARRIED_GRID, DECODING, GRID, RECORDED  # noqa: F401

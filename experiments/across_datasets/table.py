@@ -24,8 +24,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).parent.parent))
 from _results import end_strip, keep_small_files, real_strip
 
+from chorjax.evaluation.scoring import mean_of
 from chorjax.sampling.calibration_file import chosen_calibration_row
-from chorjax.scoring import mean_of
 
 HERE = Path(__file__).parent.parent  # experiments/
 OUT = Path(__file__).parent

@@ -20,7 +20,7 @@ import numpy as np
 from chorjax.config import load_config
 from chorjax.data.dataset import conform, load_dataset, read_takes
 from chorjax.data.transforms import to_y_up
-from chorjax.scoring import mean_of, score
+from chorjax.evaluation.scoring import mean_of, score
 
 BARS = ("jitter", "speed", "root_travel")
 

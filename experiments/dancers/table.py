@@ -49,7 +49,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).parent.parent))
 from _results import end_strip, keep_small_files, real_strip, takes_as_trained
 
-from chorjax.scoring import mean_of
+from chorjax.evaluation.scoring import mean_of
 
 HERE = Path(__file__).parent
 RESULTS = HERE / "results"  # each run's small files, kept in the repository (runs/ is not)
@@ -187,7 +187,7 @@ def real_scores(run: Path) -> tuple[dict, tuple[int, float]]:
   are the extremes over every take's segments (``movement_min_train`` / ``movement_max_train``), as a
   sample's are over its own: not the takes' mean of each take's (which hid martial's 0.66 and 1.40 takes
   behind 0.96 / 0.99 until 2026-11-26)."""
-  from chorjax.scoring import score
+  from chorjax.evaluation.scoring import score
 
   train, held, skeleton, fps = real_takes(run)
   e = score(train, held, skeleton, fps, train=train, unseen=held)  # its fid_*_train are its fid_k / fid_g

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from chorjax.evaluate import evaluate
-from chorjax.scoring import mean_of
+from chorjax.evaluation.evaluate import evaluate
+from chorjax.evaluation.scoring import mean_of
 
 ROOT = Path("runs/families")
 OUT = Path("experiments/families/short_report.md")

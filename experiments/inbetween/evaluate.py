@@ -24,11 +24,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # benchmarks/, beside chorjax/
 from benchmarks import lafan1
+from chorjax.compare import machine_info
 from chorjax.data.dataset import conform, load_dataset, read_takes, to_rate
 from chorjax.data.features import leg_length
 from chorjax.families.inbetween import inbetweening as ib
 from chorjax.run import load_run
-from chorjax.compare import machine_info
 
 HERE = Path(__file__).parent
 BASELINES = ("zero velocity", "linear interpolation", "nearest 20 training transitions")

@@ -28,9 +28,9 @@ from sklearn.metrics import confusion_matrix
 from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 
-from chorjax import metrics, scoring
 from chorjax.data.dataset import load_dataset
 from chorjax.data.transforms import to_y_up
+from chorjax.evaluation import metrics, scoring
 from chorjax.run import load_run
 
 WINDOW, HOP = 60, 30  # 2 s windows at 30 fps, half overlapping

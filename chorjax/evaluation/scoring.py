@@ -45,7 +45,7 @@ Keys (a value, or ``{"mean", "sd"}`` over several motions or reference splits):
   training takes (``chorjax metrics``: of the reference); ``novelty_real``: the same for real takes
   that are not training takes (``chorjax metrics``: each reference take against the others).
 * ``coverage``, ``coverage_together``, ``global_diversity``, ``local_diversity``, ``inter_diversity``: the
-  single-take measures (:mod:`chorjax.single_take`) against the training takes (``chorjax metrics``: the
+  single-take measures (:mod:`chorjax.evaluation.single_take`) against the training takes (``chorjax metrics``: the
   reference), where those hold at most two minutes (``SINGLE_TAKE_FRAMES``); None otherwise.
 """
 
@@ -57,9 +57,9 @@ from pathlib import Path
 
 import numpy as np
 
-from chorjax import metrics
 from chorjax.data.motion import Skeleton, bone_length_cv
 from chorjax.errors import UserError
+from chorjax.evaluation import metrics
 
 
 def spread(values) -> float | dict:
@@ -386,11 +386,11 @@ SINGLE_TAKE_FRAMES = 3600  # the single-take measures for takes of up to two min
 
 @metric("one take", "coverage", "global_diversity", "local_diversity", "inter_diversity")
 def one_take(j: Judged) -> dict:
-  """Coverage and diversities against the one take the motions were drawn from (chorjax.single_take).
+  """Coverage and diversities against the one take the motions were drawn from (chorjax.evaluation.single_take).
 
   Against the training takes (``chorjax metrics``: the reference), where those hold at most
   ``SINGLE_TAKE_FRAMES`` frames; else None each."""
-  from chorjax.single_take import KEYS, single_take
+  from chorjax.evaluation.single_take import KEYS, single_take
 
   takes = j.train if j.train is not None else j.reference
   if sum(len(t) for t in takes) > SINGLE_TAKE_FRAMES:

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from chorjax import formats
 from chorjax.errors import UserError
+from chorjax.io import formats
 
 
 def load_character(path, out: Path):
@@ -24,7 +24,7 @@ def load_character(path, out: Path):
 
 
 def write_motions(out: Path, motions, *, settings=None, character=None, title=None) -> list:
-  """Writes ``motions`` (of one skeleton and rate) as ``out``'s suffix says (:mod:`chorjax.formats`): one
+  """Writes ``motions`` (of one skeleton and rate) as ``out``'s suffix says (:mod:`chorjax.io.formats`): one
   ``.npz`` with all of them and ``settings``, one ``.html`` player (``title``), or a ``.csv`` / ``.bvh`` /
   ``.glb`` per motion (``output_paths``; ``character``: a BVH onto that character's hierarchy). Returns the
   paths written."""

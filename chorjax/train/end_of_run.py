@@ -86,7 +86,7 @@ def end_sample(run: Finished) -> dict:
 def write_end_sample(workdir: Path, graphdef, params, ds, cfg, controls: Controls | None = None) -> dict:
   """``samples/sample.csv`` and ``samples/player.html``: the dance the run ends with, as its family draws it
   (``Family.end_sample``: the generated dancers beside a real take, or an in-betweening piece beside its take)."""
-  from chorjax.output import as_motions, write_motions
+  from chorjax.io.output import as_motions, write_motions
 
   controls = controls or Controls.resolve(cfg.sample)
   named = dataclasses.replace(cfg, name=Path(workdir).resolve().name)  # a run is named by its folder

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from chorjax import formats
 from chorjax.errors import UserError, is_run_folder, refuse_existing
-from chorjax.output import load_character
+from chorjax.io import formats
+from chorjax.io.output import load_character
 
 # Names that say a file of a format data convert does not write (every registered format's but CSV's, BVH's and
 # NPZ's, which a folder of converted CSVs may be named after, and a few more): refused as -o, they would become
@@ -96,7 +96,7 @@ def like_reference(motions, like: str) -> list:
   the features)."""
   from chorjax.data import transforms
   from chorjax.data.dataset import read_takes, to_rate, to_up_axis
-  from chorjax.metrics import body_size
+  from chorjax.evaluation.metrics import body_size
 
   ref = read_takes([like])
   canon = lambda m: np.asarray(transforms.to_y_up(m.positions, m.up_axis))

@@ -33,15 +33,15 @@ import jax.numpy as jnp
 import numpy as np
 
 from chorjax import checkpoint as ckpt
-from chorjax import end_of_run
 from chorjax.config import Config
 from chorjax.data.dataset import WindowSampler, dataset_notes, eval_windows, load_dataset
 from chorjax.errors import UserError
 from chorjax.families import family_of
-from chorjax.loop import Loop, MetricsLog, TrainingDiverged, best_checkpoint_hook, stop_on_signals
-from chorjax.points import NotAligned, check_group
 from chorjax.run import run_meta
-from chorjax.training import (
+from chorjax.train import end_of_run
+from chorjax.train.loop import Loop, MetricsLog, TrainingDiverged, best_checkpoint_hook, stop_on_signals
+from chorjax.train.points import NotAligned, check_group
+from chorjax.train.training import (
   _check_saved_config,
   _keep_aside,
   _restore_or_init,

@@ -46,7 +46,7 @@ import jax
 import numpy as np
 
 from chorjax.errors import UserError, load_json
-from chorjax.live_guard import Budget, header_refusal, host_port, origin_refusal, server_names
+from chorjax.live.guard import Budget, header_refusal, host_port, origin_refusal, server_names
 from chorjax.sampling.controls import Controls
 
 AHEAD = 2  # chunks generated ahead of the clock
@@ -488,7 +488,7 @@ def run_live(
   """``chorjax live``: loads the run, serves until Ctrl-C, writes the recording (``record``, an ``.npz`` not
   replaced unless ``force``); returns 0."""
   from chorjax.data.motion import Motion
-  from chorjax.output import write_motions
+  from chorjax.io.output import write_motions
   from chorjax.run import load_run
   from chorjax.sample import read_phrase
 

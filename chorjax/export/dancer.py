@@ -62,7 +62,7 @@ def export_onnx(run, output, *, batch: int = 1, controls: dict | None = None, fo
   unless ``force``. Returns the paths written."""
   from chorjax.errors import atomic_write, check_output, refuse_existing
 
-  _needs_onnx()
+  needs_onnx()
   out, _ = check_output(output, (".onnx",))
   if isinstance(batch, bool) or not isinstance(batch, int | np.integer) or not 1 <= batch <= MAX_BATCH:
     raise UserError(f"--batch {batch!r}: must be a whole number within 1-{MAX_BATCH}")
@@ -88,139 +88,7 @@ def export_onnx(run, output, *, batch: int = 1, controls: dict | None = None, fo
   return [out, side]
 
 
-# onnxruntime-web's files the page loads (its wasm build, single-threaded), from the npm package's dist/
-ORT_WEB_FILES = ("ort.wasm.min.js", "ort-wasm-simd-threaded.wasm", "ort-wasm-simd-threaded.mjs")
-ORT_WEB_PLACES = ("node_modules/onnxruntime-web/dist", ".venv/node/node_modules/onnxruntime-web/dist")
-
-
-def find_ort_web(given=None) -> Path:
-  """The folder of onnxruntime-web's files: ``given``, else ``node_modules/onnxruntime-web/dist`` here (``npm
-  install onnxruntime-web``), else the same under ``.venv/node``."""
-  places = [Path(given)] if given else [Path(p) for p in ORT_WEB_PLACES]
-  for place in places:
-    if all((place / f).is_file() for f in ORT_WEB_FILES):
-      return place
-  where = f"{given} does not hold {', '.join(ORT_WEB_FILES)}" if given else "npm install onnxruntime-web here"
-  raise UserError(f"--web needs onnxruntime-web's files ({where}; or --ort-web PATH/onnxruntime-web/dist)")
-
-
-WEB_DANCER = "dancer.onnx"  # what write_web puts in its folder: this, its sidecar, the page and ort/
-WEB_FILES = ("index.html", WEB_DANCER, sidecar_path(WEB_DANCER).name, "ort")
-
-
-def write_web(workdir, folder, *, ort_web=None, controls=None, checkpoint="kept", force: bool = False) -> Path:
-  """``chorjax export --web``: a static folder in which the run's dancer dances live in the page, offline:
-  ``index.html``, the dancer (``dancer.onnx`` and its sidecar) and onnxruntime-web's files (``ort/``, with its
-  licence). Any static file server serves it. The page draws the joints the graph decodes (rigid bones; the
-  feet neither grounded nor locked). Returns the folder."""
-  import shutil
-  import tempfile
-  from importlib.resources import files
-
-  from chorjax.errors import as_path
-  from chorjax.run import load_run
-
-  _needs_onnx()
-  out = as_path(folder, "--web")
-  if out.exists() and (not out.is_dir() or any(out.iterdir())):
-    if not force:
-      raise UserError(f"{out}: already exists and is not an empty folder (use --force to replace it)")
-    _check_web_folder(out)
-  ort = find_ort_web(ort_web)
-  run = load_run(workdir, checkpoint)
-  out.parent.mkdir(parents=True, exist_ok=True)
-  staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-  try:
-    export_onnx(run, staging / WEB_DANCER, controls=controls)
-    (staging / "ort").mkdir()
-    for name in ORT_WEB_FILES:
-      shutil.copyfile(ort / name, staging / "ort" / name)
-    render = files("chorjax.render")
-    version = _package_version(ort.parent / "package.json")
-    licence = render.joinpath("onnxruntime_web_license.txt").read_text(encoding="utf-8")
-    (staging / "ort" / "LICENSE").write_text(licence.replace("{version}", version), encoding="utf-8")
-    (staging / "index.html").write_text(
-      render.joinpath("web_dancer.html").read_text(encoding="utf-8"), encoding="utf-8"
-    )
-    staging.chmod(0o755)  # a folder to serve (mkdtemp makes it private)
-    if out.exists():
-      shutil.rmtree(out)
-    staging.rename(out)
-  finally:
-    shutil.rmtree(staging, ignore_errors=True)
-  return out
-
-
-def _check_web_folder(out: Path) -> None:
-  """A UserError unless ``out`` is a folder that ``--force`` may replace: one that holds only what ``--web``
-  writes (a page written before), and neither the working directory nor a folder above it."""
-  here = Path.cwd().resolve()
-  where = out.resolve()
-  if where == here or where in here.parents:
-    raise UserError(f"{out}: is the working directory or holds it; --web --force replaces only a page it wrote")
-  if not out.is_dir():
-    raise UserError(f"{out}: is a file, not a page --web wrote; --force replaces only such a folder")
-  ort_files = {*ORT_WEB_FILES, "LICENSE"}
-  foreign = sorted(p.name for p in out.iterdir() if p.name not in WEB_FILES)
-  if (out / "ort").is_dir():
-    foreign += sorted(f"ort/{p.name}" for p in (out / "ort").iterdir() if p.name not in ort_files)
-  elif (out / "ort").exists():
-    foreign.append("ort")
-  if foreign:
-    listed = ", ".join(foreign[:3]) + (", ..." if len(foreign) > 3 else "")
-    raise UserError(f"{out}: holds files --web did not write ({listed}); --force replaces only a page it wrote")
-
-
-def write_blender_addon(output, *, force: bool = False) -> Path:
-  """``chorjax blender-addon``: the Blender add-on as a zip to install in Blender (Preferences > Add-ons >
-  Install from Disk): ``chorjax/blender_addon`` with the joint-name rules (``chorjax.data.joint_names``), the
-  16-joint layout and the up axes it reads, and a copy of the ``websockets`` package (with its licence) for
-  live mode. It runs on Blender's own Python; see its module docstring. Returns the zip's path."""
-  import importlib.metadata
-  import importlib.util
-  import zipfile
-
-  from chorjax import __version__
-  from chorjax.data.skeletons import MPII16
-  from chorjax.data.transforms import up_axis_matrix
-  from chorjax.errors import UP_AXES, atomic_write, check_output, refuse_existing
-
-  out, _ = check_output(output, (".zip",))
-  refuse_existing([out], force)
-  spec = importlib.util.find_spec("websockets")
-  if spec is None or not spec.submodule_search_locations:
-    raise UserError("the add-on carries the websockets package for live mode: pip install 'chorjax[live]'")
-  websockets = Path(next(iter(spec.submodule_search_locations)))
-  licence = [f for f in importlib.metadata.files("websockets") or [] if f.name == "LICENSE"]
-  here = Path(__file__).parent
-  shipped = {
-    "version": __version__,
-    "joints": list(MPII16.joint_names),
-    "y_up": {axis: np.asarray(up_axis_matrix(axis)).tolist() for axis in UP_AXES},
-  }
-
-  def write(tmp):
-    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
-      for f in sorted((here / "blender_addon").glob("*.py")):
-        z.write(f, f"chorjax_blender/{f.name}")
-      z.write(here / "data" / "joint_names.py", "chorjax_blender/joint_names.py")
-      z.writestr("chorjax_blender/chorjax.json", json.dumps(shipped, indent=1))
-      for f in sorted(websockets.rglob("*.py")):
-        z.write(f, f"chorjax_blender/vendor/websockets/{f.relative_to(websockets).as_posix()}")
-      for f in licence[:1]:
-        z.write(Path(str(f.locate())), "chorjax_blender/vendor/websockets.LICENSE")
-
-  return atomic_write(out, write, overwrite=True)
-
-
-def _package_version(package_json: Path) -> str:
-  try:
-    return str(json.loads(package_json.read_text())["version"])
-  except (OSError, ValueError, KeyError, TypeError):
-    return "(version not recorded)"
-
-
-def _needs_onnx() -> None:
+def needs_onnx() -> None:
   try:
     import onnx  # noqa: F401
   except ImportError:
@@ -229,7 +97,7 @@ def _needs_onnx() -> None:
 
 def _program(run, sampling, batch: int):
   """``(onnx model, contract)``: the family's frame program traced for ``batch`` dancers and translated."""
-  from chorjax.onnx_graph import Unsupported, to_onnx
+  from chorjax.export.onnx_graph import Unsupported, to_onnx
 
   draw = sampling.draw(run.features)
   family = run.family
@@ -312,7 +180,7 @@ def _sidecar(run, sampling, batch: int, contract: dict) -> dict:
     "random_numbers": {
       "gumbel": "standard Gumbel [B, K] each frame: -log(-log(u)), u uniform in (0, 1)",
       "normal": "standard normal [B, N] each frame (N: normal_size)",
-      "chorjax": "chorjax sample --seed S draws the numbers chorjax.export.sample_numbers(run, S, frames) gives",
+      "chorjax": "chorjax sample --seed S draws the numbers chorjax.export.dancer.sample_numbers(run, S, frames) gives",
     },
     **contract,
     "features": f.to_dict(),
@@ -326,33 +194,6 @@ def sample_numbers(run, seed: int, frames: int, batch: int = 1):
 
   gumbel, normal = run.family.frame_numbers(run.graphdef, run.params, jax.random.key(seed), frames, batch)
   return np.asarray(gumbel, np.float32), np.asarray(normal, np.float32)
-
-
-def page_numbers(seed: int, frames: int, batch: int, num_gumbel: int, num_normal: int):
-  """``(gumbel [T, B, K], normal [T, B, N])``: the random numbers the exported web page draws with ``seed``
-  (its mulberry32 stream; Gumbel as ``-log(-log(u))``, normal by Box-Muller's cosine, one pair of uniforms
-  each), so that onnxruntime in Python can draw what the page draws."""
-  state = seed & 0xFFFFFFFF
-  mask = 0xFFFFFFFF
-
-  def imul(a: int, b: int) -> int:
-    return (a * b) & mask
-
-  def uniform() -> float:
-    nonlocal state
-    state = (state + 0x6D2B79F5) & mask
-    t = state
-    t = imul(t ^ (t >> 15), t | 1)
-    t ^= (t + imul(t ^ (t >> 7), t | 61)) & mask
-    return (((t ^ (t >> 14)) & mask) + 0.5) / 4294967296
-
-  gumbel = np.zeros((frames, batch, num_gumbel), np.float32)
-  normal = np.zeros((frames, batch, num_normal), np.float32)
-  for f in range(frames):
-    gumbel[f] = np.array([-np.log(-np.log(uniform())) for _ in range(batch * num_gumbel)]).reshape(batch, -1)
-    pairs = [(uniform(), uniform()) for _ in range(batch * num_normal)]
-    normal[f] = np.array([np.sqrt(-2 * np.log(u1)) * np.cos(2 * np.pi * u2) for u1, u2 in pairs]).reshape(batch, -1)
-  return gumbel, normal
 
 
 class OnnxDancer:

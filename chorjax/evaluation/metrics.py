@@ -14,7 +14,7 @@ lengths by the body size (root->foot plus root->head along the bones), so number
 * geometric features: yes/no relations of a pose (``GEOMETRIC_FEATURES``), for FID_g / Div_g;
 * novelty: distance from each generated window to its nearest training window.
 
-``chorjax.scoring`` turns these into the numbers ``chorjax eval`` and ``chorjax metrics`` report.
+``chorjax.evaluation.scoring`` turns these into the numbers ``chorjax eval`` and ``chorjax metrics`` report.
 """
 
 from __future__ import annotations

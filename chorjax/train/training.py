@@ -5,7 +5,7 @@ builds, with its jitted step, batch sampler and validation loss. Randomness come
 ``fold_in(key(seed), step)`` and batches from the sampler's ``batch(step)``, so a run resumed from a
 checkpoint at step s repeats exactly what the uninterrupted run did after s.
 
-The loop and its hooks are ``chorjax.loop``'s; this module keeps the run directory (its lock, the saved
+The loop and its hooks are ``chorjax.train.loop``'s; this module keeps the run directory (its lock, the saved
 config, what a resume reads back) and the driver that puts a family's step, hooks and end-of-run sample
 together.
 """
@@ -25,12 +25,14 @@ from typing import Any
 import jax
 
 from chorjax import checkpoint as ckpt
-from chorjax import end_of_run
 from chorjax.config import Config, config_diff, config_from_dict, resumable_keys
 from chorjax.data.dataset import Dataset, dataset_notes, load_dataset
 from chorjax.errors import UserError, atomic_write, is_run_folder, load_json
 from chorjax.families import family_of
-from chorjax.loop import (
+from chorjax.models import motion_weight_vector
+from chorjax.run import run_meta
+from chorjax.train import end_of_run
+from chorjax.train.loop import (
   Loop,
   MetricsLog,
   agreed_stop,
@@ -41,8 +43,6 @@ from chorjax.loop import (
   patience_hook,
   stop_on_signals,
 )
-from chorjax.models import motion_weight_vector
-from chorjax.run import run_meta
 
 # ---------------------------------------------------------------- run directory
 
@@ -158,7 +158,7 @@ def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=No
   end sample.
 
   Writes ``config.json``, ``metrics.jsonl``, TensorBoard events, ``checkpoints/`` and, at the end,
-  ``samples/`` (a short sample and its HTML player). With ``parallel`` (see ``chorjax.parallel``)
+  ``samples/`` (a short sample and its HTML player). With ``parallel`` (see ``chorjax.train.parallel``)
   every process trains its share and only process 0 writes anything but checkpoints.
   """
   workdir = Path(workdir).absolute()

@@ -1,4 +1,4 @@
-"""``chorjax eval``: held-out likelihood plus the generation metrics of ``chorjax.scoring`` for a run."""
+"""``chorjax eval``: held-out likelihood plus the generation metrics of ``chorjax.evaluation.scoring`` for a run."""
 
 from __future__ import annotations
 
@@ -9,11 +9,11 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from chorjax import scoring
 from chorjax.data.dataset import eval_windows
 from chorjax.data.motion import Motion
 from chorjax.data.transforms import to_y_up
 from chorjax.errors import UserError, atomic_write
+from chorjax.evaluation import scoring
 from chorjax.run import HELD_OUT, Run, load_run, read_reference  # noqa: F401  (re-exported)
 from chorjax.runtime import side_by_side
 from chorjax.sampling.controls import Controls
@@ -41,14 +41,14 @@ def evaluate(
       training take, round robin).
     seed, seeds: sampling seed(s); with several, ``num`` dancers are drawn with each and all are
       scored together (every key then carries a mean and sd over them).
-    window, splits: windows and reference splits of the distribution metrics (``chorjax.scoring``).
+    window, splits: windows and reference splits of the distribution metrics (``chorjax.evaluation.scoring``).
     controls: sampling controls (``controls.Controls``: temperatures, greedy, noise smoothing,
       persistence, rigid bones); unset or None: the run's ``[sample]``.
 
   Returns:
     The loss on the takes of ``data`` the run did not train on (``loss_takes = "held-out"``; on all of them,
     ``"all"``, when it trained on every one; None for a GAN, which has no likelihood) and every key of
-    :func:`chorjax.scoring.score` (JSON-ready): the generated motion measured against the takes in
+    :func:`chorjax.evaluation.scoring.score` (JSON-ready): the generated motion measured against the takes in
     ``data``, novelty against the run's training takes.
   """
   run = load_run(workdir, checkpoint).serving("eval")
@@ -120,7 +120,7 @@ def metrics_path(workdir) -> Path:
 
 def write_metrics(result: dict, path) -> Path:
   """Writes the metrics JSON; an evaluation's first generated dancer goes to ``sample.npz`` beside it."""
-  from chorjax.output import write_motions
+  from chorjax.io.output import write_motions
 
   result = dict(result)
   first = result.pop("first_sample", None)

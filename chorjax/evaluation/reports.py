@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from chorjax.scoring import METRICS
-from chorjax.single_take import KEYS as SINGLE_TAKE_KEYS
+from chorjax.evaluation.scoring import METRICS
+from chorjax.evaluation.single_take import KEYS as SINGLE_TAKE_KEYS
 
 # printed only where measured: the single-take measures (takes of up to two minutes; two samples for inter_)
 WHERE_MEASURED = tuple(k for k in SINGLE_TAKE_KEYS if k != "coverage_together")
@@ -16,7 +16,8 @@ WHERE_MEASURED = tuple(k for k in SINGLE_TAKE_KEYS if k != "coverage_together")
 
 def metric_keys() -> tuple[str, ...]:
   """The keys `chorjax metrics` and `chorjax eval` print, metric by metric (every one is in the JSON): what each
-  metric registered in chorjax/scoring.py says it prints, asked when printing (a metric registered counts)."""
+  metric registered in chorjax/evaluation/scoring.py says it prints, asked when printing (a metric registered
+  counts)."""
   return tuple(k for m in METRICS.values() for k in m.printed)
 
 
@@ -82,7 +83,7 @@ def check_report(inputs, joint_map=None, fps: float = 30.0) -> tuple:
 def metric_lines(result: dict, keys) -> list[str]:
   """The metrics of ``result`` (``scoring.score``, ``evaluate.evaluate``) as ``chorjax metrics`` prints them:
   a key a line, its value, and the real takes' (and the training takes') beside it."""
-  from chorjax.scoring import mean_of
+  from chorjax.evaluation.scoring import mean_of
 
   lines = []
   if "segment_frames" in result:
