@@ -43,7 +43,7 @@ __all__ = [  # noqa: RUF022  (the API, then the version)
 def __getattr__(name: str):
   """The public API, imported on first use (``import chorjax`` stays light for the command line)."""
   if name in _API:
-    from chorjax import api
+    from chorjax import api  # on first use: importing the package root loads none of it
 
     return getattr(api, name)
   raise AttributeError(f"module 'chorjax' has no attribute {name!r}")

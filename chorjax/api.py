@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import html
+import io
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any  # noqa: F401  (the inherited fields' annotations name these: the API docs resolve them here)
@@ -33,26 +34,41 @@ from chorjax.config import (  # noqa: F401
   toml_value,
 )
 from chorjax.data import motion as _motion
+from chorjax.data.dataset import read_motions, read_takes
 from chorjax.data.features import Features  # noqa: F401
 from chorjax.data.motion import Skeleton  # noqa: F401
 from chorjax.errors import (
   Interrupted,  # noqa: F401
   UserError,
   as_path,
+  atomic_write,
+  check_output,
+  refuse_existing,
 )
 from chorjax.evaluation.evaluate import evaluate_to  # noqa: F401
 from chorjax.evaluation.reports import check_report, metric_keys, metric_lines, takes_table  # noqa: F401
-from chorjax.evaluation.scoring import score_to  # noqa: F401
+from chorjax.evaluation.scoring import (
+  score_motions,
+  score_to,  # noqa: F401
+)
 from chorjax.export.blender import write_blender_addon  # noqa: F401
-from chorjax.export.dancer import write_onnx  # noqa: F401
+from chorjax.export.dancer import (
+  export_onnx,
+  write_onnx,  # noqa: F401
+)
 from chorjax.export.web import write_web  # noqa: F401
 from chorjax.io import formats  # noqa: F401  (the formats each command reads, writes and draws)
 from chorjax.io.convert import convert  # noqa: F401
+from chorjax.io.formats import suffixes, written_paths
+from chorjax.io.output import write_motions
 from chorjax.live.server import run_live  # noqa: F401
 from chorjax.render.files import plot_file, render  # noqa: F401
+from chorjax.render.html import player_html
+from chorjax.render.plot import strip_figure
 from chorjax.run import Run as _Run
+from chorjax.run import load_run as load
 from chorjax.runtime import keep_compiled_programs, keep_freed_memory  # noqa: F401
-from chorjax.sample import write_inbetween, write_sample  # noqa: F401
+from chorjax.sample import sample_dancers, write_inbetween, write_sample  # noqa: F401
 
 # What every command does, as functions (the command line calls these and prints what they return).
 from chorjax.sampling.calibrate import CALIBRATION_DANCERS, LABELLED_DANCERS, calibrate_run  # noqa: F401
@@ -60,6 +76,8 @@ from chorjax.sampling.controls import Controls  # noqa: F401
 from chorjax.sampling.table import CALIBRATED, FLAGGED, PLAIN, RECORDS, check_sample_control  # noqa: F401
 from chorjax.sampling.table import SWITCHES as CONTROL_SWITCHES  # noqa: F401
 from chorjax.sweeps import SWEEP_DESCRIPTION, SWEEP_FORMAT, run_sweep, train_command  # noqa: F401
+from chorjax.train.end_of_run import standard
+from chorjax.train.training import default_workdir, train_and_evaluate
 
 __all__ = ["Motion", "Player", "Run", "UserError", "load_dataset", "load_run", "read_motion", "score", "train"]
 
@@ -90,9 +108,6 @@ class Motion(_motion.Motion):
     character BVH: the dance on its hierarchy, as ``chorjax sample --skeleton``), ``.glb`` (binary glTF: the
     skeleton's nodes and their animation) or ``.html`` (the player).
     An existing file is not replaced unless ``force``."""
-    from chorjax.errors import check_output, refuse_existing
-    from chorjax.io.formats import suffixes, written_paths
-    from chorjax.io.output import write_motions
 
     path, suffix = check_output(path, suffixes("write"))
     if "\x00" in str(path):
@@ -110,7 +125,6 @@ class Motion(_motion.Motion):
   def show(self, *others: _motion.Motion, title: str | None = None) -> Player:
     """The HTML player with this motion and ``others`` side by side; shown inline by Jupyter (and kept in
     a notebook's HTML export), or ``.html`` for the page."""
-    from chorjax.render.html import player_html
 
     motions = [self, *others]
     for m in others:
@@ -123,9 +137,6 @@ class Motion(_motion.Motion):
   def strip(self, every: int = 6, poses: int = 12):
     """The filmstrip figure (matplotlib): ``poses`` figures ``every`` frames apart at the start, middle and
     end, as ``chorjax render --strip`` draws it."""
-    import io
-
-    from chorjax.render.plot import strip_figure
 
     fig = strip_figure(self, every, poses)
 
@@ -156,7 +167,6 @@ class Player:
     )
 
   def save(self, path) -> Path:
-    from chorjax.errors import atomic_write
 
     return atomic_write(path, lambda p: p.write_text(self.html, encoding="utf-8"))
 
@@ -180,7 +190,6 @@ class Run(_Run):
     (default 0), or ``mix``: ``"ID:W,ID:W"``; ``controls``: sampling controls (``pi_temperature``,
     ``noise_smoothing`` ...; unset: the run's calibration, then its ``[sample]``). One dancer is returned
     as a :class:`Motion`, several as a list."""
-    from chorjax.sample import sample_dancers
 
     pos, _ = sample_dancers(self, frames, num, seed, prime, motion, mix, controls)
     f = self.features
@@ -195,7 +204,6 @@ class Run(_Run):
     """The dancer as an ONNX model at ``path`` (``.onnx``) with its JSON sidecar, as ``chorjax export``:
     ``batch`` dancers a call, ``controls`` the sampling controls (unset: the run's own). Returns the paths
     written (:class:`chorjax.export.dancer.OnnxDancer` runs it)."""
-    from chorjax.export.dancer import export_onnx
 
     return export_onnx(self, path, batch=batch, controls=controls, force=force)
 
@@ -203,7 +211,6 @@ class Run(_Run):
 def load_run(workdir, checkpoint: str | int = "kept") -> Run:
   """The trained run in ``workdir`` at ``checkpoint`` (``kept``: what its ``train.keep`` names; ``latest``,
   ``best`` or a step number)."""
-  from chorjax.run import load_run as load
 
   return _recast(Run, load(workdir, checkpoint))
 
@@ -217,8 +224,6 @@ def train(config, workdir=None, overrides: Sequence[str] | None = None, *, force
   """Trains ``config`` (a TOML path, a loaded ``chorjax.config.Config`` or a ``{section: {key: value}}``
   dict; ``overrides``: ``"key=value"`` strings) in ``workdir`` (default ``runs/<name>``), resuming from its
   latest checkpoint as ``chorjax train`` does, and returns the run at the checkpoint it keeps."""
-  from chorjax.train.end_of_run import standard
-  from chorjax.train.training import default_workdir, train_and_evaluate
 
   cfg = load_config(config, list(overrides or []))
   workdir = Path(workdir) if workdir is not None else default_workdir(cfg)
@@ -229,7 +234,6 @@ def train(config, workdir=None, overrides: Sequence[str] | None = None, *, force
 def read_motion(path) -> Motion | list[Motion]:
   """A motion file in any format the command line reads (CSV, BVH, ASF/AMC, C3D, NPZ): one take, or the
   dancers of a sample ``.npz`` (a list when it holds several)."""
-  from chorjax.data.dataset import read_motions
 
   path = as_path(path, "read_motion")
   if not path.is_file():
@@ -240,7 +244,6 @@ def read_motion(path) -> Motion | list[Motion]:
 
 def load_dataset(name_or_dir) -> list[Motion]:
   """Every take of a bundled dataset (``cmu94``), a folder or a file, as training reads them."""
-  from chorjax.data.dataset import read_takes
 
   return [Motion.of(m) for m in read_takes([str(name_or_dir)])]
 
@@ -249,7 +252,6 @@ def score(motions, data, **kw) -> dict:
   """The metrics of ``chorjax metrics`` (same keys, same ruler) for ``motions`` (a Motion, a list of them,
   or file paths) against the real takes of ``data`` (a bundled name, folder or file, or a list of them;
   or Motions). ``kw``: ``window``, ``splits``, ``seed``."""
-  from chorjax.evaluation.scoring import score_motions
 
   as_list = lambda x: list(x) if isinstance(x, list | tuple) else [x]
   read = lambda x: [x] if isinstance(x, _motion.Motion) else load_dataset(x)

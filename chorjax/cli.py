@@ -7,9 +7,11 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import logging
 import os
 import sys
+from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
 from rich.console import Console
@@ -114,8 +116,6 @@ def _serve(site, port: int | None) -> int:
       f"--serve, or python3 -m http.server --directory {site}"
     )
     return 0
-  import functools
-  from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
 
   quiet = type("Quiet", (SimpleHTTPRequestHandler,), {"log_message": lambda *a: None})
   try:

@@ -7,16 +7,23 @@ from __future__ import annotations
 
 import datetime
 import json
+import os
 import platform
 import re
 from pathlib import Path
 
+import jax
 import numpy as np
 
-from chorjax.errors import UserError, atomic_write, load_json
+from chorjax.data.npz import read_npz
+from chorjax.errors import UserError, atomic_write, load_json, refuse_existing
+from chorjax.evaluation.evaluate import metrics_path, sample_path
 from chorjax.evaluation.scoring import mean_of, upgrade
 from chorjax.families import family_of
+from chorjax.render.plot import plot_strip, require_matplotlib, save_figure
 from chorjax.runtime import cpu_info
+from chorjax.sampling.calibration_file import chosen_calibration_row
+from chorjax.train.training import metrics_row
 
 # metric -> (label, how to pick the winner)
 COLUMNS = [
@@ -52,9 +59,6 @@ RULES = {
 
 def machine_info() -> str:
   """CPU model, core count and library versions, for reports and benchmarks."""
-  import os
-
-  import jax
 
   cpu = cpu_info().get("model name") or platform.processor() or platform.machine()
   return (
@@ -64,14 +68,12 @@ def machine_info() -> str:
 
 
 def _read_run(workdir: Path) -> dict:
-  from chorjax.evaluation.evaluate import metrics_path
 
   cfg_path, ev_path = workdir / "config.json", metrics_path(workdir)
   if not cfg_path.exists():
     raise UserError(f"{workdir}: not a run directory (no config.json)")
   if not ev_path.exists():
     raise UserError(f"{ev_path}: missing; run `chorjax eval {workdir} --data ...` first")
-  from chorjax.train.training import metrics_row
 
   history = workdir / "metrics.jsonl"
   rows = (
@@ -94,7 +96,6 @@ def _read_run(workdir: Path) -> dict:
 def _calibration_objective(workdir: Path) -> float | None:
   """The objective of the settings a run's calibration chose (how far its draws are from its training takes
   on movement, jitter, speed, root travel and poses); None if never calibrated or hand-edited."""
-  from chorjax.sampling.calibration_file import chosen_calibration_row
 
   row = chosen_calibration_row(workdir)
   try:
@@ -203,7 +204,6 @@ def _winner(groups, key, rule):
 
 
 def _loss_plot(plt, runs, path: Path) -> None:
-  from chorjax.render.plot import save_figure
 
   fig, ax = plt.subplots(figsize=(8, 4))
   for r in runs:
@@ -223,7 +223,6 @@ def _loss_plot(plt, runs, path: Path) -> None:
 
 
 def _movement_plot(plt, groups, path: Path) -> None:
-  from chorjax.render.plot import save_figure
 
   fig, ax = plt.subplots(figsize=(8, 4))
   for g in groups:
@@ -307,9 +306,6 @@ def _table(groups) -> list[str]:
 
 def _strips(groups, stem: Path) -> list[str]:
   """Each group's first run's evaluation sample as a filmstrip (start, middle, end)."""
-  from chorjax.data.npz import read_npz
-  from chorjax.evaluation.evaluate import metrics_path, sample_path
-  from chorjax.render.plot import plot_strip
 
   lines = []
   for i, g in enumerate(groups):
@@ -387,7 +383,6 @@ def compare(workdirs, output) -> Path:
   """Writes ``report.md``: a table of mean ± sd over training seeds, who wins beyond the spread (both per
   dataset where the runs trained on several), loss and movement plots, and each configuration's evaluation
   sample as filmstrips."""
-  from chorjax.render.plot import require_matplotlib
 
   runs = [_read_run(Path(w)) for w in workdirs]
   groups = group_runs(runs)
@@ -413,7 +408,6 @@ def compare(workdirs, output) -> Path:
 def compare_to(workdirs, output, *, force: bool = False) -> Path:
   """``chorjax compare``: :func:`compare`, the report and the images written beside it refused where they
   exist (unless ``force``)."""
-  from chorjax.errors import refuse_existing
 
   stem = Path(output).with_suffix("")
   images = sorted(stem.parent.glob(f"{stem.name}_loss.png")) + sorted(stem.parent.glob(f"{stem.name}_movement.png"))

@@ -16,6 +16,8 @@ import tomllib
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
+
 
 class UserError(Exception):
   """Bad input from the user; its message is one line that names the file/line or key (a line break or other
@@ -223,7 +225,6 @@ def check_draw(frames: int, values_per_frame: int, what: str) -> None:
 def check_array(values, where: str) -> None:
   """One-line ``UserError`` naming ``where`` if ``values`` hold a non-finite entry or one beyond
   +-``LARGEST_VALUE`` (binary formats: the text readers check each line with :func:`parse_numbers`)."""
-  import numpy as np
 
   a = np.asarray(values)
   bad = ~np.isfinite(a) | (np.abs(np.nan_to_num(a)) > LARGEST_VALUE)

@@ -23,10 +23,12 @@ from flax import nnx
 
 from chorjax import checkpoint as ckpt
 from chorjax.config import Config, config_from_dict
+from chorjax.data.dataset import conform, load_dataset, read_takes, with_tails
 from chorjax.data.features import Features
 from chorjax.data.labels import Labels, take_condition
 from chorjax.errors import UserError, atomic_write, check_draw, load_json
 from chorjax.families import family_of
+from chorjax.models import motion_weight_vector
 from chorjax.sampling.calibration_file import read_calibration
 from chorjax.sampling.controls import Controls, with_ceiling
 
@@ -105,7 +107,6 @@ class Run:
   def motion_weights(self, motion=None, mix=None, source: str = "--motion") -> np.ndarray:
     """The weights ``[M]`` that condition a dance: a take id or ``ID:W,...`` blend, or with labels
     ``FIELD=VALUE,...`` or ``FIELD=VALUE:W,...`` (nothing given: take 0, or each label's first value)."""
-    from chorjax.models import motion_weight_vector
 
     if self.labels is not None:
       return self.labels.parse(motion, mix, source)
@@ -184,7 +185,6 @@ class Run:
       ceiling = read_ceiling(self.workdir, self.step, sampling.scale_cap) if self.workdir else None
       if ceiling is not None and ceiling.shape in ((self.features.dim,), (1,)):
         return dataclasses.replace(self, features=dataclasses.replace(f, scale_ceiling=ceiling))
-    from chorjax.data.dataset import load_dataset
 
     what = "a training range or pace" if needs else "a scale ceiling"
     try:
@@ -304,7 +304,6 @@ HELD_OUT = "held-out"  # --data held-out: the takes of the run's dataset it did 
 def read_reference(run: Run, data: Sequence[str] | None) -> tuple[list, list]:
   """``(the takes in data, the run's training takes)``, read exactly as training read its takes; ``data`` of
   ``["held-out"]``: the takes of the run's own dataset that it did not train on; None: the training takes."""
-  from chorjax.data.dataset import conform, read_takes, with_tails
 
   data_cfg = run.config.data
   trained = set(run.train_takes)

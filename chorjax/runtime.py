@@ -36,6 +36,10 @@ from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
+import jax
+
+from chorjax.data.cache import cache_root
+
 # mallopt parameters (malloc.h)
 _M_TRIM_THRESHOLD, _M_MMAP_MAX, _M_ARENA_MAX = -1, -4, -8
 _KEEP_BYTES = 2**31 - 1  # (the largest value mallopt takes) keep freed heap memory
@@ -90,9 +94,6 @@ def keep_compiled_programs() -> Path | None:
   cannot be written. Every program is kept, however quick to compile (``COMPILED_BYTES`` in all, least recently
   used dropped first). A loaded program is the compiled one: the same frames to the bit. An entry that cannot be
   read or written is compiled again without a word."""
-  import jax
-
-  from chorjax.data.cache import cache_root
 
   root = cache_root("auto")  # a folder ("off" is the setting that gives none)
   off = os.environ.get("CHORJAX_COMPILE_CACHE", "").lower() == "off"

@@ -11,7 +11,10 @@ import jax
 import numpy as np
 
 from chorjax.data.dataset import conform, read_takes
-from chorjax.errors import UserError
+from chorjax.errors import UserError, check_output, refuse_existing
+from chorjax.io.formats import output_paths, suffixes, written_paths
+from chorjax.io.output import as_motions, load_character, write_motions
+from chorjax.run import load_run
 
 
 def read_prime(spec: str, features, data_cfg) -> np.ndarray:
@@ -118,10 +121,6 @@ def write_sample(
   :func:`sample_dancers`) and writes them to ``output`` (``output.write_motions``: CSV, NPZ with the
   settings, BVH, onto the character ``skeleton`` where given, or HTML). Everything that can be refused is
   refused before the draw; an existing file is not replaced unless ``force``. Returns the paths written."""
-  from chorjax.errors import check_output, refuse_existing
-  from chorjax.io.formats import suffixes, written_paths
-  from chorjax.io.output import as_motions, load_character, write_motions
-  from chorjax.run import load_run
 
   check_counts(frames=frames, num=num, seed=seed)  # before any arithmetic on them
   out, _ = check_output(output, suffixes("write"))
@@ -144,10 +143,6 @@ def write_inbetween(
   target pose of ``to`` (``FILE[:FRAME]``) the frames a run of a family that writes transitions puts before
   it (``frames``: one count for every target, or one for all) and the target; written to ``output`` as
   :func:`write_sample` writes. Returns the paths written."""
-  from chorjax.errors import check_output, refuse_existing
-  from chorjax.io.formats import output_paths, suffixes
-  from chorjax.io.output import as_motions, write_motions
-  from chorjax.run import load_run
 
   to, frames = list(to), list(frames)
   if len(frames) == 1:

@@ -38,15 +38,26 @@ points and resumes unfinished ones. ``chorjax compare`` groups points that diffe
 from __future__ import annotations
 
 import contextlib
+import gc
 import itertools
 import json
 import tomllib
 from pathlib import Path
 
+import jax
+
+from chorjax import checkpoint as ckpt
 from chorjax.config import check_training_size, load_config, plain_name, valid_keys
 from chorjax.errors import UserError, load_toml, read_text
+from chorjax.evaluation.evaluate import evaluate, metrics_path, write_metrics
 from chorjax.fields import suggest
 from chorjax.sampling.controls import Controls
+from chorjax.train import end_of_run
+from chorjax.train.end_of_run import standard
+from chorjax.train.parallel import setup_parallel
+from chorjax.train.points import VECTOR_KEYS, NotAligned, expand_overrides
+from chorjax.train.training import default_workdir, train_and_evaluate
+from chorjax.train.vectorized import train_vectorized
 
 SWEEP_KEYS = {"name", "base", "root", "grid", "set", "eval", "candidates", "vectorize"}
 EVAL_KEYS = {"data", "frames", "num", "seed", "seeds", "splits", "window", *Controls.names()}
@@ -108,7 +119,6 @@ def load_sweep(path) -> dict:
     for key in body:
       if key not in valid_keys():
         raise UserError(f"{path}: [candidates.{name}] key {key!r} is not a config key{suggest(key, valid_keys())}")
-  from chorjax.train.points import VECTOR_KEYS
 
   vec = sweep.get("vectorize", [])
   if not isinstance(vec, list) or any(k not in VECTOR_KEYS for k in vec):
@@ -146,8 +156,6 @@ def is_finished(workdir: Path, num_steps: int, with_eval: bool) -> bool:
   """Whether a point's run trained to its end (and was evaluated, ``with_eval``): a checkpoint of its last
   step, that step read from the run's own config where ``train.epochs`` resolved it, or the end-of-run sample
   that a finished run writes (also where ``train.patience`` ended it early)."""
-  from chorjax import checkpoint as ckpt
-  from chorjax.evaluation.evaluate import metrics_path
 
   with contextlib.suppress(OSError, ValueError, KeyError, TypeError):
     num_steps = json.loads((Path(workdir) / "config.json").read_text())["train"]["num_steps"]
@@ -175,8 +183,6 @@ def run_sweep(path, log=print, shard: tuple[int, int] = (0, 1)) -> list[Path]:
   the groups (points, without ``vectorize``) whose index is ``i`` modulo ``n`` (0-based ``i``), so ``n``
   jobs with no coordinator split a sweep (a job array), each skipping what is already finished;
   ``compare`` over the shared root merges them."""
-  from chorjax import checkpoint as ckpt
-  from chorjax.evaluation.evaluate import evaluate, metrics_path, write_metrics
 
   sweep = load_sweep(path)
   ev = sweep.get("eval")
@@ -206,9 +212,6 @@ def _release_compiled() -> None:
   programs) and evaluation compile anew, and each compiled program holds its own memory mappings, so after
   about ten points the kernel's limit on a process's mappings (vm.max_map_count, 65,530) was reached and
   LLVM failed ("Unable to allocate section memory") with most of the memory free."""
-  import gc
-
-  import jax
 
   jax.clear_caches()
   gc.collect()
@@ -216,10 +219,6 @@ def _release_compiled() -> None:
 
 def _train_points(points, log) -> None:
   """Trains ``(name, overrides, cfg, workdir)`` points: together when there are several, else alone."""
-  from chorjax.train.end_of_run import standard
-  from chorjax.train.points import NotAligned
-  from chorjax.train.training import train_and_evaluate
-  from chorjax.train.vectorized import train_vectorized
 
   if len(points) > 1:
     log(f"{', '.join(n for n, *_ in points)}: training together ({' '.join(points[0][1])} ...)")
@@ -238,11 +237,6 @@ def train_command(config, overrides=(), *, workdir=None, force: bool = False, lo
   (``train.seed=[0,1,2]``) trains one run directory a point (``WORKDIR/seed=0`` ...) as one program, else
   one run (data-parallel over processes where ``[parallel]`` says). ``log`` hears a line a run trained.
   Returns the runs' summaries (:func:`train_and_evaluate`)."""
-  from chorjax.train import end_of_run
-  from chorjax.train.parallel import setup_parallel
-  from chorjax.train.points import expand_overrides
-  from chorjax.train.training import default_workdir, train_and_evaluate
-  from chorjax.train.vectorized import train_vectorized
 
   overrides, points = expand_overrides(list(overrides))
   if len(points) == 1:  # a one-element list is that value, checked as the value alone is

@@ -266,3 +266,25 @@ def test_the_sampling_controls_are_listed_once():
     for hit in control_lists(p, set(NAMES))
   ]
   assert not lists, "sampling controls listed outside chorjax/sampling/table.py: " + "; ".join(lists)
+
+
+MAX_INNER_IMPORTS = 20
+
+
+def test_imports_sit_at_the_top_but_a_few_that_say_why():
+  """An import inside a function hides an arrow from a reader; the few left load an optional extra or keep
+  ``import chorjax`` light, and say so on their line."""
+  inner, silent = 0, []
+  for path in PACKAGE.rglob("*.py"):
+    if "blender_addon" in path.parts:  # runs inside Blender, on its own Python
+      continue
+    lines = path.read_text().splitlines()
+    for fn in ast.walk(ast.parse("\n".join(lines))):
+      if isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+        for node in ast.walk(fn):
+          if isinstance(node, (ast.Import, ast.ImportFrom)):
+            inner += 1
+            if "#" not in lines[node.lineno - 1]:
+              silent.append(f"{path.relative_to(PACKAGE.parent)}:{node.lineno}")
+  assert inner <= MAX_INNER_IMPORTS, f"{inner} imports inside functions (at most {MAX_INNER_IMPORTS})"
+  assert not silent, "imports inside functions that do not say why: " + ", ".join(silent)

@@ -11,6 +11,7 @@ or an allocation beyond the ceiling is a one-line error naming the file, never t
 from __future__ import annotations
 
 import importlib.util
+import json
 import os
 import struct
 import subprocess
@@ -93,7 +94,6 @@ def _memory_ceiling() -> int:
 
 def _read_isolated(path: Path):
   """``(points [4, M, T], rate, units, labels)`` read by ezc3d in a child process (module docstring)."""
-  import json
 
   timeout = TIMEOUT_BASE_S + TIMEOUT_PER_MB_S * path.stat().st_size / 2**20
   with tempfile.TemporaryDirectory(prefix="chorjax-c3d-") as tmp:

@@ -18,8 +18,10 @@ never removed by chorjax: delete the folder to reclaim its space.
 
 from __future__ import annotations
 
+import concurrent.futures
 import hashlib
 import json
+import multiprocessing
 import os
 import sys
 from collections.abc import Callable
@@ -184,8 +186,6 @@ def workers_for(setting: int, missing: int) -> int:
 def in_processes(fn: Callable, items: list, workers: int) -> None:
   """``fn(item)`` for every item, in ``workers`` fresh processes (each writes its entries into the cache; the
   caller then reads them). A worker's UserError (a bad file) reaches the caller as it is."""
-  import concurrent.futures
-  import multiprocessing
 
   context = multiprocessing.get_context("spawn")  # jax is threaded: a forked copy of it can deadlock
   with concurrent.futures.ProcessPoolExecutor(workers, mp_context=context) as pool:

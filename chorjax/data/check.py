@@ -29,8 +29,12 @@ import dataclasses
 
 import numpy as np
 
+from chorjax.data.csv import has_sidecar
+from chorjax.data.dataset import read_motions, resolve_files
+from chorjax.data.mapping import HEAD_TOP_FROM_EYES, apply_mapping, find_mapping, leg_length, map_takes
 from chorjax.data.motion import Motion, bone_length_cv
 from chorjax.data.rest import drop_leading_rest, find_jumps  # noqa: F401  (drop_leading_rest: re-exported)
+from chorjax.data.skeletons import MPII16
 from chorjax.errors import UserError
 
 LEG_M = 0.85  # hip -> knee -> ankle of an adult, metres
@@ -102,7 +106,6 @@ def detect_up(motion: Motion, mapped: Motion | None) -> tuple[str, str]:
 
 def detect_units(motion: Motion, mapped: Motion | None, up_axis: str) -> tuple[str, float, str]:
   """``(unit, metres per unit, evidence)`` from the body's size (see the module docstring)."""
-  from chorjax.data.mapping import leg_length
 
   if mapped is not None:
     size, want, what = leg_length(mapped.positions), LEG_M, "leg (hip-knee-ankle)"
@@ -134,7 +137,6 @@ def _floor(mapped: Motion | None, up_axis: str, fps: float) -> tuple[str, list[s
 
 def check_take(motion: Motion, joint_map=None, mapping=None) -> TakeReport:
   """Measures one take (see the module docstring); ``mapping``: the one its dataset uses (default: its own)."""
-  from chorjax.data.mapping import apply_mapping, find_mapping
 
   r = TakeReport(motion.source or motion.name, motion.num_frames, motion.fps, motion.skeleton.num_joints)
   r.skeleton = motion.skeleton.name
@@ -206,9 +208,6 @@ def suggest_config(reports: list[TakeReport], csv: bool) -> list[str]:
 
 def check_paths(specs, joint_map=None, fps: float = 30.0) -> tuple[list[TakeReport], list[str]]:
   """Reports for every take named by ``specs`` (files, folders, bundled names) and the suggested config."""
-  from chorjax.data.csv import has_sidecar
-  from chorjax.data.dataset import read_motions, resolve_files
-  from chorjax.data.mapping import HEAD_TOP_FROM_EYES, map_takes
 
   reports, motions, csv = [], [], False
   for spec in specs:
@@ -236,7 +235,6 @@ def _compare_bodies(reports) -> None:
   """Notes on the takes whose 16-joint body differs from the set's: another skeleton of the same dancer
   (CMU's BVH releases lack the ASF's thorax bone: their arms and head sit ~2 units lower) or another
   scale (a copy in metres beside one in inches)."""
-  from chorjax.data.skeletons import MPII16
 
   bodies = {r.path: (r, r.body) for r in reports if r.body is not None}
   if len(bodies) < 2:

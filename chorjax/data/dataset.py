@@ -19,7 +19,9 @@ from chorjax.data import transforms
 from chorjax.data.cache import Cache, cache_root, in_processes, workers_for
 from chorjax.data.features import Features, feature_dim, floor_height, takes_joint_pace
 from chorjax.data.labels import Labels, read_labels, search_name, take_condition
+from chorjax.data.mapping import map_takes
 from chorjax.data.motion import Motion, bone_lengths
+from chorjax.data.rest import drop_leading_rests
 from chorjax.data.transforms import to_up_axis
 from chorjax.errors import UserError
 from chorjax.io import formats
@@ -121,8 +123,6 @@ def conform(
   ``data.keep_rest_frames``; ``rest=False`` keeps frame numbers as in the file), joints (``data.joints``,
   mapped as ``chorjax.data.mapping`` decides; the mappings used are put into ``mappings``) and up axis.
   What the user should know goes into ``notes``."""
-  from chorjax.data.mapping import map_takes
-  from chorjax.data.rest import drop_leading_rests
 
   out = list(motions)
   if rest and not data_cfg.keep_rest_frames:

@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from chorjax.data import transforms
+from chorjax.data.joint_names import split_name
 from chorjax.data.motion import Skeleton, chain_length, mean_bone_lengths
 from chorjax.errors import UserError
 
@@ -375,7 +376,6 @@ def hips(skeleton: Skeleton) -> tuple[int, int]:
   """``(left, right)``: the root's children that are each other's twins, the left one by name."""
   kids = [c for p, c in skeleton.bones if p == skeleton.root]
   pairs = [(a, skeleton.twins[a]) for a in kids if skeleton.twins[a] != a and skeleton.twins[a] in kids]
-  from chorjax.data.joint_names import split_name
 
   for a, b in pairs:
     if split_name(skeleton.joint_names[a])[0] == "left":

@@ -19,6 +19,7 @@ import numpy as np
 
 from chorjax.data.motion import Motion, topological_order
 from chorjax.data.rotations import local_transforms, matrix_to_quaternion, pose_rotations, quaternion_to_matrix
+from chorjax.data.transforms import to_y_up
 from chorjax.errors import UserError, atomic_write
 
 # metres per unit of the units a Motion may name (others are written as they are)
@@ -28,18 +29,23 @@ METRES = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254}
 def gltf_positions(motion: Motion) -> tuple[np.ndarray, float]:
   """``(positions [T, J, 3] y-up in metres where the units are known, the factor applied)``: what the glTF
   holds of ``motion``."""
-  from chorjax.data.transforms import to_y_up
 
   scale = METRES.get(motion.units, 1.0)
   return np.asarray(to_y_up(np.asarray(motion.positions, np.float64), motion.up_axis), np.float64) * scale, scale
 
 
+def _pygltflib(path, doing: str):
+  """The pygltflib package, or a UserError naming the export extra."""
+  try:
+    import pygltflib  # the export extra: chorjax runs without it
+  except ImportError:
+    raise UserError(f"{path}: {doing} glTF needs pygltflib: pip install 'chorjax[export]'") from None
+  return pygltflib
+
+
 def write_glb(motion: Motion, path, *, overwrite: bool = True) -> Path:
   """Writes ``motion`` as a binary glTF at ``path`` (see the module docstring). Returns the path."""
-  try:
-    import pygltflib as gl
-  except ImportError:
-    raise UserError(f"{path}: writing glTF needs pygltflib: pip install 'chorjax[export]'") from None
+  gl = _pygltflib(path, "writing")
   sk = motion.skeleton
   pos, scale = gltf_positions(motion)
   translation, rotation = local_transforms(pos, sk.parents, pose_rotations(pos, sk.parents, sk.topological_order))
@@ -98,8 +104,7 @@ def write_glb(motion: Motion, path, *, overwrite: bool = True) -> Path:
 def read_glb_positions(path) -> np.ndarray:
   """The joint positions ``[T, J, 3]`` a ``.glb`` written by :func:`write_glb` animates (its nodes' local
   translations and rotations composed down the hierarchy, frame by frame): what an importer sees."""
-  import pygltflib as gl
-
+  gl = _pygltflib(path, "reading")
   loaded = gl.GLTF2().load_binary(str(path))
   blob = None if loaded is None else loaded.binary_blob()
   if loaded is None or blob is None:

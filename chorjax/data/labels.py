@@ -8,12 +8,14 @@ style=elderly:0.5,style=active:0.5``), and a take it never saw is conditioned by
 
 from __future__ import annotations
 
+import csv
 import dataclasses
+import io
 
 import numpy as np
 import regex
 
-from chorjax.errors import UserError
+from chorjax.errors import UserError, read_text
 
 MAX_LABEL_CHARS = 10_000  # a --motion or --mix of labels: longer text is refused unread
 
@@ -159,10 +161,6 @@ def read_labels(spec: str, take_names: list[str], where: str = "data.labels") ->
 
 
 def _read_label_csv(path: str, where: str) -> tuple[list[str], dict]:
-  import csv
-  import io
-
-  from chorjax.errors import read_text
 
   try:
     rows = list(csv.reader(io.StringIO(read_text(path, "labels"), newline="")))  # a quoted line break kept

@@ -33,6 +33,7 @@ from chorjax.data.mapping import apply_mapping, find_mapping, leg_length
 from chorjax.data.motion import Motion
 from chorjax.data.rotations import matrix_to_euler, swing
 from chorjax.data.skeletons import MPII16
+from chorjax.data.transforms import to_up_axis
 from chorjax.errors import UserError, atomic_write, read_text
 
 
@@ -103,7 +104,6 @@ def _drivers(ch: Character) -> dict:
 
 def retarget(motion: Motion, character: Character) -> np.ndarray:
   """``[T, channels]`` MOTION rows that play ``motion`` (16 joints) on ``character``."""
-  from chorjax.data.transforms import to_up_axis  # jax: only where a character is written
 
   if motion.skeleton.joint_names != MPII16.joint_names:
     raise UserError(f"{motion.source or motion.name}: retargeting takes the 16-joint layout")

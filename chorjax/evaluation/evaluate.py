@@ -12,8 +12,9 @@ import numpy as np
 from chorjax.data.dataset import eval_windows
 from chorjax.data.motion import Motion
 from chorjax.data.transforms import to_y_up
-from chorjax.errors import UserError, atomic_write
+from chorjax.errors import UserError, atomic_write, check_output, refuse_existing
 from chorjax.evaluation import scoring
+from chorjax.io.output import write_motions
 from chorjax.run import HELD_OUT, Run, load_run, read_reference  # noqa: F401  (re-exported)
 from chorjax.runtime import side_by_side
 from chorjax.sampling.controls import Controls
@@ -120,7 +121,6 @@ def metrics_path(workdir) -> Path:
 
 def write_metrics(result: dict, path) -> Path:
   """Writes the metrics JSON; an evaluation's first generated dancer goes to ``sample.npz`` beside it."""
-  from chorjax.io.output import write_motions
 
   result = dict(result)
   first = result.pop("first_sample", None)
@@ -138,7 +138,6 @@ def evaluate_to(workdir, data, output=None, *, force: bool = False, **kw) -> tup
   """``chorjax eval``: :func:`evaluate` (``kw``: its arguments and the sampling controls), written to ``output``
   (default: the run's ``eval/metrics.json``) with its first dancer beside it; neither replaced unless
   ``force`` (checked before the draw). Returns ``(the result, the JSON written)``."""
-  from chorjax.errors import check_output, refuse_existing
 
   out = check_output(output, (".json",))[0] if output else metrics_path(workdir)
   refuse_existing([out, sample_path(out)], force)

@@ -6,8 +6,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from rich.table import Table
 
-from chorjax.evaluation.scoring import METRICS
+from chorjax.data.check import check_paths
+from chorjax.data.dataset import read_takes
+from chorjax.data.motion import bone_length_cv
+from chorjax.evaluation.scoring import METRICS, mean_of
 from chorjax.evaluation.single_take import KEYS as SINGLE_TAKE_KEYS
 
 # printed only where measured: the single-take measures (takes of up to two minutes; two samples for inter_)
@@ -27,7 +31,6 @@ CHECK_COLUMNS = ("take", "frames", "fps", "seconds", "joints", "up", "units", "b
 
 
 def _table(columns, left):
-  from rich.table import Table
 
   table = Table(title="takes", show_lines=False)
   for col in columns:
@@ -38,8 +41,6 @@ def _table(columns, left):
 def takes_table(inputs):
   """A table of the takes in ``inputs`` (files, folders or bundled names): frames, joints, rate, extent and
   how steady their bones are (a rich ``Table``)."""
-  from chorjax.data.dataset import read_takes
-  from chorjax.data.motion import bone_length_cv
 
   table = _table((*INFO_COLUMNS, *BONE_COLUMNS), ("take",))
   for m in read_takes(inputs):
@@ -56,7 +57,6 @@ def takes_table(inputs):
 def check_report(inputs, joint_map=None, fps: float = 30.0) -> tuple:
   """``data check`` of ``inputs``: ``(a table of the readable takes, the lines that explain them and give
   the config keys for the set, the fatal problems)``."""
-  from chorjax.data.check import check_paths
 
   reports, config = check_paths(inputs, joint_map=joint_map, fps=fps)
   table = _table(CHECK_COLUMNS, ("take", "up", "units", "bone CV"))
@@ -83,7 +83,6 @@ def check_report(inputs, joint_map=None, fps: float = 30.0) -> tuple:
 def metric_lines(result: dict, keys) -> list[str]:
   """The metrics of ``result`` (``scoring.score``, ``evaluate.evaluate``) as ``chorjax metrics`` prints them:
   a key a line, its value, and the real takes' (and the training takes') beside it."""
-  from chorjax.evaluation.scoring import mean_of
 
   lines = []
   if "segment_frames" in result:

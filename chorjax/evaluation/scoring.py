@@ -52,14 +52,22 @@ Keys (a value, or ``{"mean", "sd"}`` over several motions or reference splits):
 from __future__ import annotations
 
 import dataclasses
+import json
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
+from chorjax.data import transforms
+from chorjax.data.dataset import read_takes
+from chorjax.data.mapping import to_mpii16
 from chorjax.data.motion import Skeleton, bone_length_cv
-from chorjax.errors import UserError
+from chorjax.errors import UserError, atomic_write, check_output, refuse_existing
 from chorjax.evaluation import metrics
+from chorjax.evaluation.single_take import KEYS, single_take
+from chorjax.fields import suggest
+from chorjax.sampling.controls import Controls
+from chorjax.sections import DataConfig, SampleConfig
 
 
 def spread(values) -> float | dict:
@@ -78,8 +86,6 @@ def mean_of(value) -> float:
 def upgrade(result: dict) -> dict:
   """A metrics dict in today's key names (older files named the first and last segment after 1,000 frames)
   and with every sampling control stated (older files lack the ones added since: they were off)."""
-  from chorjax.sampling.controls import Controls
-  from chorjax.sections import SampleConfig
 
   out = dict(result)
   for old, new in (("movement_first_1000", "movement_first"), ("movement_last_1000", "movement_last")):
@@ -390,7 +396,6 @@ def one_take(j: Judged) -> dict:
 
   Against the training takes (``chorjax metrics``: the reference), where those hold at most
   ``SINGLE_TAKE_FRAMES`` frames; else None each."""
-  from chorjax.evaluation.single_take import KEYS, single_take
 
   takes = j.train if j.train is not None else j.reference
   if sum(len(t) for t in takes) > SINGLE_TAKE_FRAMES:
@@ -457,8 +462,6 @@ def score(
 
 def score_files(motion_specs, data_specs, **kw) -> dict:
   """``chorjax metrics``: :func:`score_motions` of motion files against real takes, any formats."""
-  from chorjax.data.dataset import read_takes
-  from chorjax.sections import DataConfig
 
   data_cfg = DataConfig()
   reference = read_takes(list(data_specs), data_cfg)
@@ -472,9 +475,6 @@ def score_motions(motions, reference, **kw) -> dict:
   Every motion is brought to the reference's frame rate (resampled) and body size (scaled), so
   another system's output is measured with the same ruler as a chorjax sample.
   """
-  from chorjax.data import transforms
-  from chorjax.data.mapping import to_mpii16
-  from chorjax.errors import UserError
 
   check_options(kw)
   if not reference or not motions:
@@ -504,7 +504,6 @@ OPTIONS = {"window": (4, 10_000), "splits": (1, 1_000), "segment": (1, 2**31 - 1
 def check_options(kw: dict) -> None:
   """Refuses, in one line naming it, an option :func:`score` does not take (with the closest name) or a value
   outside ``OPTIONS`` (a bool, a float and text included): the CLI's flags and the API's keywords alike."""
-  from chorjax.fields import suggest
 
   for name, value in kw.items():
     if name not in OPTIONS:
@@ -519,9 +518,6 @@ def check_options(kw: dict) -> None:
 def score_to(motion_specs, data_specs, output=None, *, force: bool = False, **kw) -> tuple[dict, Path | None]:
   """``chorjax metrics``: :func:`score_files` (``kw``: ``window``, ``splits``, ``seed``), written as JSON to
   ``output`` where given (not replaced unless ``force``). Returns ``(the result, the JSON written or None)``."""
-  import json
-
-  from chorjax.errors import atomic_write, check_output, refuse_existing
 
   check_options(kw)
   out = check_output(output, (".json",))[0] if output else None

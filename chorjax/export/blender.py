@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+import importlib.metadata
+import importlib.util
 import json
+import zipfile
 from pathlib import Path
 
 import numpy as np
 
-from chorjax.errors import UserError
+from chorjax.data.skeletons import MPII16
+from chorjax.data.transforms import up_axis_matrix
+from chorjax.errors import UP_AXES, UserError, atomic_write, check_output, refuse_existing
 
 PACKAGE = Path(__file__).resolve().parents[1]  # chorjax/
 
@@ -17,13 +22,6 @@ def write_blender_addon(output, *, force: bool = False) -> Path:
   Install from Disk): ``chorjax/blender_addon`` with the joint-name rules (``chorjax.data.joint_names``), the
   16-joint layout and the up axes it reads, and a copy of the ``websockets`` package (with its licence) for
   live mode. It runs on Blender's own Python; see its module docstring. Returns the zip's path."""
-  import importlib.metadata
-  import importlib.util
-  import zipfile
-
-  from chorjax.data.skeletons import MPII16
-  from chorjax.data.transforms import up_axis_matrix
-  from chorjax.errors import UP_AXES, atomic_write, check_output, refuse_existing
 
   out, _ = check_output(output, (".zip",))
   refuse_existing([out], force)

@@ -27,12 +27,17 @@ run's feature pipeline (the sidecar's ``features``).
 
 from __future__ import annotations
 
+import importlib.util
 import json
 from pathlib import Path
 
+import jax
 import numpy as np
 
-from chorjax.errors import UserError
+from chorjax.data.features import Features
+from chorjax.data.transforms import up_axis_matrix
+from chorjax.errors import UserError, atomic_write, check_output, refuse_existing
+from chorjax.run import load_run
 
 SIDECAR_FORMAT = "chorjax-onnx-dancer"
 SIDECAR_VERSION = 1
@@ -50,7 +55,6 @@ def write_onnx(
   workdir, output, *, batch: int = 1, controls: dict | None = None, checkpoint="kept", force: bool = False
 ) -> list[Path]:
   """``chorjax export``: the run in ``workdir`` as an ONNX dancer (:func:`export_onnx`)."""
-  from chorjax.run import load_run
 
   return export_onnx(load_run(workdir, checkpoint), output, batch=batch, controls=controls, force=force)
 
@@ -60,7 +64,6 @@ def export_onnx(run, output, *, batch: int = 1, controls: dict | None = None, fo
   dancers a call, with the sampling ``controls`` given (unset: the run's calibration, then its ``[sample]``).
   Everything that can be refused is refused before anything is written; an existing file is not replaced
   unless ``force``. Returns the paths written."""
-  from chorjax.errors import atomic_write, check_output, refuse_existing
 
   needs_onnx()
   out, _ = check_output(output, (".onnx",))
@@ -89,15 +92,13 @@ def export_onnx(run, output, *, batch: int = 1, controls: dict | None = None, fo
 
 
 def needs_onnx() -> None:
-  try:
-    import onnx  # noqa: F401
-  except ImportError:
+  if importlib.util.find_spec("onnx") is None:
     raise UserError("chorjax export needs the export extra: pip install 'chorjax[export]'") from None
 
 
 def _program(run, sampling, batch: int):
   """``(onnx model, contract)``: the family's frame program traced for ``batch`` dancers and translated."""
-  from chorjax.export.onnx_graph import Unsupported, to_onnx
+  from chorjax.export.onnx_graph import Unsupported, to_onnx  # the export extra's onnx: read only to export
 
   draw = sampling.draw(run.features)
   family = run.family
@@ -138,7 +139,6 @@ def _with_positions(program, args, inputs, outputs, features, sampling):
 
 def jax_outputs(program, args) -> list:
   """The shapes and dtypes of ``program(*args)``'s outputs (nothing computed)."""
-  import jax
 
   return list(jax.eval_shape(program, *args))
 
@@ -148,7 +148,6 @@ def _io(name: str, value) -> dict:
 
 
 def _sidecar(run, sampling, batch: int, contract: dict) -> dict:
-  from chorjax.data.transforms import up_axis_matrix
 
   f = run.features
   sk = f.skeleton
@@ -190,7 +189,6 @@ def _sidecar(run, sampling, batch: int, contract: dict) -> dict:
 def sample_numbers(run, seed: int, frames: int, batch: int = 1):
   """``(gumbel [T, B, K], normal [T, B, N])``: the random numbers each frame of ``chorjax sample --seed seed``
   (``batch`` dancers) is drawn with, as the run's exported graph takes them (``Family.frame_numbers``)."""
-  import jax
 
   gumbel, normal = run.family.frame_numbers(run.graphdef, run.params, jax.random.key(seed), frames, batch)
   return np.asarray(gumbel, np.float32), np.asarray(normal, np.float32)
@@ -203,7 +201,7 @@ class OnnxDancer:
 
   def __init__(self, path):
     try:
-      import onnxruntime as ort
+      import onnxruntime as ort  # the export extra: only the reference host runs it
     except ImportError:
       raise UserError("OnnxDancer needs onnxruntime (the export extra): pip install 'chorjax[export]'") from None
 
@@ -244,7 +242,6 @@ class OnnxDancer:
 
   def positions(self, z_BxTxD) -> np.ndarray:
     """Joint positions ``[B, T, J, 3]`` in data space: the frames decoded as ``chorjax sample`` decodes."""
-    from chorjax.data.features import Features
 
     features = Features.from_dict(self.meta["features"])
     return np.asarray(features.decode(np.asarray(z_BxTxD), **self.meta["decoding"]))

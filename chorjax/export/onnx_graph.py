@@ -16,6 +16,8 @@ from collections.abc import Callable, Sequence
 
 import jax
 import numpy as np
+import onnx
+from jax.extend.core import Literal
 
 OPSET = 18
 
@@ -71,8 +73,6 @@ def to_onnx(
 ):
   """``fn(*args)`` (arrays in, a flat sequence of arrays out) as an ``onnx.ModelProto`` whose inputs and
   outputs carry the given names, at the shapes and dtypes of ``args``."""
-  import onnx
-
   closed = jax.make_jaxpr(fn)(*args)
   g = _Graph()
   env: dict = {}
@@ -97,14 +97,10 @@ def to_onnx(
 
 
 def _value_info(name: str, aval):
-  import onnx
-
   return onnx.helper.make_tensor_value_info(name, _onnx_type(aval.dtype), list(aval.shape))
 
 
 def _onnx_type(dtype) -> int:
-  import onnx
-
   return onnx.helper.np_dtype_to_tensor_dtype(np.dtype(dtype))
 
 
@@ -120,15 +116,11 @@ class _Graph:
     return next(self._names)
 
   def node(self, op: str, inputs: list[str], outputs: list[str] | None = None, **attrs) -> str:
-    import onnx
-
     outputs = outputs or [self.fresh()]
     self.nodes.append(onnx.helper.make_node(op, inputs, outputs, **attrs))
     return outputs[0]
 
   def const(self, value) -> str:
-    import onnx
-
     name = self.fresh()
     value = np.asarray(value)
     if value.dtype == np.float64:
@@ -140,7 +132,6 @@ class _Graph:
     return self.const(np.asarray(values, np.int64))
 
   def read(self, env: dict, var) -> str:
-    from jax.extend.core import Literal
 
     if isinstance(var, Literal):
       return self.const(np.asarray(var.val, dtype=getattr(var.aval, "dtype", None)))

@@ -5,12 +5,16 @@ onnxruntime-web's files, with its licence."""
 from __future__ import annotations
 
 import json
+import shutil
+import tempfile
+from importlib.resources import files
 from pathlib import Path
 
 import numpy as np
 
-from chorjax.errors import UserError
+from chorjax.errors import UserError, as_path
 from chorjax.export.dancer import export_onnx, needs_onnx, sidecar_path
+from chorjax.run import load_run
 
 # onnxruntime-web's files the page loads (its wasm build, single-threaded), from the npm package's dist/
 ORT_WEB_FILES = ("ort.wasm.min.js", "ort-wasm-simd-threaded.wasm", "ort-wasm-simd-threaded.mjs")
@@ -37,12 +41,6 @@ def write_web(workdir, folder, *, ort_web=None, controls=None, checkpoint="kept"
   ``index.html``, the dancer (``dancer.onnx`` and its sidecar) and onnxruntime-web's files (``ort/``, with its
   licence). Any static file server serves it. The page draws the joints the graph decodes (rigid bones; the
   feet neither grounded nor locked). Returns the folder."""
-  import shutil
-  import tempfile
-  from importlib.resources import files
-
-  from chorjax.errors import as_path
-  from chorjax.run import load_run
 
   needs_onnx()
   out = as_path(folder, "--web")

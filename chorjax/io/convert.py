@@ -9,7 +9,15 @@ from pathlib import Path
 
 import numpy as np
 
+from chorjax.data import transforms
+from chorjax.data.bvh import write_bvh
+from chorjax.data.csv import write_csv, written_paths
+from chorjax.data.dataset import read_motions, read_takes, resolve_files, to_rate, to_up_axis
+from chorjax.data.mapping import map_takes, to_mpii16
+from chorjax.data.rest import drop_leading_rests
+from chorjax.data.retarget import write_retargeted
 from chorjax.errors import UserError, is_run_folder, refuse_existing
+from chorjax.evaluation.metrics import body_size
 from chorjax.io import formats
 from chorjax.io.output import load_character
 
@@ -41,7 +49,6 @@ def convert(
   """Converts the takes of ``inputs`` (files or folders) and writes them to ``output``: a folder (one CSV a
   take) or one ``.bvh`` (onto ``skeleton``, a character BVH, where given). ``log`` hears what was done on
   the way (rest frames dropped, how joints were mapped). Returns ``[(path written, motion)]``."""
-  from chorjax.data.dataset import read_motions, resolve_files
 
   out = Path(output)
   files = (*(s for s in formats.FORMATS if s not in (".csv", ".bvh", ".npz")), *OTHER_FILES)
@@ -58,16 +65,12 @@ def convert(
   ]
   motions = _without_rest(motions, drop_first_frame, keep_rest_frames, log)
   if joints == "mpii16":
-    from chorjax.data.mapping import map_takes
-
     motions, used = map_takes(motions, joint_map)
     for how in dict.fromkeys(m.describe() for m in used.values()):
       log(f"joints mapped {how}")
   if like:
     motions = like_reference(motions, like)
   if up_axis:
-    from chorjax.data.dataset import to_up_axis
-
     motions = [to_up_axis(m, up_axis) for m in motions]
   if scale != 1.0:
     motions = [m.replace(positions=m.positions * np.float32(scale)) for m in motions]
@@ -82,7 +85,6 @@ def _without_rest(motions, drop_first_frame: bool, keep_rest_frames: bool, log) 
     return [m.replace(positions=m.positions[1:]) for m in motions]
   if keep_rest_frames:
     return motions
-  from chorjax.data.rest import drop_leading_rests
 
   motions, note = drop_leading_rests(motions, "--keep-rest-frames")
   if note:
@@ -94,9 +96,6 @@ def like_reference(motions, like: str) -> list:
   """``motions`` made like the takes of ``like`` (a bundled name, folder or file): their up axis and units,
   their mean body size, their frame rate, and the same average place of the root (the root is absolute in
   the features)."""
-  from chorjax.data import transforms
-  from chorjax.data.dataset import read_takes, to_rate, to_up_axis
-  from chorjax.evaluation.metrics import body_size
 
   ref = read_takes([like])
   canon = lambda m: np.asarray(transforms.to_y_up(m.positions, m.up_axis))
@@ -119,14 +118,10 @@ def like_reference(motions, like: str) -> list:
 
 def _write(motions, out: Path, character, joint_map, rigid: bool, force: bool) -> list:
   """One BVH (``out.bvh``, onto ``character`` where given) or one CSV a take in the folder ``out``."""
-  from chorjax.data.csv import write_csv, written_paths
 
   if out.suffix.lower() == ".bvh":
     if len(motions) != 1:
       raise UserError(f"{out}: one .bvh holds one motion; give one input or an output folder")
-    from chorjax.data.bvh import write_bvh
-    from chorjax.data.mapping import to_mpii16
-    from chorjax.data.retarget import write_retargeted
 
     refuse_existing([out], force)
     if character is not None:

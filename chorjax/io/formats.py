@@ -16,7 +16,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from chorjax.data.mapping import to_mpii16
+from chorjax.data.retarget import write_retargeted
 from chorjax.errors import UserError, either
+from chorjax.render import plot
+from chorjax.render.html import write_player
+from chorjax.render.video import write_animation
 
 
 @dataclass(frozen=True)
@@ -160,7 +167,6 @@ def _per_motion(write_one: Callable[[Any, Path], Path]):
 
 
 def _write_npz(motions, paths, writing: Writing) -> list[Path]:
-  import numpy as np
 
   first = motions[0]
   positions = np.stack([m.positions for m in motions])
@@ -171,32 +177,26 @@ def _write_npz(motions, paths, writing: Writing) -> list[Path]:
 def _write_bvh(motions, paths, writing: Writing) -> list[Path]:
   if writing.character is None:
     return [bvh.write_bvh(m, p) for m, p in zip(motions, paths)]
-  from chorjax.data.mapping import to_mpii16
-  from chorjax.data.retarget import write_retargeted
 
   return [write_retargeted(to_mpii16(m), writing.character, p) for m, p in zip(motions, paths)]
 
 
 def _write_player(motions, paths, writing: Writing) -> list[Path]:
-  from chorjax.render.html import write_player  # the page's transforms load jax
 
   return [write_player(motions, paths[0], title=writing.title or paths[0].stem)]
 
 
 def _draw_player(motions, out: Path, drawing: Drawing) -> Path:
-  from chorjax.render.html import write_player  # the page's transforms load jax
 
   return write_player(motions, out, title=drawing.title or out.stem, columns=drawing.columns)
 
 
 def _animation(motions, out: Path, drawing: Drawing) -> Path:
-  from chorjax.render.video import write_animation  # imageio
 
   return write_animation(motions, out, size=drawing.size)
 
 
 def _picture(motions, out: Path, drawing: Drawing) -> Path:
-  from chorjax.render import plot  # matplotlib
 
   if len(motions) > 1:
     drawing.warn(f"note: {out.suffix.lower()} shows one motion; rendering {motions[0].name}")

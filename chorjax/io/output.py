@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from chorjax.data.motion import Motion
+from chorjax.data.retarget import Character
 from chorjax.errors import UserError
 from chorjax.io import formats
 
@@ -18,7 +20,6 @@ def load_character(path, out: Path):
     return None
   if out.suffix.lower() != ".bvh":
     raise UserError(f"--skeleton {path}: retargeting writes BVH; give -o OUT.bvh (not {out.name})")
-  from chorjax.data.retarget import Character
 
   return Character(path)
 
@@ -33,6 +34,5 @@ def write_motions(out: Path, motions, *, settings=None, character=None, title=No
 
 def as_motions(positions, fps, skeleton, up_axis, name: str = "dancer") -> list:
   """Drawn positions ``[K, T, J, 3]`` in a run's data space as motions ``{name} 0``, ``{name} 1`` ..."""
-  from chorjax.data.motion import Motion
 
   return [Motion(p, fps, skeleton, up_axis, units="data", name=f"{name} {k}") for k, p in enumerate(positions)]

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import contextlib
 import re
+import socket
+import time
 import typing
 
 from chorjax.errors import UserError
@@ -21,7 +23,6 @@ class Budget:
   BURST: typing.ClassVar[dict[str, float]] = {"prime": 16.0, "prime_file": 4.0, "set": 60.0, "pause": 60.0}
 
   def __init__(self, clock=None):
-    import time
 
     self.clock = clock or time.monotonic
     self.tokens = dict(self.BURST)
@@ -51,7 +52,6 @@ LOOPBACK = {"127.0.0.1", "localhost", "::1", "[::1]"}
 def server_names(host: str) -> set[str]:
   """The names a request's ``Host`` may use for a server listening on ``host``: loopback names alone on
   loopback; off it, also the listening address, this machine's host names and its addresses."""
-  import socket
 
   names = set(LOOPBACK)
   if host in LOOPBACK:

@@ -45,9 +45,16 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from chorjax.errors import UserError, load_json
+from chorjax.data.motion import Motion
+from chorjax.data.transforms import up_axis_matrix
+from chorjax.errors import UserError, check_output, load_json, refuse_existing
+from chorjax.io.output import write_motions
 from chorjax.live.guard import Budget, header_refusal, host_port, origin_refusal, server_names
+from chorjax.render.html import live_html
+from chorjax.run import load_run
+from chorjax.sample import read_phrase
 from chorjax.sampling.controls import Controls
+from chorjax.sampling.table import check_sample_control
 
 AHEAD = 2  # chunks generated ahead of the clock
 PRIME_RANGE = 10.0  # a primed frame's features may lie this many times the training range's span outside it
@@ -149,7 +156,6 @@ class Stream:
   def set(self, pi_temperature=None, sigma_temperature=None, mix=None) -> None:
     """New temperatures (from the next chunk) and/or a new motion mix (``"4:0.5,5:0.5"``): the model is
     conditioned on it and re-primed with the frames it just danced, so the dance changes without a jump."""
-    from chorjax.sampling.table import check_sample_control
 
     given = {"pi_temperature": pi_temperature, "sigma_temperature": sigma_temperature}
     checked = {k: check_sample_control(k, v, f"set {k}") for k, v in given.items() if v is not None}
@@ -179,7 +185,6 @@ class Live:
     self.ticks = 0  # frame periods gone by, paused ones left out
 
   def hello(self) -> str:
-    from chorjax.data.transforms import up_axis_matrix
 
     f, run = self.stream.features, self.stream.run
     sk = f.skeleton
@@ -217,8 +222,7 @@ class Live:
 
   async def pace(self) -> None:
     """One frame every 1/fps seconds to every client (and OSC), on an absolute clock (no drift)."""
-    from websockets.asyncio.server import broadcast
-
+    broadcast = _net()[0].asyncio.server.broadcast
     loop = asyncio.get_running_loop()
     period, due = 1.0 / self.fps, loop.time()
     while True:
@@ -309,7 +313,6 @@ class Live:
 
   def read_file(self, value) -> np.ndarray:
     """A ``prime_file`` message's file, read as training reads takes (any format chorjax reads)."""
-    from chorjax.sample import read_phrase
 
     if not isinstance(value, dict) or not isinstance(value.get("name"), str) or not isinstance(value.get("text"), str):
       raise UserError('prime_file: expected {"name": "phrase.csv", "text": "..."}')
@@ -360,15 +363,24 @@ class OscInput:
     return self.frames.popleft() if self.frames else None
 
 
+def _net():
+  """``(websockets, pythonosc)`` with the parts live mode uses loaded: the live extra, imported here alone so
+  that chorjax runs without it."""
+  import pythonosc.dispatcher, pythonosc.osc_server, pythonosc.udp_client  # noqa: E401, I001  (the live extra)
+  import websockets.asyncio.server, websockets.datastructures, websockets.http11  # noqa: E401  (the live extra)
+
+  return websockets, pythonosc
+
+
 async def serve(live: Live, host: str, port: int, *, osc_in=None, on_ready=print, origins=()) -> None:
   """Serves until SIGINT or SIGTERM; ``on_ready`` gets the line ``serving http://HOST:PORT``; WebSocket
   clients from other pages are refused (``origin_refusal``; ``origins``: more allowed)."""
-  from websockets.asyncio.server import serve as ws_serve
-  from websockets.datastructures import Headers
-  from websockets.http11 import Response
-
-  from chorjax.render.html import live_html
-
+  websockets = _net()[0]
+  ws_serve, Headers, Response = (
+    websockets.asyncio.server.serve,
+    websockets.datastructures.Headers,
+    websockets.http11.Response,
+  )
   page = live_html(title=f"chorjax live ({live.stream.run.workdir})").encode("utf-8")
 
   names = server_names(host)
@@ -425,9 +437,8 @@ async def serve(live: Live, host: str, port: int, *, osc_in=None, on_ready=print
 
 async def _listen_osc(live: Live, host: str, port: int):
   """``--osc-in``: OSC messages steer the stream (see the module docstring)."""
-  from pythonosc.dispatcher import Dispatcher
-  from pythonosc.osc_server import AsyncIOOSCUDPServer
-
+  pythonosc = _net()[1]
+  Dispatcher, AsyncIOOSCUDPServer = pythonosc.dispatcher.Dispatcher, pythonosc.osc_server.AsyncIOOSCUDPServer
   j3 = live.stream.features.skeleton.num_joints * 3
   loop = asyncio.get_running_loop()
   act = lambda kind, value: loop.create_task(_quietly(live.apply(kind, value)))
@@ -487,10 +498,6 @@ def run_live(
 ) -> int:
   """``chorjax live``: loads the run, serves until Ctrl-C, writes the recording (``record``, an ``.npz`` not
   replaced unless ``force``); returns 0."""
-  from chorjax.data.motion import Motion
-  from chorjax.io.output import write_motions
-  from chorjax.run import load_run
-  from chorjax.sample import read_phrase
 
   _check_flags(port, record, force, fps, alternate)
   for origin in allow_origins:
@@ -510,9 +517,7 @@ def run_live(
   stream = Stream(run, sampling, weights, seed, chunk=max(1, math.ceil(rate / 8)))
   sender = None
   if osc_out:
-    from pythonosc.udp_client import SimpleUDPClient
-
-    sender = SimpleUDPClient(*osc_out)
+    sender = _net()[1].udp_client.SimpleUDPClient(*osc_out)
   live = Live(stream, rate, osc=sender, alternate=alternate, source=source)
   try:
     asyncio.run(serve(live, host, port, osc_in=listen, on_ready=on_ready, origins=tuple(allow_origins)))
@@ -529,7 +534,6 @@ def run_live(
 def _check_flags(port: int, record, force: bool, fps, alternate: float) -> None:
   """``chorjax live``'s flags checked before anything is loaded: the port, the recording (an ``.npz`` that
   is not there yet, unless ``force``), the frame rate and the alternation's seconds; and the live extra."""
-  from chorjax.errors import check_output, refuse_existing
 
   if not 0 <= port <= 65535:
     raise UserError(f"--port {port}: must be at least 0" if port < 0 else f"--port {port}: must be at most 65535")
@@ -537,8 +541,7 @@ def _check_flags(port: int, record, force: bool, fps, alternate: float) -> None:
     check_output(record, (".npz",))
     refuse_existing([record], force)
   try:
-    import pythonosc  # noqa: F401
-    import websockets  # noqa: F401
+    _net()
   except ImportError:
     raise UserError("chorjax live needs the live extra: pip install -e '.[live]'") from None
   if fps is not None and not (math.isfinite(fps) and 0 < fps <= MAX_FPS):

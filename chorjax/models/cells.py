@@ -23,6 +23,7 @@ from typing import cast
 
 import jax.numpy as jnp
 from flax import nnx
+from jax.experimental import rnn
 
 from chorjax.models.fused import (
   dense,
@@ -86,7 +87,6 @@ class LSTMCell(_Cell):
 
   def cudnn_scan(self, carry, x_TxBxD):
     """``scan(carry, project(x))`` as one cuDNN call (CUDA only; the numerics are ``scan``'s, see the tests)."""
-    from jax.experimental import rnn
 
     c0, h0 = carry
     x = jnp.swapaxes(x_TxBxD, 0, 1)

@@ -6,7 +6,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-from chorjax.errors import UserError
+from chorjax.data.dataset import read_motions, read_takes, resolve_files
+from chorjax.errors import UserError, check_output, refuse_existing
+from chorjax.io import formats
+from chorjax.render.plot import plot_trajectories
 
 MAX_SIDE = 7680  # pixels: 8K video's width
 MAX_POSES = 200  # strip: poses per row (a row of 200 is already wider than any screen)
@@ -41,9 +44,6 @@ def render(
   ``.html`` (the player, ``columns`` side by side, ``title``), ``.gif``/``.mp4`` (``size``: ``WxH``),
   ``.png`` (the first take's trajectories, or its filmstrip with ``strip``: ``poses`` a row, ``every``
   frames apart). ``frames``: the first N frames only. Returns the path written."""
-  from chorjax.data.dataset import read_motions, resolve_files
-  from chorjax.errors import check_output, refuse_existing
-  from chorjax.io import formats
 
   if poses > MAX_POSES:
     raise UserError(f"--poses {poses}: at most {MAX_POSES} poses in a row")
@@ -63,8 +63,6 @@ def render(
 def plot_file(path, output, *, split: int = 200) -> Path:
   """``chorjax data plot``: the trajectories of the one take in ``path`` as a PNG (``split``: frames in the
   first row)."""
-  from chorjax.data.dataset import read_takes
-  from chorjax.render.plot import plot_trajectories
 
   motions = read_takes([path])
   if len(motions) != 1:

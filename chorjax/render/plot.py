@@ -2,38 +2,35 @@
 
 from __future__ import annotations
 
+import importlib
 from pathlib import Path
 
 import numpy as np
 
+from chorjax.data import transforms
 from chorjax.data.motion import Motion
 from chorjax.errors import UserError, atomic_write
 
 
 def require_matplotlib():
+  """``matplotlib.pyplot`` on the Agg backend, or a UserError naming the viz extra."""
   try:
-    import matplotlib
+    import matplotlib  # the viz extra: chorjax runs without it
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+    return importlib.import_module("matplotlib.pyplot")
   except ImportError:
     raise UserError("this needs matplotlib: pip install 'chorjax[viz]'") from None
 
 
 def _figure_class():
-  try:
-    from matplotlib.figure import Figure
-  except ImportError:
-    raise UserError("this needs matplotlib: pip install 'chorjax[viz]'") from None
-  return Figure
+  require_matplotlib()
+  return importlib.import_module("matplotlib.figure").Figure
 
 
 def save_figure(fig, path) -> Path:
   """Writes a matplotlib figure atomically (format from the suffix, PNG by default) and closes it."""
-  import matplotlib.pyplot as plt
-
+  plt = require_matplotlib()
   fmt = (Path(path).suffix or ".png").lstrip(".")
   try:
     return atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=80, format=fmt))
@@ -104,7 +101,6 @@ def strip_figure(motion: Motion, every: int = 6, poses: int = 12):
   A dance that freezes shows the same figure over and over in the end row; one that trembles, the
   same figure with its limbs slightly shaken. Positions are drawn y-up, each pose centred on its root.
   """
-  from chorjax.data import transforms
 
   figure = _figure_class()  # no pyplot: drawing a strip never changes a notebook's own plotting backend
   pos = np.asarray(transforms.to_y_up(motion.positions, motion.up_axis), np.float64)

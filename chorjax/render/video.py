@@ -80,7 +80,7 @@ def write_animation(
   suffix = path.suffix.lower()
   fps = motions[0].fps
   try:
-    import imageio.v3 as iio
+    import imageio.v3 as iio  # the viz extra: chorjax runs without it
   except ImportError:
     raise UserError("this needs imageio: pip install 'chorjax[viz]'") from None
   frames = _frames_rgb(motions, size, max_frames)
@@ -90,7 +90,7 @@ def write_animation(
       iio.imwrite(tmp, np.stack(list(frames)), extension=".gif", duration=1000.0 / fps, loop=0)
   elif suffix == ".mp4":
     try:
-      import imageio_ffmpeg
+      import imageio_ffmpeg  # the viz extra, for MP4 only
     except ImportError:
       raise UserError("MP4 needs imageio-ffmpeg: pip install 'chorjax[viz]'") from None
 

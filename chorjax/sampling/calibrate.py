@@ -33,13 +33,24 @@ from collections.abc import Sequence
 
 import jax
 import numpy as np
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from chorjax.data.transforms import to_y_up
-from chorjax.errors import UserError, atomic_write
+from chorjax.errors import UserError, atomic_write, refuse_existing
 from chorjax.evaluation import metrics, scoring
+from chorjax.run import load_run, read_reference
 from chorjax.runtime import side_by_side
 from chorjax.sampling.calibration_file import calibration_path, read_calibration  # noqa: F401  (re-exported)
-from chorjax.sampling.table import BEYOND, CALIBRATED, CARRIED_BEYOND, CARRIED_GRID, DECODING, GRID, RECORDED  # noqa: F401
+from chorjax.sampling.table import (  # noqa: F401
+  BEYOND,
+  CALIBRATED,
+  CARRIED_BEYOND,
+  CARRIED_GRID,
+  DECODING,
+  GRID,
+  RECORDED,
+  check_sample_control,
+)
 
 # The walk starts from each of the grid's WALKS best settings: from the best alone it missed, on one martial run,
 # a setting a quarter nearer (objective 0.51 against 0.67) that the third best's walk reaches.
@@ -227,7 +238,6 @@ def calibrate(
   Returns:
     What ``calibration.json`` holds: the settings, the reference, and every setting's measurements.
   """
-  from chorjax.run import load_run, read_reference
 
   run = load_run(workdir).serving("calibrate")
   if num is None:
@@ -286,7 +296,6 @@ def _progress(grid_size: int):
   if not sys.stdout.isatty():
     yield None
     return
-  from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
   with Progress(TextColumn("calibrate"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), transient=True) as bar:
     task = bar.add_task("calibrate", total=grid_size)
@@ -297,8 +306,6 @@ def calibrate_run(workdir, data=None, *, force: bool = False, noise_order=None, 
   """``chorjax calibrate``: :func:`calibrate` (``kw``: ``frames``, ``num``, ``seed``), refused before any draw
   where the run already has a calibration.json (unless ``force``) or ``noise_order`` / ``pace`` are not what
   ``[sample]`` allows."""
-  from chorjax.errors import refuse_existing
-  from chorjax.sampling.table import check_sample_control
 
   refuse_existing([calibration_path(workdir)], force)
   if noise_order is not None:

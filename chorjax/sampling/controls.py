@@ -20,8 +20,10 @@ import jax.numpy as jnp
 import numpy as np
 from flax import nnx
 
+from chorjax.data.dataset import eval_windows
 from chorjax.errors import UserError
-from chorjax.sampling.table import HEAD, NAMES, PLAIN, SWITCHES, TRACED, ControlFields
+from chorjax.models.heads import MDNHead
+from chorjax.sampling.table import HEAD, NAMES, PLAIN, SWITCHES, TRACED, ControlFields, check_sample_control
 
 LABEL_PACE_WIDTH = 0.05  # two label combinations that differ in one value are 2 apart: each its own pace
 
@@ -46,7 +48,6 @@ class Controls(ControlFields):
       if name not in names:
         close = difflib.get_close_matches(name, names, n=1)
         raise UserError(f"{name!r} is not a sampling control" + (f"; did you mean {close[0]!r}?" if close else ""))
-    from chorjax.sampling.table import check_sample_control
 
     # checked as the same keys are in a config file: a value the CLI or a calibration.json gives that no
     # [sample] could hold is refused here too (the API's keywords, a calibration edited by hand)
@@ -235,8 +236,6 @@ def scale_ceiling(graphdef, params, train, seq_length: int, quantile: float):
   model predicts for its own training frames (``train``: ``(motion id, features [T, D])`` per take;
   teacher forced, the most likely component's scale), ``[S]``; no ceiling (inf) for a head without scales
   (MSE)."""
-  from chorjax.data.dataset import eval_windows
-  from chorjax.models.heads import MDNHead
 
   model = nnx.merge(graphdef, params)
   if not isinstance(getattr(model, "head", None), MDNHead):

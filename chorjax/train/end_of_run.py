@@ -12,7 +12,10 @@ from typing import Any
 import numpy as np
 
 from chorjax.families import family_of
-from chorjax.sampling.controls import Controls
+from chorjax.io.output import as_motions, write_motions
+from chorjax.run import load_run, save_ceiling
+from chorjax.sampling.calibrate import calibrate, default_grid
+from chorjax.sampling.controls import Controls, scale_ceiling
 
 
 @dataclasses.dataclass(frozen=True)
@@ -28,7 +31,6 @@ class Finished:
   @functools.cached_property
   def kept(self):
     """The run as sample, eval and export load it (its kept checkpoint), read once for every hook."""
-    from chorjax.run import load_run
 
     return load_run(self.workdir)
 
@@ -47,8 +49,6 @@ def record_ceiling(run: Finished) -> dict:
   """``sample.scale_cap``'s ceiling for the kept checkpoint, measured on the training takes and saved in the
   run (``run.save_ceiling``): the run samples without its training data (moved, deleted, or a relative
   path read from elsewhere)."""
-  from chorjax.run import save_ceiling
-  from chorjax.sampling.controls import scale_ceiling
 
   kept = run.kept
   q = run.cfg.sample.scale_cap
@@ -60,14 +60,12 @@ def record_ceiling(run: Finished) -> dict:
 
 def calibrates(cfg) -> bool:
   """Whether training ends by calibrating (``train.calibrate``; a family whose draw a control can change)."""
-  from chorjax.sampling.calibrate import default_grid
 
   return cfg.train.calibrate and family_of(cfg).calibrated and bool(default_grid(cfg))
 
 
 def calibration(run: Finished) -> dict:
   """``train.calibrate``: ``chorjax calibrate`` on the kept checkpoint, then the end sample drawn with it."""
-  from chorjax.sampling.calibrate import calibrate
 
   calibrate(run.workdir, log=lambda line: print(line, flush=True))
   if run.cfg.sample.frames <= 0:
@@ -86,7 +84,6 @@ def end_sample(run: Finished) -> dict:
 def write_end_sample(workdir: Path, graphdef, params, ds, cfg, controls: Controls | None = None) -> dict:
   """``samples/sample.csv`` and ``samples/player.html``: the dance the run ends with, as its family draws it
   (``Family.end_sample``: the generated dancers beside a real take, or an in-betweening piece beside its take)."""
-  from chorjax.io.output import as_motions, write_motions
 
   controls = controls or Controls.resolve(cfg.sample)
   named = dataclasses.replace(cfg, name=Path(workdir).resolve().name)  # a run is named by its folder

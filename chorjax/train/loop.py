@@ -18,12 +18,16 @@ from pathlib import Path
 
 import jax
 import numpy as np
+from jax.experimental import multihost_utils
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+from tensorboardX import SummaryWriter
 
 from chorjax import checkpoint as ckpt
 from chorjax.config import Config
 from chorjax.data.dataset import Dataset
 from chorjax.errors import Interrupted, UserError
 from chorjax.families import family_of
+from chorjax.render.plot import require_matplotlib
 from chorjax.sampling.controls import Controls, with_ceiling
 
 
@@ -155,7 +159,6 @@ def agreed_stop(local: Callable[[], int | None]) -> Callable[[], int | None]:
   """For several processes: after every step they exchange whether a signal arrived (one tiny
   all-gather), so that all stop, and save the collective checkpoint, at the same step when any one is
   signalled (a preempted host gets SIGTERM alone)."""
-  from jax.experimental import multihost_utils
 
   def stop() -> int | None:
     every = np.asarray(multihost_utils.process_allgather(np.int32(local() or 0)))
@@ -177,8 +180,6 @@ class _Progress:
     self.mode = mode
     self.total, self.bar = total, None
     if self.mode == "bar":
-      from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-
       self.bar = Progress(
         TextColumn("train"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[info]}"), TimeRemainingColumn()
       )
@@ -208,8 +209,6 @@ class MetricsLog:
     self.path, self.log_every, self.total = workdir / "metrics.jsonl", cfg.train.log_every, cfg.train.num_steps
     self.writer = None
     if cfg.log.tensorboard:
-      from tensorboardX import SummaryWriter
-
       self.writer = SummaryWriter(str(workdir), flush_secs=10)
     self.progress = _Progress(cfg.log.progress, self.total, start)
     self.t_last, self.step_last = time.time(), start
@@ -306,7 +305,6 @@ def best_checkpoint_hook(manager, save: Callable, val_loss: Callable[[Loop], flo
 
 def figure_hook(writer, graphdef, host_params, ds: Dataset, cfg: Config):
   """A short generated sample beside a real one, as a TensorBoard figure (needs matplotlib)."""
-  from chorjax.render.plot import require_matplotlib
 
   try:
     plt = require_matplotlib()

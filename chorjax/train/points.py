@@ -4,10 +4,11 @@ into points."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 
-from chorjax.config import Config
+from chorjax.config import Config, parse_override
 from chorjax.errors import UserError
 from chorjax.families import family_of
 
@@ -62,9 +63,6 @@ MAX_POINTS = 1024  # models one vectorized program trains together; split a larg
 def expand_overrides(overrides) -> tuple[list[str], list[list[tuple[str, object]]]]:
   """``train.seed=[0,1,2]`` (a list for a vectorizable key) -> the plain overrides and the points:
   one ``[(key, value), ...]`` per combination (a single point, ``[[]]``, when no list is given)."""
-  import itertools
-
-  from chorjax.config import parse_override
 
   plain, lists = [], []
   for text in overrides:

@@ -10,8 +10,19 @@ from __future__ import annotations
 import numpy as np
 from flax import nnx
 
+from chorjax.data.dataset import WindowSampler
+from chorjax.errors import UserError
 from chorjax.families.family import Family
+from chorjax.families.gan.adversarial import check_gan, create_gan_state, gan_train_step
 from chorjax.families.gan.gan_config import GanConfig
+from chorjax.families.gan.networks import (
+  GanModel,
+  frame_numbers,
+  frame_program,
+  gan_controls,
+  generate_sequences,
+  pose_layer,
+)
 from chorjax.registry import register
 
 
@@ -33,23 +44,18 @@ class Gan(Family):
     return config["gan"]["cell"], f"gan ({config['gan']['loss']})"
 
   def check(self, cfg) -> None:
-    from chorjax.families.gan.adversarial import check_gan
 
     check_gan(cfg, cfg.data.representation)
 
   def build_model(self, cfg, features, num_motions: int):
-    from chorjax.families.gan.networks import GanModel
 
     return GanModel(cfg.gan, features.dim, rngs=nnx.Rngs(cfg.train.seed))
 
   def create_state(self, cfg, ds):
-    from chorjax.families.gan.adversarial import create_gan_state
 
     return create_gan_state(cfg, ds.features)
 
   def parts(self, cfg, ds):
-    from chorjax.data.dataset import WindowSampler
-    from chorjax.families.gan.adversarial import gan_train_step
 
     # batches of critic_steps x batch_size windows; no likelihood to validate
     per_step = cfg.train.batch_size * cfg.gan.critic_steps
@@ -57,24 +63,19 @@ class Gan(Family):
     return gan_train_step, sampler, {}, None
 
   def controls(self, controls):
-    from chorjax.families.gan.networks import gan_controls
 
     return gan_controls(controls)
 
   def frame_program(self, graphdef, params, features, draw, batch: int, num_motions: int):
-    from chorjax.families.gan.networks import frame_program
 
     return frame_program(graphdef, params, features, draw, batch, num_motions)
 
   def frame_numbers(self, graphdef, params, key, frames: int, batch: int):
-    from chorjax.families.gan.networks import frame_numbers
 
     return frame_numbers(graphdef, params, key, frames, batch)
 
   def dance(self, graphdef, params, features, motion, key, num_frames, controls, prime=None):
     """Each dancer one sequence from noise (``motion`` only counts them; no prime)."""
-    from chorjax.errors import UserError
-    from chorjax.families.gan.networks import GanModel, gan_controls, generate_sequences, pose_layer
 
     if prime is not None:
       raise UserError("--prime: a GAN draws whole sequences from noise; it cannot continue a phrase")

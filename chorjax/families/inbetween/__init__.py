@@ -9,8 +9,17 @@ a context phrase and a target pose (``chorjax inbetween``), no dance of their ow
 
 from __future__ import annotations
 
+from chorjax.data.motion import Motion
 from chorjax.families.family import Family
+from chorjax.families.inbetween import inbetweening as ib
+from chorjax.families.inbetween.cvae_model import transition_model
 from chorjax.families.inbetween.inbetween_config import InbetweenConfig
+from chorjax.families.inbetween.inbetweening import (
+  check_inbetween,
+  create_inbetween_state,
+  end_sample,
+  write_transitions,
+)
 from chorjax.registry import register
 
 _NO_DANCE = (
@@ -28,22 +37,18 @@ class Inbetween(Family):
     return None if command == "inbetween" else _NO_DANCE.format(command=command)
 
   def check(self, cfg) -> None:
-    from chorjax.families.inbetween.inbetweening import check_inbetween
 
     check_inbetween(cfg)
 
   def build_model(self, cfg, features, num_motions: int):
-    from chorjax.families.inbetween.cvae_model import transition_model
 
     return transition_model(cfg, features)
 
   def create_state(self, cfg, ds):
-    from chorjax.families.inbetween.inbetweening import create_inbetween_state
 
     return create_inbetween_state(cfg, ds.features)
 
   def parts(self, cfg, ds):
-    from chorjax.families.inbetween import inbetweening as ib
 
     space, icfg = ib.Space.of(ds.features), cfg.inbetween
     sampler = ib.TransitionSampler(
@@ -54,15 +59,12 @@ class Inbetween(Family):
 
   def end_sample(self, graphdef, params, ds, cfg, controls):
     """Key poses of a held-out take, the model writing every frame between, beside that take."""
-    from chorjax.data.motion import Motion
-    from chorjax.families.inbetween.inbetweening import end_sample
 
     real, pieces, title = end_sample(graphdef, params, ds, cfg)
     motions = [real] + [Motion(p, real.fps, real.skeleton, real.up_axis, real.units, name=title) for p in pieces]
     return pieces[0], motions, cfg.name
 
   def transitions(self, run, context, targets, frames, key, num: int):
-    from chorjax.families.inbetween.inbetweening import write_transitions
 
     return write_transitions(
       run.graphdef, run.params, run.features, run.config.inbetween, context, targets, frames, key, num

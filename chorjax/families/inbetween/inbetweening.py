@@ -32,6 +32,7 @@ import optax
 from flax import nnx
 
 from chorjax.config import Config
+from chorjax.data import transforms
 from chorjax.data.features import Features, hips
 from chorjax.data.motion import chain_length
 from chorjax.errors import UserError
@@ -94,7 +95,6 @@ def _rotate_y(v, angle):
 def training_takes(ds, augment) -> list[np.ndarray]:
   """The training takes as canonical positions ``[T, J, 3]``, with their mirror images and/or the takes
   played backwards as ``augment`` (``data.augment``) asks."""
-  from chorjax.data import transforms
 
   f = ds.features
   by_name = {m.name: m for m in ds.motions}

@@ -12,11 +12,16 @@ import dataclasses
 from collections.abc import Sequence
 from typing import Any
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 from flax import nnx
 
+from chorjax.data.dataset import WindowSampler
+from chorjax.errors import UserError
 from chorjax.families.family import Family
 from chorjax.families.patch.patch_config import PatchConfig
+from chorjax.families.patch.synthesis import synthesize
 from chorjax.registry import register
 
 
@@ -74,9 +79,6 @@ class Patch(Family):
     return PatchTakes(cfg.patch, features.dim)
 
   def create_state(self, cfg, ds):
-    import jax.numpy as jnp
-
-    from chorjax.errors import UserError
 
     takes = [np.asarray(x, np.float32) for _, x in ds.train]
     total, size = sum(map(len, takes)), cfg.patch.size
@@ -93,7 +95,6 @@ class Patch(Family):
     return state, PatchSpec(graphdef)
 
   def parts(self, cfg, ds):
-    from chorjax.data.dataset import WindowSampler
 
     return _keep, WindowSampler(ds.train, cfg.data.seq_length, 1, cfg.train.seed), {}, None
 
@@ -102,10 +103,6 @@ class Patch(Family):
 
   def dance(self, graphdef, params, features, motion, key, num_frames, controls, prime=None):
     """Each dancer one recombination of the takes (``motion`` only counts them; no prime)."""
-    import jax
-
-    from chorjax.errors import UserError
-    from chorjax.families.patch.synthesis import synthesize
 
     if prime is not None:
       raise UserError("--prime: a patch run recombines its takes; it cannot continue a phrase")

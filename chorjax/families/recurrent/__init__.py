@@ -8,7 +8,25 @@ predicting every next frame through a mixture-density (or MSE) head, sampled fra
 
 from __future__ import annotations
 
+import jax
+import numpy as np
+from flax import nnx
+
+from chorjax.data.dataset import WindowSampler, eval_windows
+from chorjax.data.features import principal_axes
+from chorjax.errors import UserError
 from chorjax.families.family import Family
+from chorjax.families.recurrent.generation import continue_stream, dance, frame_program, start_stream
+from chorjax.families.recurrent.recurrent_model import create_model
+from chorjax.families.recurrent.steps import (
+  _train_step,
+  create_train_state,
+  eval_step,
+  parted_train_step,
+  sharded_train_step,
+  train_step,
+)
+from chorjax.models.heads import frame_numbers, white_axes
 from chorjax.registry import register
 
 
@@ -16,9 +34,6 @@ def mdn_basis(model_cfg, takes, white: int = 0):
   """The MDN's ``[D, D]`` coordinates (``model.mdn_basis``): the principal axes of the training frames
   (``takes``, ``[T, D]`` each) or of their second differences; the last ``white`` features
   (``heads.white_axes``) are axes of their own, left out of the others."""
-  import numpy as np
-
-  from chorjax.data.features import principal_axes
 
   lag = 2 if model_cfg.mdn_basis == "acceleration" else 0
   d = takes[0].shape[-1]
@@ -35,7 +50,6 @@ class Recurrent(Family):
   own_keys = frozenset({"model.lstm_kernel", "model.condition_every_frame", "train.batch_parts"})
 
   def check(self, cfg) -> None:
-    from chorjax.errors import UserError
 
     if cfg.model.memory and cfg.train.feedback != "none":
       raise UserError(
@@ -44,22 +58,16 @@ class Recurrent(Family):
       )
 
   def build_model(self, cfg, features, num_motions: int):
-    from chorjax.families.recurrent.recurrent_model import create_model
-    from chorjax.models.heads import white_axes
 
     return create_model(cfg.model, features.dim, num_motions, cfg.train.seed, white_axes(cfg.model, features))
 
   def create_state(self, cfg, ds):
-    from chorjax.families.recurrent.steps import create_train_state
-    from chorjax.models.heads import white_axes
 
     white = white_axes(cfg.model, ds.features)
     basis = mdn_basis(cfg.model, [z for _, z in ds.train], white) if cfg.model.pca_basis else None
     return create_train_state(cfg, ds.features.dim, ds.num_motions, basis, white)
 
   def parts(self, cfg, ds):
-    from chorjax.data.dataset import WindowSampler, eval_windows
-    from chorjax.families.recurrent.steps import eval_step, parted_train_step, train_step
 
     sampler = WindowSampler(ds.train, cfg.data.seq_length, cfg.train.batch_size, cfg.train.seed)
     val = eval_windows(ds.val, cfg.data.seq_length, cfg.train.val_windows)
@@ -67,42 +75,32 @@ class Recurrent(Family):
     return step, sampler, val, lambda params, val, spec: eval_step(params, val, spec.graphdef)
 
   def window_loss(self, graphdef, params, windows: dict) -> float:
-    from chorjax.families.recurrent.steps import eval_step
 
     return float(eval_step(params, windows, graphdef))
 
   def parallel_step(self, parallel):
-    from chorjax.families.recurrent.steps import sharded_train_step
 
     return sharded_train_step(parallel)
 
   def dance(self, graphdef, params, features, motion, key, num_frames, controls, prime=None):
-    from chorjax.families.recurrent.generation import dance
 
     return dance(graphdef, params, features, motion, key, num_frames, controls, prime)
 
   def stream(self):
-    from chorjax.families.recurrent.generation import continue_stream, start_stream
 
     return start_stream, continue_stream
 
   def frame_program(self, graphdef, params, features, draw, batch: int, num_motions: int):
-    from chorjax.families.recurrent.generation import frame_program
 
     return frame_program(graphdef, params, draw, batch)
 
   def frame_numbers(self, graphdef, params, key, frames: int, batch: int):
-    import jax
-    from flax import nnx
-
-    from chorjax.models.heads import frame_numbers
 
     model = nnx.merge(graphdef, params)
     k, d = model.num_mixtures, model.dim
     return jax.vmap(lambda f: frame_numbers(f, batch, k, d))(jax.random.split(key, frames))
 
   def vector_step(self):
-    from chorjax.families.recurrent.steps import _train_step, eval_step
 
     return _train_step, eval_step
 
