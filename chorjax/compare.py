@@ -333,9 +333,8 @@ def _wins(groups) -> list[str]:
 
 def _chosen(groups) -> list[str]:
   """The run one would keep without looking at the held-out takes: of the calibrated runs (two at least),
-  the one whose calibrated draws came nearest its own training takes (the lowest calibration objective).
-  On the dancers benchmark this picked, among 3 cells x 3 seeds, the best held-out FID_g on salsa and a
-  good one on cmu94, not on martial (experiments/across_datasets/table.md)."""
+  the one whose calibrated draws came nearest its own training takes (the lowest calibration objective;
+  how well that chooses: ``docs/perf-notes.md``)."""
   calibrated = [
     (r["calibration"], r["name"], g["name"]) for g in groups for r in g["runs"] if r["calibration"] is not None
   ]

@@ -3,8 +3,8 @@ disk, independent draws side by side.
 
 XLA:CPU allocates each executable's scratch memory (hundreds of MB for a training step) per call and
 frees it afterwards. With glibc's default settings, a block that large comes from ``mmap`` and goes
-back with ``munmap``, so every training step page-faults its whole scratch buffer again (about 76,000
-faults, ~0.19 s of kernel time per step of the reference model; see BENCHMARKS.md).
+back with ``munmap``, so every training step page-faults its whole scratch buffer again
+(``docs/perf-notes.md`` has the figures).
 :func:`keep_freed_memory` tells glibc to serve large blocks from one heap and not to give freed memory
 back, so the next step reuses the same pages.
 
@@ -13,9 +13,8 @@ start); the ``chorjax`` command calls it first thing. Set ``CHORJAX_MALLOC=syste
 defaults. It does nothing where the C library is not glibc.
 
 :func:`keep_compiled_programs` keeps every program XLA compiles (JAX's persistent compilation cache), so that a
-command compiles a program once per machine and every later command loads it: ``chorjax sample`` of the quick
-start's run took 6.0 s, of which 3.0 s compiling, the first time and 3.1-3.3 s after (the same frames); its
-``chorjax calibrate`` 27.7 s, then 21.3 s (the same table). The ``chorjax`` command calls it too.
+command compiles a program once per machine and every later command loads it (what that saves:
+``docs/perf-notes.md``). The ``chorjax`` command calls it too.
 
 :func:`side_by_side` runs independent draws (calibration's settings, evaluation's seeds) ``DRAWS_AT_ONCE`` at a
 time in threads: a draw's frame loop runs small kernels one after another on one core.

@@ -349,7 +349,7 @@ def lock_feet(pos_xTxJx3, contacts_xTxF, feet: Sequence[int], max_step: float = 
   faster foot is swinging, whatever the contact says), their mean horizontal step is their slide; the slide,
   averaged over ``2 * width + 1`` frames (:func:`ease`), is taken back from every joint, accumulated over
   time. Averaged, a foot's tremble stays its own instead of shaking the whole body (taken back frame by
-  frame, the real takes' own decode trembles at 1.3x their jitter), while a slide that lasts is taken back
+  frame, it shakes the real takes' own decode), while a slide that lasts is taken back
   whole. Poses and bone lengths are unchanged; the body then travels by what its legs do (frames without
   contact keep their own root motion); ``width = 0``: every frame's slide exactly."""
   f = pos_xTxJx3[..., jnp.asarray(feet), :]

@@ -82,8 +82,7 @@ def foot_sliding(
 
 def airborne(pos_TxJx3, skeleton: Skeleton, size: float, height: float = 0.1) -> float:
   """The fraction of frames with every foot more than ``height`` body sizes above the floor (the 5th
-  percentile of the lowest foot's height): a dancer who floats, or jumps. Real dance is airborne in
-  under 1% of its frames (cmu94, salsa, martial: 0.0-0.3%)."""
+  percentile of the lowest foot's height): a dancer who floats, or jumps (real dance rarely is)."""
   feet = np.asarray(skeleton.feet)
   lowest = np.asarray(pos_TxJx3)[:, feet, 1].min(-1) / size
   return float(np.mean(lowest > np.percentile(lowest, 5) + height))

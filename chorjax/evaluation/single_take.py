@@ -18,9 +18,9 @@ of the ``n`` frames' costs.
   ``INTER_FRAMES`` frames), averaged over pairs: how different two samples are (0 = the same dance; needs two).
 
 The papers measure joint rotations; chorjax measures positions, so the threshold is its own: 0.15 body sizes
-(L2 over the joints) on average over the window. On cmu94, a take danced 10% faster or slower comes within
-0.04-0.09 of its own windows (10th-90th percentile), another take of the dancer 0.31-0.54: covered are the
-take's moves, not another choreography.
+(L2 over the joints) on average over the window: a take danced a little faster or slower comes within it,
+another take of the dancer does not (the figures: ``docs/perf-notes.md``). Covered are the take's moves, not
+another choreography.
 """
 
 from __future__ import annotations

@@ -38,7 +38,7 @@ def normalize(x):
 def dense(x, w):
   """``x @ w`` over any leading axes of ``x``. Its weight gradient is one ``x^T d`` matmul over the
   flattened leading axes: under JAX's own rule XLA:CPU copies the (large) output gradient into a
-  transposed layout first and transposes the result back (6-20% of a train step, BENCHMARKS.md)."""
+  transposed layout first and transposes the result back (what that costs: ``docs/perf-notes.md``)."""
   return x @ w
 
 

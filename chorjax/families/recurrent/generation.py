@@ -222,9 +222,7 @@ def _governed(controls: dict, own_B, ref, gain) -> dict:
   """The draw's controls as the pace governor sets them for dancers at ``own`` pace (training pace ``ref``): the
   scale temperature times ``m = (ref / own) ** gain`` within 0.5-2x (a dancer who slows down gets more energy,
   one who races less), and the persistence times ``min(m, 1 / m) ** 2`` (off pace either way, the component
-  it holds is what keeps it there: it lets go sooner). On martial, judged against its training takes, the
-  scale alone left one seed's calmest 1,000 frames at 0.47 of their movement, another's busiest at 1.29;
-  letting go of the component too: 0.84 / 1.13 (experiments/dancers, 2026-11-27)."""
+  it holds is what keeps it there: it lets go sooner; why both: ``docs/perf-notes.md``)."""
   m = jnp.clip((ref / jnp.maximum(own_B, 1e-6)) ** gain, 0.5, 2.0)[:, None]
   sigma, hold = controls["sigma_temperature"] * m, controls["persistence"] * jnp.minimum(m, 1 / m) ** 2
   return {**controls, "sigma_temperature": sigma, "persistence": hold}
