@@ -18,11 +18,13 @@ import numpy as np
 from chorjax.data.npz import read_npz
 from chorjax.errors import UserError, atomic_write, load_json, refuse_existing
 from chorjax.evaluation.evaluate import metrics_path, sample_path
-from chorjax.evaluation.scoring import mean_of, upgrade
+from chorjax.evaluation.scoring import mean_of
 from chorjax.families import family_of
 from chorjax.render.plot import plot_strip, require_matplotlib, save_figure
 from chorjax.runtime import cpu_info
 from chorjax.sampling.calibration_file import chosen_calibration_row
+from chorjax.sampling.controls import Controls
+from chorjax.sections import SampleConfig
 from chorjax.train.training import metrics_row
 
 # metric -> (label, how to pick the winner)
@@ -55,6 +57,20 @@ RULES = {
   "train": "lowest relative to the training takes' FID against the held-out takes",
   "data": "closest to the real data's value",
 }
+
+
+def upgrade(result: dict) -> dict:
+  """An evaluation file's metrics as today's are read: compatibility with files written before, in one place.
+  Older files named the first and last segment ``movement_first_1000`` and ``movement_last_1000``, and lack
+  the sampling controls added since (they were off)."""
+  out = dict(result)
+  for old, new in (("movement_first_1000", "movement_first"), ("movement_last_1000", "movement_last")):
+    if old in out and new not in out:
+      out[new] = out.pop(old)
+  out.setdefault("segment_frames", 1000)
+  if "sampling" in out:
+    out["sampling"] = {**Controls.resolve(SampleConfig()).to_dict(), **out["sampling"]}
+  return out
 
 
 def machine_info() -> str:

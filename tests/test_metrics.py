@@ -358,8 +358,7 @@ def test_sweep_candidates_cross_the_grid_and_bad_keys_are_named(tmp_path):
 
 def test_older_metrics_files_state_the_controls_added_since_as_off():
   """Runs evaluated before a sampling control existed group with runs that state it off (compare)."""
-  from chorjax.compare import group_runs
-  from chorjax.evaluation.scoring import upgrade
+  from chorjax.compare import group_runs, upgrade
 
   old = {"movement_first_1000": 0.5, "sampling": {"pi_temperature": 0.2, "seed": 0}}
   new = {"movement_first": 0.5, "sampling": {"pi_temperature": 0.2, "clamp": False, "pace": 0.0, "seed": 0}}

@@ -9,8 +9,7 @@ Keys (a value, or ``{"mean", "sd"}`` over several motions or reference splits):
 * ``movement_first``, ``movement_last``, ``movement_min``, ``movement_max``: per consecutive segment of
   ``segment_frames`` frames (``segment``, default 1,000; the shortest motion's length if that is shorter),
   the mean root-relative joint displacement over 0.5 s divided by the reference's; 1 = moves as much as
-  the data, trembling in place -> 0. (Files written before 2026-11-23 call the first two
-  ``movement_first_1000`` and ``movement_last_1000``; :func:`upgrade` renames them.)
+  the data, trembling in place -> 0.
 * ``jitter``, ``jitter_max``: mean magnitude of the second difference of joint positions / the
   reference's, over the whole motion and in its roughest segment.
 * ``per_motion``: per motion (in order), the values that bars are set on one sample at a time:
@@ -66,8 +65,7 @@ from chorjax.errors import UserError, atomic_write, check_output, refuse_existin
 from chorjax.evaluation import metrics
 from chorjax.evaluation.single_take import KEYS, single_take
 from chorjax.fields import suggest
-from chorjax.sampling.controls import Controls
-from chorjax.sections import DataConfig, SampleConfig
+from chorjax.sections import DataConfig
 
 
 def spread(values) -> float | dict:
@@ -81,20 +79,6 @@ def spread(values) -> float | dict:
 def mean_of(value) -> float:
   """The mean of a value written by :func:`spread`."""
   return float(value["mean"]) if isinstance(value, dict) else float(value)
-
-
-def upgrade(result: dict) -> dict:
-  """A metrics dict in today's key names (older files named the first and last segment after 1,000 frames)
-  and with every sampling control stated (older files lack the ones added since: they were off)."""
-
-  out = dict(result)
-  for old, new in (("movement_first_1000", "movement_first"), ("movement_last_1000", "movement_last")):
-    if old in out and new not in out:
-      out[new] = out.pop(old)
-  out.setdefault("segment_frames", 1000)
-  if "sampling" in out:
-    out["sampling"] = {**Controls.resolve(SampleConfig()).to_dict(), **out["sampling"]}
-  return out
 
 
 @dataclasses.dataclass
