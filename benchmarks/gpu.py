@@ -137,7 +137,7 @@ def sampling(reps: int) -> dict:
 def vectorized(k: int, reps: int) -> dict:
   """Seconds of one step of one run, and of one vectorized step of ``k`` runs (the shipped shape)."""
   from chorjax.families.recurrent.steps import _train_step, create_train_state, train_step
-  from chorjax.train.vectorized import vec_train_step
+  from chorjax.training.vectorized import vec_train_step
 
   layers, hidden, b, t = SHAPES["shipped"]
   made = [create_train_state(_config("lstm", layers, hidden, [f"train.seed={s}"]), D, 10, np.eye(D)) for s in range(k)]

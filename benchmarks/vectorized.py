@@ -47,7 +47,7 @@ def steady_steps(k: int, reps: int = 30) -> dict:
   """Median seconds of one lone step and of one vectorized step of ``k`` points."""
   from chorjax.data.dataset import WindowSampler, load_dataset
   from chorjax.families.recurrent.steps import _train_step, create_train_state, train_step
-  from chorjax.train.vectorized import vec_train_step
+  from chorjax.training.vectorized import vec_train_step
 
   cfgs = _cfgs(k, 100)
   ds = load_dataset(cfgs[0].data)
@@ -128,8 +128,8 @@ def torch_steps(k: int, form: str, reps: int = 30) -> dict:
 
 
 def whole_training(k: int, steps: int) -> dict:
-  from chorjax.train.training import train_and_evaluate
-  from chorjax.train.vectorized import train_vectorized
+  from chorjax.training.driver import train_and_evaluate
+  from chorjax.training.vectorized import train_vectorized
 
   cfgs = _cfgs(k, steps)
   with tempfile.TemporaryDirectory() as d:

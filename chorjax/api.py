@@ -76,8 +76,8 @@ from chorjax.sampling.controls import Controls  # noqa: F401
 from chorjax.sampling.table import CALIBRATED, FLAGGED, PLAIN, RECORDS, check_sample_control  # noqa: F401
 from chorjax.sampling.table import SWITCHES as CONTROL_SWITCHES  # noqa: F401
 from chorjax.sweeps import SWEEP_DESCRIPTION, SWEEP_FORMAT, run_sweep, train_command  # noqa: F401
-from chorjax.train.end_of_run import standard
-from chorjax.train.training import default_workdir, train_and_evaluate
+from chorjax.training.driver import default_workdir, train_and_evaluate
+from chorjax.training.end_of_run import standard
 
 __all__ = ["Motion", "Player", "Run", "UserError", "load_dataset", "load_run", "read_motion", "score", "train"]
 

@@ -25,7 +25,7 @@ from chorjax.runtime import cpu_info
 from chorjax.sampling.calibration_file import chosen_calibration_row
 from chorjax.sampling.controls import Controls
 from chorjax.sections import SampleConfig
-from chorjax.train.training import metrics_row
+from chorjax.training.driver import metrics_row
 
 # metric -> (label, how to pick the winner)
 COLUMNS = [

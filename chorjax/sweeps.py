@@ -26,7 +26,7 @@ of different recipes is one file::
     "train.seed" = [0, 1, 2]
 
 ``vectorize = ["train.seed", "optim.lr", "train.input_noise"]`` (any of them) trains the points that
-differ only in those keys as one vectorized program (``chorjax.train.points``): one run's cost for
+differ only in those keys as one vectorized program (``chorjax.training.points``): one run's cost for
 several seeds on a CPU whose cores one small model leaves idle.
 
 Every point is an ordinary run directory (``<root>/<name>-<key>=<value>...``) with its evaluation in
@@ -52,12 +52,12 @@ from chorjax.errors import UserError, load_toml, read_text
 from chorjax.evaluation.evaluate import evaluate, metrics_path, write_metrics
 from chorjax.fields import suggest
 from chorjax.sampling.controls import Controls
-from chorjax.train import end_of_run
-from chorjax.train.end_of_run import standard
-from chorjax.train.parallel import setup_parallel
-from chorjax.train.points import VECTOR_KEYS, NotAligned, expand_overrides
-from chorjax.train.training import default_workdir, train_and_evaluate
-from chorjax.train.vectorized import train_vectorized
+from chorjax.training import end_of_run
+from chorjax.training.driver import default_workdir, train_and_evaluate
+from chorjax.training.end_of_run import standard
+from chorjax.training.parallel import setup_parallel
+from chorjax.training.points import VECTOR_KEYS, NotAligned, expand_overrides
+from chorjax.training.vectorized import train_vectorized
 
 SWEEP_KEYS = {"name", "base", "root", "grid", "set", "eval", "candidates", "vectorize"}
 EVAL_KEYS = {"data", "frames", "num", "seed", "seeds", "splits", "window", *Controls.names()}
@@ -178,7 +178,7 @@ def sweep_groups(sweep: dict) -> list[list[tuple[str, list[str]]]]:
 def run_sweep(path, log=print, shard: tuple[int, int] = (0, 1)) -> list[Path]:
   """Trains (and evaluates) every point of a sweep; returns the point workdirs.
 
-  Points that differ only in the ``vectorize`` keys train together (``chorjax.train.points``); points
+  Points that differ only in the ``vectorize`` keys train together (``chorjax.training.points``); points
   whose checkpoints are at different steps fall back to training one by one. ``shard = (i, n)``: only
   the groups (points, without ``vectorize``) whose index is ``i`` modulo ``n`` (0-based ``i``), so ``n``
   jobs with no coordinator split a sweep (a job array), each skipping what is already finished;

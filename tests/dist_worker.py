@@ -15,8 +15,8 @@ sys.path.insert(0, os.path.dirname(__file__))
 from helpers import tiny_config
 
 from chorjax.errors import Interrupted
-from chorjax.train.parallel import setup_parallel
-from chorjax.train.training import train_and_evaluate
+from chorjax.training.driver import train_and_evaluate
+from chorjax.training.parallel import setup_parallel
 
 port, pid, n, workdir, steps = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4], int(sys.argv[5])
 cfg = tiny_config(
@@ -30,7 +30,7 @@ cfg = tiny_config(
 )
 try:
   summary = train_and_evaluate(cfg, workdir, parallel=setup_parallel(cfg))
-except Interrupted as e:  # a signal: every process stops after the same step (chorjax.train.loop.agreed_stop)
+except Interrupted as e:  # a signal: every process stops after the same step (chorjax.training.loop.agreed_stop)
   print(json.dumps({"process": pid, "stopped": str(e)}), flush=True)
   sys.exit(e.code)
 print(json.dumps({"process": pid, "losses": summary["train_losses"]}), flush=True)

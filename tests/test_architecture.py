@@ -103,11 +103,11 @@ def test_no_import_cycle_among_chorjax_modules():
 
 def test_dependencies_run_one_way_from_data_to_the_command_line():
   graph = import_graph()
-  assert "chorjax.train.training" not in graph["chorjax.sample"] and "chorjax.sample" not in graph["chorjax.run"]
-  assert not graph["chorjax.run"] & {"chorjax.train.training", "chorjax.sample", "chorjax.cli"}
+  assert "chorjax.training.driver" not in graph["chorjax.sample"] and "chorjax.sample" not in graph["chorjax.run"]
+  assert not graph["chorjax.run"] & {"chorjax.training.driver", "chorjax.sample", "chorjax.cli"}
   below_models = {m for m in graph if m.startswith(("chorjax.models", "chorjax.data"))}
   for m in below_models:
-    assert not graph[m] & {"chorjax.run", "chorjax.train.training", "chorjax.sample", "chorjax.cli"}, m
+    assert not graph[m] & {"chorjax.run", "chorjax.training.driver", "chorjax.sample", "chorjax.cli"}, m
 
 
 def test_no_function_is_longer_than_70_lines():
@@ -288,3 +288,16 @@ def test_imports_sit_at_the_top_but_a_few_that_say_why():
               silent.append(f"{path.relative_to(PACKAGE.parent)}:{node.lineno}")
   assert inner <= MAX_INNER_IMPORTS, f"{inner} imports inside functions (at most {MAX_INNER_IMPORTS})"
   assert not silent, "imports inside functions that do not say why: " + ", ".join(silent)
+
+
+def test_no_module_takes_a_public_name_of_the_package():
+  """``chorjax.train`` is the API's function: a subpackage of that name, once imported, would take its place."""
+  import pkgutil
+
+  import chorjax
+
+  modules = {m.name for m in pkgutil.iter_modules(chorjax.__path__)}
+  assert not modules & set(chorjax.__all__), modules & set(chorjax.__all__)
+  import chorjax.api
+
+  assert callable(chorjax.train) and callable(chorjax.score)

@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 from chorjax import cli
 from chorjax.data.dataset import bundled_path, read_motions
 from chorjax.errors import UserError
-from chorjax.train.training import train_and_evaluate
+from chorjax.training.driver import train_and_evaluate
 
 TINY_TRAIN = [
   "model.hidden_size=16",

@@ -19,7 +19,7 @@ from chorjax.sampling import calibrate
 from chorjax.sampling.calibrate import calibration_path, search
 from chorjax.sampling.calibration_file import CALIBRATED, chosen_calibration_row
 from chorjax.sampling.controls import Draw, Pacing
-from chorjax.train.training import train_and_evaluate
+from chorjax.training.driver import train_and_evaluate
 
 GRID = {"noise_smoothing": (0.6, 0.75, 0.85, 0.95), "sigma_temperature": (0.8, 0.9, 1.0, 1.15, 1.3, 1.5)}
 # What the commands below search: every control of the shipped grid, two values of two (the whole grid,

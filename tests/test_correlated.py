@@ -17,7 +17,7 @@ from chorjax.evaluation.metrics import roughness
 from chorjax.families.recurrent.recurrent_model import create_model
 from chorjax.models.heads import ar_coefficients, mdn_carry, mdn_log_prob
 from chorjax.sampling.controls import PLAIN
-from chorjax.train.training import train_and_evaluate
+from chorjax.training.driver import train_and_evaluate
 
 
 def _model_and_window(frames: int = 20, memory: int = 2):

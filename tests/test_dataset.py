@@ -168,7 +168,7 @@ def test_one_take_validates_on_its_own_last_frames(tmp_path):
   held-out``); a take too short for a window on each side is one line."""
   from chorjax.data.dataset import TAIL, dataset_notes
   from chorjax.run import load_run, read_reference
-  from chorjax.train.training import train_and_evaluate
+  from chorjax.training.driver import train_and_evaluate
 
   take = bundled_path("cmu94") / "94_03_skeleton_3d.csv"
   cfg = load_config(None, [f"data.dataset={take}", "data.seq_length=20", "data.val_tail=0.25"])

@@ -15,7 +15,7 @@ from helpers import BLENDER_PYTHON, GAN_NETWORKS, TINY
 
 from chorjax import cli
 from chorjax.data.dataset import bundled_path
-from chorjax.train.training import train_and_evaluate
+from chorjax.training.driver import train_and_evaluate
 
 ROOT = Path(__file__).resolve().parents[1]
 GUIDES = sorted((ROOT / "docs").rglob("*.md"))

@@ -27,7 +27,7 @@ from helpers import GAN_NETWORKS, QUICKSTART_SAMPLING, tiny_config
 from chorjax import cli
 from chorjax.data.dataset import bundled_path
 from chorjax.runtime import cpu_info
-from chorjax.train.training import train_and_evaluate
+from chorjax.training import train_and_evaluate
 
 ROOT = Path(__file__).resolve().parents[1]
 DIGESTS = ROOT / "tests" / "fixtures" / "draws.json"

@@ -20,7 +20,7 @@ from chorjax.errors import UserError
 from chorjax.export.dancer import OnnxDancer, sample_numbers
 from chorjax.models import motion_weight_vector
 from chorjax.sample import sample_dancers
-from chorjax.train.training import train_and_evaluate
+from chorjax.training.driver import train_and_evaluate
 
 ROOT = Path(__file__).resolve().parents[1]
 NODE_MODULES = ROOT / ".venv" / "node"  # .ci/run: npm install --prefix .venv/node gltf-validator onnxruntime-web

@@ -233,8 +233,8 @@ def test_an_unknown_family_is_one_line_naming_the_known_ones():
 
 
 def test_the_end_of_a_run_is_the_hooks_handed_to_training(tmp_path):
-  from chorjax.train import end_of_run
-  from chorjax.train.training import train_and_evaluate
+  from chorjax.training import end_of_run
+  from chorjax.training.driver import train_and_evaluate
 
   seen = []
   hook = lambda run: seen.append(run) or {"mine": str(run.workdir)}

@@ -12,7 +12,7 @@ from chorjax import cli
 from chorjax.data.dataset import bundled_path
 from chorjax.data.motion import Motion, Skeleton
 from chorjax.io import formats
-from chorjax.train.training import train_and_evaluate
+from chorjax.training.driver import train_and_evaluate
 
 TAKE = bundled_path("cmu94") / "94_07_skeleton_3d.csv"
 

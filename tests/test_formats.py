@@ -143,7 +143,7 @@ def test_written_bvh_reads_with_an_independent_reader(tmp_path):
 def test_generated_sample_exports_to_bvh(tmp_path, shared_data):
   from test_retarget import check_retargeted
 
-  from chorjax.train.training import train_and_evaluate
+  from chorjax.training.driver import train_and_evaluate
 
   train_and_evaluate(tiny_config("train.num_steps=2", "log.tensorboard=false"), tmp_path / "run")
   args = ["sample", str(tmp_path / "run"), "--frames", "120", "--seed", "3"]

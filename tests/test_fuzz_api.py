@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 import chorjax
 from chorjax.data.dataset import bundled_path
 from chorjax.sampling.controls import Controls
-from chorjax.train.training import train_and_evaluate
+from chorjax.training.driver import train_and_evaluate
 
 settings.register_profile(
   "api_ci", max_examples=15, derandomize=True, deadline=None, suppress_health_check=list(HealthCheck)

@@ -21,7 +21,7 @@ from chorjax.families.gan.adversarial import create_gan_state, critic_loss, crit
 from chorjax.families.gan.networks import Critic, GanModel, Generator, pose_layer
 from chorjax.models.rnn import RecurrentCore
 from chorjax.run import load_run
-from chorjax.train.training import train_and_evaluate
+from chorjax.training.driver import train_and_evaluate
 
 GAN = [
   *GAN_NETWORKS,

@@ -18,7 +18,7 @@ from helpers import TINY, tiny_config
 from chorjax import cli
 from chorjax.data.bvh import read_bvh
 from chorjax.errors import UserError
-from chorjax.train.training import train_and_evaluate
+from chorjax.training.driver import train_and_evaluate
 
 BVH = "bvh/cmu131/131_01.bvh"
 QUICKSTART = str(Path(__file__).resolve().parents[1] / "configs" / "quickstart.toml")

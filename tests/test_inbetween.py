@@ -20,7 +20,7 @@ from chorjax.families.inbetween import inbetweening as ib
 from chorjax.families.inbetween.cvae_model import transition_model
 from chorjax.families.inbetween.lstm_model import noise_strength, rollout, tta_embedding
 from chorjax.run import load_run
-from chorjax.train.training import train_and_evaluate
+from chorjax.training.driver import train_and_evaluate
 
 IB = [
   "model.family=inbetween",

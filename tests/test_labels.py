@@ -19,7 +19,7 @@ from chorjax.errors import UserError
 from chorjax.export.dancer import OnnxDancer, sample_numbers
 from chorjax.live.server import Stream
 from chorjax.sample import sample_dancers
-from chorjax.train.training import train_and_evaluate
+from chorjax.training.driver import train_and_evaluate
 
 ARCHIVE = "bandai-motion.tar.xz"
 TAKES = [f"dataset-2_{a}_{s}_{t:03d}" for a in ("walk", "run") for s in ("elderly", "active") for t in (1, 2)]

@@ -28,7 +28,7 @@ from chorjax.errors import UserError
 from chorjax.live.server import Stream
 from chorjax.models import motion_weight_vector
 from chorjax.run import load_run
-from chorjax.train.training import train_and_evaluate
+from chorjax.training.driver import train_and_evaluate
 
 TAKE = bundled_path("cmu94") / "94_07_skeleton_3d.csv"
 FPS = 20.0

@@ -16,7 +16,7 @@ from chorjax.errors import UserError
 from chorjax.models.heads import MDNHead
 from chorjax.run import load_run
 from chorjax.sample import sample_dancers
-from chorjax.train.training import train_and_evaluate
+from chorjax.training.driver import train_and_evaluate
 
 
 def test_principal_axes_find_the_direction_the_data_varies_along():

@@ -543,7 +543,7 @@ def test_a_metric_is_one_function_and_one_registration(tmp_path, capsys):
     # and chorjax eval's report: a tiny run's sample judged on two takes
     from helpers import tiny_config
 
-    from chorjax.train.training import train_and_evaluate
+    from chorjax.training.driver import train_and_evaluate
 
     train_and_evaluate(tiny_config("log.tensorboard=false", "train.calibrate=false"), tmp_path / "run")
     ev = ["eval", str(tmp_path / "run"), "--data", *refs, "--frames", "300", "-o", str(tmp_path / "e.json")]

@@ -13,8 +13,8 @@ import pytest
 from helpers import tiny_config
 
 from chorjax import cli
-from chorjax.train.parallel import setup_parallel
-from chorjax.train.training import train_and_evaluate
+from chorjax.training.driver import train_and_evaluate
+from chorjax.training.parallel import setup_parallel
 
 HERE = Path(__file__).resolve().parent
 

@@ -23,7 +23,7 @@ from chorjax.families.recurrent.generation import generate
 from chorjax.models import as_weights, parse_mix
 from chorjax.run import load_run
 from chorjax.sampling.controls import Bounds, Draw, Pacing
-from chorjax.train.training import train_and_evaluate
+from chorjax.training.driver import train_and_evaluate
 
 ROOT = Path(__file__).resolve().parents[1]
 TAKE = bundled_path("cmu94") / "94_07_skeleton_3d.csv"

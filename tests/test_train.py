@@ -25,8 +25,8 @@ from chorjax.data.dataset import WindowSampler, load_dataset
 from chorjax.errors import UserError
 from chorjax.families.recurrent.steps import create_train_state, eval_step, parted_train_step, train_step
 from chorjax.run import load_run
-from chorjax.train.loop import due
-from chorjax.train.training import train_and_evaluate, workdir_lock
+from chorjax.training.driver import train_and_evaluate, workdir_lock
+from chorjax.training.loop import due
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -340,7 +340,7 @@ def test_sigint_and_sigterm_save_a_checkpoint_and_resume_exactly(tmp_path, monke
     "sample.frames=1",
   )
   run, straight = tmp_path / "run", tmp_path / "straight"
-  import chorjax.train.training as train_mod
+  import chorjax.training.driver as train_mod
 
   # Ctrl-C (in this process) once step 5 is logged: the step finishes, a checkpoint is saved, exit 130
   log_call = train_mod.MetricsLog.__call__

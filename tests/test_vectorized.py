@@ -10,9 +10,9 @@ from chorjax import cli
 from chorjax.errors import UserError
 from chorjax.run import load_run
 from chorjax.sweeps import load_sweep, sweep_groups
-from chorjax.train.points import NotAligned, check_group
-from chorjax.train.training import train_and_evaluate
-from chorjax.train.vectorized import train_vectorized
+from chorjax.training.driver import train_and_evaluate
+from chorjax.training.points import NotAligned, check_group
+from chorjax.training.vectorized import train_vectorized
 
 BASE = ["train.num_steps=4", "log.tensorboard=false", "train.eval_every=2", "train.checkpoint_every=2"]
 POINTS = [

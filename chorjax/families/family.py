@@ -155,7 +155,7 @@ class Family:
     raise NotImplementedError
 
   def vector_step(self) -> tuple[Callable, Callable] | None:
-    """``(step, loss)`` for training grid points as one vectorized program (``chorjax.train.vectorized``): the
+    """``(step, loss)`` for training grid points as one vectorized program (``chorjax.training.vectorized``): the
     un-jitted ``step(state, batch, key, spec, lr_scale, noise) -> (state, metrics)`` with the learning-rate
     scale and the input noise traced, and ``loss(params, windows, graphdef)`` on ``data.dataset`` windows; or
     None where the family trains its points apart."""

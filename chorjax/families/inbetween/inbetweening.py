@@ -5,7 +5,7 @@ in units of the training takes' leg length, the origin under the root at the las
 frame facing +z (``Space``). Poses are flat ``[K = 3J]`` vectors. A transition of ``n`` frames is the
 ``n`` frames between the last context frame and the target (which stands ``n + 1`` frames after it).
 
-Training (:func:`inbetween_train_step`, run by ``chorjax.train.training``'s loop with its checkpoints, metrics and
+Training (:func:`inbetween_train_step`, run by ``chorjax.training.driver``'s loop with its checkpoints, metrics and
 resume): batches of windows of ``context + max_frames + 1`` frames from the training takes (mirrored
 copies with ``data.augment = ["mirror"]``), each row its own transition length drawn from
 ``min_frames..max_frames`` and its target the frame that length after the context; the model writes the

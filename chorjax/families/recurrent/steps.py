@@ -173,7 +173,7 @@ def _feedback_loss_fn(params, batch, key, step, spec: StepSpec):
 
 def _train_step(state, batch, key, spec: StepSpec, lr_scale=None, noise=None):
   """One optimizer step. ``lr_scale`` and ``noise`` (traced; vectorized training, see
-  ``chorjax.train.vectorized``): the update scaled by ``lr_scale``, the input noise ``noise`` instead of
+  ``chorjax.training.vectorized``): the update scaled by ``lr_scale``, the input noise ``noise`` instead of
   ``spec.input_noise``."""
   key = step_key(key, state["step"])
   (loss, aux), grads = _gradients(state["params"], batch, key, state["step"], spec, noise)

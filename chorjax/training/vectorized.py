@@ -38,10 +38,8 @@ from chorjax.data.dataset import WindowSampler, dataset_notes, eval_windows, loa
 from chorjax.errors import UserError
 from chorjax.families import family_of
 from chorjax.run import run_meta
-from chorjax.train import end_of_run
-from chorjax.train.loop import Loop, MetricsLog, TrainingDiverged, best_checkpoint_hook, stop_on_signals
-from chorjax.train.points import NotAligned, check_group
-from chorjax.train.training import (
+from chorjax.training import end_of_run
+from chorjax.training.driver import (
   _check_saved_config,
   _keep_aside,
   _restore_or_init,
@@ -51,6 +49,8 @@ from chorjax.train.training import (
   sized_to_data,
   workdir_lock,
 )
+from chorjax.training.loop import Loop, MetricsLog, TrainingDiverged, best_checkpoint_hook, stop_on_signals
+from chorjax.training.points import NotAligned, check_group
 
 
 @functools.partial(jax.jit, static_argnums=(4, 5), donate_argnums=0)

@@ -1,6 +1,6 @@
 """The training loop and its hooks: :class:`Loop` only runs a family's jitted steps; everything periodic is a
 :class:`Hook` with a ``due(step, every, total)`` rule (evaluation, patience, checkpoints, TensorBoard figures),
-and metrics reach listeners (``metrics.jsonl``, TensorBoard, progress) one step late. ``chorjax.train.training``
+and metrics reach listeners (``metrics.jsonl``, TensorBoard, progress) one step late. ``chorjax.training.driver``
 drives it for a run; a new training mode brings a step function and hooks, not a new loop."""
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ builds, with its jitted step, batch sampler and validation loss. Randomness come
 ``fold_in(key(seed), step)`` and batches from the sampler's ``batch(step)``, so a run resumed from a
 checkpoint at step s repeats exactly what the uninterrupted run did after s.
 
-The loop and its hooks are ``chorjax.train.loop``'s; this module keeps the run directory (its lock, the saved
+The loop and its hooks are ``chorjax.training.loop``'s; this module keeps the run directory (its lock, the saved
 config, what a resume reads back) and the driver that puts a family's step, hooks and end-of-run sample
 together.
 """
@@ -31,8 +31,8 @@ from chorjax.errors import UserError, atomic_write, is_run_folder, load_json
 from chorjax.families import family_of
 from chorjax.models import motion_weight_vector
 from chorjax.run import run_meta
-from chorjax.train import end_of_run
-from chorjax.train.loop import (
+from chorjax.training import end_of_run
+from chorjax.training.loop import (
   Loop,
   MetricsLog,
   agreed_stop,
@@ -158,7 +158,7 @@ def train_and_evaluate(cfg: Config, workdir, *, force: bool = False, parallel=No
   end sample.
 
   Writes ``config.json``, ``metrics.jsonl``, TensorBoard events, ``checkpoints/`` and, at the end,
-  ``samples/`` (a short sample and its HTML player). With ``parallel`` (see ``chorjax.train.parallel``)
+  ``samples/`` (a short sample and its HTML player). With ``parallel`` (see ``chorjax.training.parallel``)
   every process trains its share and only process 0 writes anything but checkpoints.
   """
   workdir = Path(workdir).absolute()

@@ -1,5 +1,5 @@
 """Points of a grid (sweep points, ``train.seed=[0,1,2]``) that train together as one vectorized program
-(``chorjax.train.vectorized``): which keys may differ between them, and how a command's list overrides expand
+(``chorjax.training.vectorized``): which keys may differ between them, and how a command's list overrides expand
 into points."""
 
 from __future__ import annotations
