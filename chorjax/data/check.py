@@ -12,9 +12,8 @@ Detection, on the body rather than the headers:
   which the middle 80% of the markers spread most in a frame, its sign the one that puts most markers
   in the upper half: a body carries more markers above the hips than below);
 - **jumps**: a step (the largest joint move between two frames, the pose measured from the root, or the
-  root's own move) over ``JUMP`` times the take's 99th-percentile step and over 5% of the body's size: real
-  motion, however fast, stays within ~2x (every take in ../shared/data: 1.0-2.0x); a converter's rest pose
-  (arms out) in frame 0 jumps 4-30x. A frame jumped into and out of is a rest/T-pose frame; a run of jumps
+  root's own move) over ``JUMP`` times the take's 99th-percentile step and over 5% of the body's size
+  (:mod:`chorjax.data.rest`). A frame jumped into and out of is a rest/T-pose frame; a run of jumps
   at the start is a **leading rest pose** (the rest frame and the blend out of it), which training and
   ``data convert`` drop by default (``drop_leading_rest``);
 - **units**: the mean leg (hip to knee to ankle; a marker set: standing height) against an adult's

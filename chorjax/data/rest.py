@@ -2,10 +2,10 @@
 
 A step (the largest joint move between two frames, the pose measured from the root, or the root's own
 move) over ``JUMP`` times the take's 99th-percentile step and over 5% of the body's size is a jump: real
-motion, however fast, stays within ~2x (every take in ../shared/data: 1.0-2.0x); a converter's rest pose
-(arms out) in frame 0 jumps 4-30x. A frame jumped into and out of is a rest/T-pose (or glitch) frame; a
-run of jumps at the start is a **leading rest pose** (the rest frame and the blend out of it), which
-training and ``data convert`` drop by default (``drop_leading_rest``; ``chorjax data check`` reports all).
+motion, however fast, stays within about twice that step, and a converter's rest pose (arms out) in frame 0
+jumps far beyond it (the figures: ``docs/perf-notes.md``). A frame jumped into and out of is a rest/T-pose
+(or glitch) frame; a run of jumps at the start is a **leading rest pose** (the rest frame and the blend out of
+it), which training and ``data convert`` drop by default (``drop_leading_rest``; ``chorjax data check`` reports all).
 """
 
 from __future__ import annotations
