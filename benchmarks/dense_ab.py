@@ -17,7 +17,7 @@ import functools
 import jax
 import numpy as np
 
-from benchmarks.run import B, D, H, L, T, alternate, random_batch
+from benchmarks.timing import B, D, H, L, T, alternate, random_batch
 
 REFERENCE = [f"model.num_layers={L}", f"model.hidden_size={H}", f"train.batch_size={B}", f"data.seq_length={T}"]
 

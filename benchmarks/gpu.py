@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from benchmarks.run import alternate, compiled_train_step, random_batch
+from benchmarks.timing import alternate, compiled_train_step, random_batch
 
 D, K, FRAMES = 48, 8, 1000
 SHAPES = {"shipped": (2, 192, 32, 64), "reference": (3, 256, 50, 100)}  # layers, hidden, batch, frames

@@ -25,7 +25,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from benchmarks.run import D, H, K, L, alternate, matmul_peak, sampler_model, timed
+from benchmarks.run import matmul_peak, sampler_model
+from benchmarks.timing import D, H, K, L, alternate, timed
 
 B, FRAMES = 64, 1000
 FLOPS_PER_FRAME = 2 * B * ((D + H) * 4 * H + (L - 1) * 2 * H * 4 * H + H * (K + 2 * K * D))

@@ -20,7 +20,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from benchmarks.run import alternate, compiled_train_step
+from benchmarks.timing import alternate, compiled_train_step, random_batch
 
 D, K = 48, 8
 SHAPES = {"shipped": (2, 192, 32, 64), "reference": (3, 256, 50, 100)}  # layers, hidden, batch, frames
@@ -49,7 +49,6 @@ def jax_step(head: str, shape: str):
 def parted_step(head: str, shape: str, parts: int = 2):
   """chorjax's LSTM train step with ``train.batch_parts = parts``: the shares' gradients in threads, then the
   update (``run() -> loss``)."""
-  from benchmarks.run import random_batch
   from chorjax.families.recurrent.steps import create_train_state, parted_train_step
 
   _, _, b, t = SHAPES[shape]
