@@ -42,7 +42,7 @@ _BASE_SECTIONS = {
 
 
 def section_classes() -> dict[str, type]:
-  """Every section's dataclass in schema order: the model families' own sections (``[gan]``, ...: each
+  """Every section's dataclass in schema order: the model families' own sections (``[FAMILY]``: each
   family's ``section``) right after ``[model]``."""
   base = list(_BASE_SECTIONS.items())
   return dict([*base[:2], *family_sections().items(), *base[2:]])
@@ -51,7 +51,7 @@ def section_classes() -> dict[str, type]:
 @dataclasses.dataclass(frozen=True)
 class Config:
   """A run's configuration: a section per attribute (``cfg.train.batch_size``); a model family's own section
-  (``cfg.gan``) is read the same way, from ``families`` (each family's defaults where not given)."""
+  (``cfg.FAMILY``) is read the same way, from ``families`` (each family's defaults where not given)."""
 
   data: DataConfig = dataclasses.field(default_factory=DataConfig)
   model: ModelConfig = dataclasses.field(default_factory=ModelConfig)
