@@ -164,7 +164,7 @@ def test_the_carried_recipe_draws_with_three_controls_and_calibrates_two():
 
   cfg = load_config("configs/carried.toml")
   assert cfg.model.memory == 3 and cfg.model.mdn_carry == "smooth" and cfg.model.mdn_basis == "acceleration"
-  assert cfg.train.calibrate
+  assert cfg.train.calibrate and cfg.train.keep == "last" and cfg.train.num_steps == 4000
   drawn = Controls.resolve(cfg.sample).to_dict()
   used = {k for k in PLAIN if drawn[k] != PLAIN[k]} | {"sigma_temperature"}  # calibrated: used at any value
   assert used == {"sigma_temperature", "pace", "clamp"}  # the mixture weights at full temperature
