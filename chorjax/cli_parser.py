@@ -473,7 +473,7 @@ def _add_report_commands(sub) -> None:
     "-o",
     "--output",
     metavar="metrics.json",
-    help="default: WORKDIR/eval/metrics.json (the first generated dancer goes to sample.npz beside it)",
+    help="default: WORKDIR/eval/metrics.json; its first dancer beside it (sample.npz; NAME.sample.npz for NAME.json)",
   )
   ev.add_argument(
     "--seeds",

@@ -213,6 +213,9 @@ def test_sweep_eval_compare_end_to_end(tmp_path, monkeypatch, capsys):
   )
   m = json.loads((tmp_path / "m.json").read_text())
   assert (m["frames"], m["num"], m["data"]) == (240, 1, ["cmu94/94_10_skeleton_3d.csv"])
+  again = ["eval", str(runs[0]), "--data", "cmu94/94_10_skeleton_3d.csv", "--frames", "120", "--num", "1"]
+  assert cli.main([*again, "-o", str(tmp_path / "m3.json")]) == 0  # a second evaluation in the same folder
+  assert (tmp_path / "m.sample.npz").is_file() and (tmp_path / "m3.sample.npz").is_file()
   assert mean_of(m["fid_k"]) >= 0 and mean_of(m["fid_k_real"]) >= 0 and m["div_k"] > 0
   assert np.isfinite(m["heldout_loss"])
   assert cli.main(["eval", str(runs[0]), "--data", "nope.csv", "-o", str(tmp_path / "m2.json")]) == 2

@@ -130,8 +130,11 @@ def write_metrics(result: dict, path) -> Path:
 
 
 def sample_path(metrics_json) -> Path:
-  """The evaluation's first generated dancer, beside its metrics JSON."""
-  return Path(metrics_json).with_name("sample.npz")
+  """The evaluation's first generated dancer, beside its metrics JSON: ``sample.npz`` beside ``metrics.json``
+  (a run's ``eval/``), else ``NAME.sample.npz`` beside ``NAME.json``, so evaluations written to one folder keep
+  a dancer each."""
+  path = Path(metrics_json)
+  return path.with_name("sample.npz" if path.name == "metrics.json" else f"{path.stem}.sample.npz")
 
 
 def evaluate_to(workdir, data, output=None, *, force: bool = False, **kw) -> tuple[dict, Path]:
