@@ -66,7 +66,7 @@ from chorjax.render.files import plot_file, render  # noqa: F401
 from chorjax.render.html import player_html
 from chorjax.render.plot import strip_figure
 from chorjax.run import Run as _Run
-from chorjax.run import load_run as load
+from chorjax.run import load_run as _load_run
 from chorjax.runtime import keep_compiled_programs, keep_freed_memory  # noqa: F401
 from chorjax.sample import sample_dancers, write_inbetween, write_sample  # noqa: F401
 
@@ -108,7 +108,6 @@ class Motion(_motion.Motion):
     character BVH: the dance on its hierarchy, as ``chorjax sample --skeleton``), ``.glb`` (binary glTF: the
     skeleton's nodes and their animation) or ``.html`` (the player).
     An existing file is not replaced unless ``force``."""
-
     path, suffix = check_output(path, suffixes("write"))
     if "\x00" in str(path):
       raise UserError(f"{path!r}: a file name cannot hold a NUL character")
@@ -125,7 +124,6 @@ class Motion(_motion.Motion):
   def show(self, *others: _motion.Motion, title: str | None = None) -> Player:
     """The HTML player with this motion and ``others`` side by side; shown inline by Jupyter (and kept in
     a notebook's HTML export), or ``.html`` for the page."""
-
     motions = [self, *others]
     for m in others:
       if not isinstance(m, _motion.Motion):
@@ -137,7 +135,6 @@ class Motion(_motion.Motion):
   def strip(self, every: int = 6, poses: int = 12):
     """The filmstrip figure (matplotlib): ``poses`` figures ``every`` frames apart at the start, middle and
     end, as ``chorjax render --strip`` draws it."""
-
     fig = strip_figure(self, every, poses)
 
     def png() -> bytes:
@@ -167,7 +164,6 @@ class Player:
     )
 
   def save(self, path) -> Path:
-
     return atomic_write(path, lambda p: p.write_text(self.html, encoding="utf-8"))
 
 
@@ -190,7 +186,6 @@ class Run(_Run):
     (default 0), or ``mix``: ``"ID:W,ID:W"``; ``controls``: sampling controls (``pi_temperature``,
     ``noise_smoothing`` ...; unset: the run's calibration, then its ``[sample]``). One dancer is returned
     as a :class:`Motion`, several as a list."""
-
     pos, _ = sample_dancers(self, frames, num, seed, prime, motion, mix, controls)
     f = self.features
     name = f"{Path(self.workdir).name} seed {seed}"
@@ -204,15 +199,13 @@ class Run(_Run):
     """The dancer as an ONNX model at ``path`` (``.onnx``) with its JSON sidecar, as ``chorjax export``:
     ``batch`` dancers a call, ``controls`` the sampling controls (unset: the run's own). Returns the paths
     written (:class:`chorjax.export.dancer.OnnxDancer` runs it)."""
-
     return export_onnx(self, path, batch=batch, controls=controls, force=force)
 
 
 def load_run(workdir, checkpoint: str | int = "kept") -> Run:
   """The trained run in ``workdir`` at ``checkpoint`` (``kept``: what its ``train.keep`` names; ``latest``,
   ``best`` or a step number)."""
-
-  return _recast(Run, load(workdir, checkpoint))
+  return _recast(Run, _load_run(workdir, checkpoint))
 
 
 def _recast(cls, obj):
@@ -224,7 +217,6 @@ def train(config, workdir=None, overrides: Sequence[str] | None = None, *, force
   """Trains ``config`` (a TOML path, a loaded ``chorjax.config.Config`` or a ``{section: {key: value}}``
   dict; ``overrides``: ``"key=value"`` strings) in ``workdir`` (default ``runs/<name>``), resuming from its
   latest checkpoint as ``chorjax train`` does, and returns the run at the checkpoint it keeps."""
-
   cfg = load_config(config, list(overrides or []))
   workdir = Path(workdir) if workdir is not None else default_workdir(cfg)
   train_and_evaluate(cfg, workdir, force=force, finish=standard(cfg))
@@ -234,7 +226,6 @@ def train(config, workdir=None, overrides: Sequence[str] | None = None, *, force
 def read_motion(path) -> Motion | list[Motion]:
   """A motion file in any format the command line reads (CSV, BVH, ASF/AMC, C3D, NPZ): one take, or the
   dancers of a sample ``.npz`` (a list when it holds several)."""
-
   path = as_path(path, "read_motion")
   if not path.is_file():
     raise UserError(f"{path}: no such file")
@@ -244,7 +235,6 @@ def read_motion(path) -> Motion | list[Motion]:
 
 def load_dataset(name_or_dir) -> list[Motion]:
   """Every take of a bundled dataset (``cmu94``), a folder or a file, as training reads them."""
-
   return [Motion.of(m) for m in read_takes([str(name_or_dir)])]
 
 
@@ -252,7 +242,6 @@ def score(motions, data, **kw) -> dict:
   """The metrics of ``chorjax metrics`` (same keys, same ruler) for ``motions`` (a Motion, a list of them,
   or file paths) against the real takes of ``data`` (a bundled name, folder or file, or a list of them;
   or Motions). ``kw``: ``window``, ``splits``, ``seed``."""
-
   as_list = lambda x: list(x) if isinstance(x, list | tuple) else [x]
   read = lambda x: [x] if isinstance(x, _motion.Motion) else load_dataset(x)
   return score_motions(

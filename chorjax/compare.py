@@ -75,7 +75,6 @@ def upgrade(result: dict) -> dict:
 
 def machine_info() -> str:
   """CPU model, core count and library versions, for reports and benchmarks."""
-
   cpu = cpu_info().get("model name") or platform.processor() or platform.machine()
   return (
     f"{cpu}, {os.cpu_count()} cores, {jax.devices()[0].platform}; Python {platform.python_version()}, "
@@ -84,7 +83,6 @@ def machine_info() -> str:
 
 
 def _read_run(workdir: Path) -> dict:
-
   cfg_path, ev_path = workdir / "config.json", metrics_path(workdir)
   if not cfg_path.exists():
     raise UserError(f"{workdir}: not a run directory (no config.json)")
@@ -112,7 +110,6 @@ def _read_run(workdir: Path) -> dict:
 def _calibration_objective(workdir: Path) -> float | None:
   """The objective of the settings a run's calibration chose (how far its draws are from its training takes
   on movement, jitter, speed, root travel and poses); None if never calibrated or hand-edited."""
-
   row = chosen_calibration_row(workdir)
   try:
     return None if row is None else float(row["objective"])
@@ -220,7 +217,6 @@ def _winner(groups, key, rule):
 
 
 def _loss_plot(plt, runs, path: Path) -> None:
-
   fig, ax = plt.subplots(figsize=(8, 4))
   for r in runs:
     if not family_of(r["config"]).likelihood:  # adversarial losses are no likelihood: not on this axis
@@ -239,7 +235,6 @@ def _loss_plot(plt, runs, path: Path) -> None:
 
 
 def _movement_plot(plt, groups, path: Path) -> None:
-
   fig, ax = plt.subplots(figsize=(8, 4))
   for g in groups:
     curves = [r["eval"]["movement_curve"] for r in g["runs"]]
@@ -322,7 +317,6 @@ def _table(groups) -> list[str]:
 
 def _strips(groups, stem: Path) -> list[str]:
   """Each group's first run's evaluation sample as a filmstrip (start, middle, end)."""
-
   lines = []
   for i, g in enumerate(groups):
     npz = sample_path(metrics_path(g["runs"][0]["dir"]))
@@ -398,7 +392,6 @@ def compare(workdirs, output) -> Path:
   """Writes ``report.md``: a table of mean ± sd over training seeds, who wins beyond the spread (both per
   dataset where the runs trained on several), loss and movement plots, and each configuration's evaluation
   sample as filmstrips."""
-
   runs = [_read_run(Path(w)) for w in workdirs]
   groups = group_runs(runs)
   out = Path(output)
@@ -423,7 +416,6 @@ def compare(workdirs, output) -> Path:
 def compare_to(workdirs, output, *, force: bool = False) -> Path:
   """``chorjax compare``: :func:`compare`, the report and the images written beside it refused where they
   exist (unless ``force``)."""
-
   stem = Path(output).with_suffix("")
   images = sorted(stem.parent.glob(f"{stem.name}_loss.png")) + sorted(stem.parent.glob(f"{stem.name}_movement.png"))
   images += sorted(stem.parent.glob(f"{stem.name}_strip*.png"))

@@ -225,7 +225,6 @@ def check_draw(frames: int, values_per_frame: int, what: str) -> None:
 def check_array(values, where: str) -> None:
   """One-line ``UserError`` naming ``where`` if ``values`` hold a non-finite entry or one beyond
   +-``LARGEST_VALUE`` (binary formats: the text readers check each line with :func:`parse_numbers`)."""
-
   a = np.asarray(values)
   bad = ~np.isfinite(a) | (np.abs(np.nan_to_num(a)) > LARGEST_VALUE)
   if bad.any():

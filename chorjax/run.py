@@ -107,7 +107,6 @@ class Run:
   def motion_weights(self, motion=None, mix=None, source: str = "--motion") -> np.ndarray:
     """The weights ``[M]`` that condition a dance: a take id or ``ID:W,...`` blend, or with labels
     ``FIELD=VALUE,...`` or ``FIELD=VALUE:W,...`` (nothing given: take 0, or each label's first value)."""
-
     if self.labels is not None:
       return self.labels.parse(motion, mix, source)
     if isinstance(motion, str):
@@ -304,7 +303,6 @@ HELD_OUT = "held-out"  # --data held-out: the takes of the run's dataset it did 
 def read_reference(run: Run, data: Sequence[str] | None) -> tuple[list, list]:
   """``(the takes in data, the run's training takes)``, read exactly as training read its takes; ``data`` of
   ``["held-out"]``: the takes of the run's own dataset that it did not train on; None: the training takes."""
-
   data_cfg = run.config.data
   trained = set(run.train_takes)
   heads, tails = with_tails(conform(read_takes([data_cfg.dataset], data_cfg), data_cfg), list(trained), data_cfg)

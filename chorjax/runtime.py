@@ -93,7 +93,6 @@ def keep_compiled_programs() -> Path | None:
   cannot be written. Every program is kept, however quick to compile (``COMPILED_BYTES`` in all, least recently
   used dropped first). A loaded program is the compiled one: the same frames to the bit. An entry that cannot be
   read or written is compiled again without a word."""
-
   root = cache_root("auto")  # a folder ("off" is the setting that gives none)
   off = os.environ.get("CHORJAX_COMPILE_CACHE", "").lower() == "off"
   if root is None or off or jax.config.values["jax_compilation_cache_dir"]:

@@ -121,7 +121,6 @@ def write_sample(
   :func:`sample_dancers`) and writes them to ``output`` (``output.write_motions``: CSV, NPZ with the
   settings, BVH, onto the character ``skeleton`` where given, or HTML). Everything that can be refused is
   refused before the draw; an existing file is not replaced unless ``force``. Returns the paths written."""
-
   check_counts(frames=frames, num=num, seed=seed)  # before any arithmetic on them
   out, _ = check_output(output, suffixes("write"))
   character = load_character(skeleton, out)
@@ -143,7 +142,6 @@ def write_inbetween(
   target pose of ``to`` (``FILE[:FRAME]``) the frames a run of a family that writes transitions puts before
   it (``frames``: one count for every target, or one for all) and the target; written to ``output`` as
   :func:`write_sample` writes. Returns the paths written."""
-
   to, frames = list(to), list(frames)
   if len(frames) == 1:
     frames *= len(to)

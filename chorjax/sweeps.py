@@ -156,7 +156,6 @@ def is_finished(workdir: Path, num_steps: int, with_eval: bool) -> bool:
   """Whether a point's run trained to its end (and was evaluated, ``with_eval``): a checkpoint of its last
   step, that step read from the run's own config where ``train.epochs`` resolved it, or the end-of-run sample
   that a finished run writes (also where ``train.patience`` ended it early)."""
-
   with contextlib.suppress(OSError, ValueError, KeyError, TypeError):
     num_steps = json.loads((Path(workdir) / "config.json").read_text())["train"]["num_steps"]
   samples = Path(workdir) / "samples"
@@ -183,7 +182,6 @@ def run_sweep(path, log=print, shard: tuple[int, int] = (0, 1)) -> list[Path]:
   the groups (points, without ``vectorize``) whose index is ``i`` modulo ``n`` (0-based ``i``), so ``n``
   jobs with no coordinator split a sweep (a job array), each skipping what is already finished;
   ``compare`` over the shared root merges them."""
-
   sweep = load_sweep(path)
   ev = sweep.get("eval")
   workdirs = []
@@ -212,14 +210,12 @@ def _release_compiled() -> None:
   programs) and evaluation compile anew, and each compiled program holds its own memory mappings, so after
   about ten points the kernel's limit on a process's mappings (vm.max_map_count, 65,530) was reached and
   LLVM failed ("Unable to allocate section memory") with most of the memory free."""
-
   jax.clear_caches()
   gc.collect()
 
 
 def _train_points(points, log) -> None:
   """Trains ``(name, overrides, cfg, workdir)`` points: together when there are several, else alone."""
-
   if len(points) > 1:
     log(f"{', '.join(n for n, *_ in points)}: training together ({' '.join(points[0][1])} ...)")
     try:
@@ -237,7 +233,6 @@ def train_command(config, overrides=(), *, workdir=None, force: bool = False, lo
   (``train.seed=[0,1,2]``) trains one run directory a point (``WORKDIR/seed=0`` ...) as one program, else
   one run (data-parallel over processes where ``[parallel]`` says). ``log`` hears a line a run trained.
   Returns the runs' summaries (:func:`train_and_evaluate`)."""
-
   overrides, points = expand_overrides(list(overrides))
   if len(points) == 1:  # a one-element list is that value, checked as the value alone is
     overrides += [f"{k}={v!r}" for k, v in points[0]]

@@ -94,7 +94,6 @@ def _memory_ceiling() -> int:
 
 def _read_isolated(path: Path):
   """``(points [4, M, T], rate, units, labels)`` read by ezc3d in a child process (module docstring)."""
-
   timeout = TIMEOUT_BASE_S + TIMEOUT_PER_MB_S * path.stat().st_size / 2**20
   with tempfile.TemporaryDirectory(prefix="chorjax-c3d-") as tmp:
     out = Path(tmp) / "points.npy"

@@ -186,7 +186,6 @@ def workers_for(setting: int, missing: int) -> int:
 def in_processes(fn: Callable, items: list, workers: int) -> None:
   """``fn(item)`` for every item, in ``workers`` fresh processes (each writes its entries into the cache; the
   caller then reads them). A worker's UserError (a bad file) reaches the caller as it is."""
-
   context = multiprocessing.get_context("spawn")  # jax is threaded: a forked copy of it can deadlock
   with concurrent.futures.ProcessPoolExecutor(workers, mp_context=context) as pool:
     for _ in pool.map(fn, items, chunksize=max(1, len(items) // (8 * workers))):

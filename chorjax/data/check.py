@@ -105,7 +105,6 @@ def detect_up(motion: Motion, mapped: Motion | None) -> tuple[str, str]:
 
 def detect_units(motion: Motion, mapped: Motion | None, up_axis: str) -> tuple[str, float, str]:
   """``(unit, metres per unit, evidence)`` from the body's size (see the module docstring)."""
-
   if mapped is not None:
     size, want, what = leg_length(mapped.positions), LEG_M, "leg (hip-knee-ankle)"
   else:
@@ -136,7 +135,6 @@ def _floor(mapped: Motion | None, up_axis: str, fps: float) -> tuple[str, list[s
 
 def check_take(motion: Motion, joint_map=None, mapping=None) -> TakeReport:
   """Measures one take (see the module docstring); ``mapping``: the one its dataset uses (default: its own)."""
-
   r = TakeReport(motion.source or motion.name, motion.num_frames, motion.fps, motion.skeleton.num_joints)
   r.skeleton = motion.skeleton.name
   pos = motion.positions
@@ -207,7 +205,6 @@ def suggest_config(reports: list[TakeReport], csv: bool) -> list[str]:
 
 def check_paths(specs, joint_map=None, fps: float = 30.0) -> tuple[list[TakeReport], list[str]]:
   """Reports for every take named by ``specs`` (files, folders, bundled names) and the suggested config."""
-
   reports, motions, csv = [], [], False
   for spec in specs:
     for f in resolve_files(spec):
@@ -234,7 +231,6 @@ def _compare_bodies(reports) -> None:
   """Notes on the takes whose 16-joint body differs from the set's: another skeleton of the same dancer
   (CMU's BVH releases lack the ASF's thorax bone: their arms and head sit ~2 units lower) or another
   scale (a copy in metres beside one in inches)."""
-
   bodies = {r.path: (r, r.body) for r in reports if r.body is not None}
   if len(bodies) < 2:
     return

@@ -123,7 +123,6 @@ def conform(
   ``data.keep_rest_frames``; ``rest=False`` keeps frame numbers as in the file), joints (``data.joints``,
   mapped as ``chorjax.data.mapping`` decides; the mappings used are put into ``mappings``) and up axis.
   What the user should know goes into ``notes``."""
-
   out = list(motions)
   if rest and not data_cfg.keep_rest_frames:
     out, note = drop_leading_rests(out)

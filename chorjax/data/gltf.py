@@ -29,7 +29,6 @@ METRES = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254}
 def gltf_positions(motion: Motion) -> tuple[np.ndarray, float]:
   """``(positions [T, J, 3] y-up in metres where the units are known, the factor applied)``: what the glTF
   holds of ``motion``."""
-
   scale = METRES.get(motion.units, 1.0)
   return np.asarray(to_y_up(np.asarray(motion.positions, np.float64), motion.up_axis), np.float64) * scale, scale
 

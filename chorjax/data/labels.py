@@ -161,7 +161,6 @@ def read_labels(spec: str, take_names: list[str], where: str = "data.labels") ->
 
 
 def _read_label_csv(path: str, where: str) -> tuple[list[str], dict]:
-
   try:
     rows = list(csv.reader(io.StringIO(read_text(path, "labels"), newline="")))  # a quoted line break kept
   except FileNotFoundError:

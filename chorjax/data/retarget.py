@@ -104,7 +104,6 @@ def _drivers(ch: Character) -> dict:
 
 def retarget(motion: Motion, character: Character) -> np.ndarray:
   """``[T, channels]`` MOTION rows that play ``motion`` (16 joints) on ``character``."""
-
   if motion.skeleton.joint_names != MPII16.joint_names:
     raise UserError(f"{motion.source or motion.name}: retargeting takes the 16-joint layout")
   gen = np.asarray(to_up_axis(motion, character.up_axis).positions, np.float64)

@@ -121,7 +121,6 @@ def metrics_path(workdir) -> Path:
 
 def write_metrics(result: dict, path) -> Path:
   """Writes the metrics JSON; an evaluation's first generated dancer goes to ``sample.npz`` beside it."""
-
   result = dict(result)
   first = result.pop("first_sample", None)
   if first is not None:
@@ -141,7 +140,6 @@ def evaluate_to(workdir, data, output=None, *, force: bool = False, **kw) -> tup
   """``chorjax eval``: :func:`evaluate` (``kw``: its arguments and the sampling controls), written to ``output``
   (default: the run's ``eval/metrics.json``) with its first dancer beside it; neither replaced unless
   ``force`` (checked before the draw). Returns ``(the result, the JSON written)``."""
-
   out = check_output(output, (".json",))[0] if output else metrics_path(workdir)
   refuse_existing([out, sample_path(out)], force)
   result = evaluate(workdir, data, **kw)

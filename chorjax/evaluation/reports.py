@@ -31,7 +31,6 @@ CHECK_COLUMNS = ("take", "frames", "fps", "seconds", "joints", "up", "units", "b
 
 
 def _table(columns, left):
-
   table = Table(title="takes", show_lines=False)
   for col in columns:
     table.add_column(col, justify="left" if col in left else "right")
@@ -41,7 +40,6 @@ def _table(columns, left):
 def takes_table(inputs):
   """A table of the takes in ``inputs`` (files, folders or bundled names): frames, joints, rate, extent and
   how steady their bones are (a rich ``Table``)."""
-
   table = _table((*INFO_COLUMNS, *BONE_COLUMNS), ("take",))
   for m in read_takes(inputs):
     lo, hi = m.positions.min(axis=(0, 1)), m.positions.max(axis=(0, 1))
@@ -57,7 +55,6 @@ def takes_table(inputs):
 def check_report(inputs, joint_map=None, fps: float = 30.0) -> tuple:
   """``data check`` of ``inputs``: ``(a table of the readable takes, the lines that explain them and give
   the config keys for the set, the fatal problems)``."""
-
   reports, config = check_paths(inputs, joint_map=joint_map, fps=fps)
   table = _table(CHECK_COLUMNS, ("take", "up", "units", "bone CV"))
   good = [r for r in reports if not r.fatal]
@@ -83,7 +80,6 @@ def check_report(inputs, joint_map=None, fps: float = 30.0) -> tuple:
 def metric_lines(result: dict, keys) -> list[str]:
   """The metrics of ``result`` (``scoring.score``, ``evaluate.evaluate``) as ``chorjax metrics`` prints them:
   a key a line, its value, and the real takes' (and the training takes') beside it."""
-
   lines = []
   if "segment_frames" in result:
     lines.append(f"segments of {result['segment_frames']} frames (movement_first/last/min/max, jitter_max)")

@@ -380,7 +380,6 @@ def one_take(j: Judged) -> dict:
 
   Against the training takes (``chorjax metrics``: the reference), where those hold at most
   ``SINGLE_TAKE_FRAMES`` frames; else None each."""
-
   takes = j.train if j.train is not None else j.reference
   if sum(len(t) for t in takes) > SINGLE_TAKE_FRAMES:
     return dict.fromkeys(KEYS)
@@ -446,7 +445,6 @@ def score(
 
 def score_files(motion_specs, data_specs, **kw) -> dict:
   """``chorjax metrics``: :func:`score_motions` of motion files against real takes, any formats."""
-
   data_cfg = DataConfig()
   reference = read_takes(list(data_specs), data_cfg)
   result = score_motions(read_takes(list(motion_specs), data_cfg), reference, **kw)
@@ -459,7 +457,6 @@ def score_motions(motions, reference, **kw) -> dict:
   Every motion is brought to the reference's frame rate (resampled) and body size (scaled), so
   another system's output is measured with the same ruler as a chorjax sample.
   """
-
   check_options(kw)
   if not reference or not motions:
     raise UserError(f"{'--data' if not reference else 'MOTION'}: no takes found")
@@ -488,7 +485,6 @@ OPTIONS = {"window": (4, 10_000), "splits": (1, 1_000), "segment": (1, 2**31 - 1
 def check_options(kw: dict) -> None:
   """Refuses, in one line naming it, an option :func:`score` does not take (with the closest name) or a value
   outside ``OPTIONS`` (a bool, a float and text included): the CLI's flags and the API's keywords alike."""
-
   for name, value in kw.items():
     if name not in OPTIONS:
       raise UserError(
@@ -502,7 +498,6 @@ def check_options(kw: dict) -> None:
 def score_to(motion_specs, data_specs, output=None, *, force: bool = False, **kw) -> tuple[dict, Path | None]:
   """``chorjax metrics``: :func:`score_files` (``kw``: ``window``, ``splits``, ``seed``), written as JSON to
   ``output`` where given (not replaced unless ``force``). Returns ``(the result, the JSON written or None)``."""
-
   check_options(kw)
   out = check_output(output, (".json",))[0] if output else None
   if out is not None:

@@ -43,7 +43,6 @@ MAX_COST_CELLS = 200_000_000  # frames of the samples x frames of the takes one 
 def facing_poses(pos_TxJx3, skeleton: Skeleton, size: float) -> np.ndarray:
   """``[T, 3J]``: each frame's joints relative to the root's point on the floor, turned so that the body faces
   +z, in body sizes (``size``): what the single-take costs compare."""
-
   p = np.asarray(pos_TxJx3, np.float64)
   left, right = hips(skeleton)
   across = p[:, left] - p[:, right]

@@ -22,7 +22,6 @@ def write_blender_addon(output, *, force: bool = False) -> Path:
   Install from Disk): ``chorjax/blender_addon`` with the joint-name rules (``chorjax.data.joint_names``), the
   16-joint layout and the up axes it reads, and a copy of the ``websockets`` package (with its licence) for
   live mode. It runs on Blender's own Python; see its module docstring. Returns the zip's path."""
-
   out, _ = check_output(output, (".zip",))
   refuse_existing([out], force)
   spec = importlib.util.find_spec("websockets")

@@ -55,7 +55,6 @@ def write_onnx(
   workdir, output, *, batch: int = 1, controls: dict | None = None, checkpoint="kept", force: bool = False
 ) -> list[Path]:
   """``chorjax export``: the run in ``workdir`` as an ONNX dancer (:func:`export_onnx`)."""
-
   return export_onnx(load_run(workdir, checkpoint), output, batch=batch, controls=controls, force=force)
 
 
@@ -64,7 +63,6 @@ def export_onnx(run, output, *, batch: int = 1, controls: dict | None = None, fo
   dancers a call, with the sampling ``controls`` given (unset: the run's calibration, then its ``[sample]``).
   Everything that can be refused is refused before anything is written; an existing file is not replaced
   unless ``force``. Returns the paths written."""
-
   needs_onnx()
   out, _ = check_output(output, (".onnx",))
   if isinstance(batch, bool) or not isinstance(batch, int | np.integer) or not 1 <= batch <= MAX_BATCH:
@@ -92,8 +90,9 @@ def export_onnx(run, output, *, batch: int = 1, controls: dict | None = None, fo
 
 
 def needs_onnx() -> None:
+  """A UserError naming the export extra unless onnx is installed (checked before any work)."""
   if importlib.util.find_spec("onnx") is None:
-    raise UserError("chorjax export needs the export extra: pip install 'chorjax[export]'") from None
+    raise UserError("chorjax export needs the export extra: pip install 'chorjax[export]'")
 
 
 def _program(run, sampling, batch: int):
@@ -139,7 +138,6 @@ def _with_positions(program, args, inputs, outputs, features, sampling):
 
 def jax_outputs(program, args) -> list:
   """The shapes and dtypes of ``program(*args)``'s outputs (nothing computed)."""
-
   return list(jax.eval_shape(program, *args))
 
 
@@ -148,7 +146,6 @@ def _io(name: str, value) -> dict:
 
 
 def _sidecar(run, sampling, batch: int, contract: dict) -> dict:
-
   f = run.features
   sk = f.skeleton
   shapes = {io["name"]: io["shape"] for io in [*contract["inputs"], *contract["outputs"]]}
@@ -189,7 +186,6 @@ def _sidecar(run, sampling, batch: int, contract: dict) -> dict:
 def sample_numbers(run, seed: int, frames: int, batch: int = 1):
   """``(gumbel [T, B, K], normal [T, B, N])``: the random numbers each frame of ``chorjax sample --seed seed``
   (``batch`` dancers) is drawn with, as the run's exported graph takes them (``Family.frame_numbers``)."""
-
   gumbel, normal = run.family.frame_numbers(run.graphdef, run.params, jax.random.key(seed), frames, batch)
   return np.asarray(gumbel, np.float32), np.asarray(normal, np.float32)
 
@@ -242,6 +238,5 @@ class OnnxDancer:
 
   def positions(self, z_BxTxD) -> np.ndarray:
     """Joint positions ``[B, T, J, 3]`` in data space: the frames decoded as ``chorjax sample`` decodes."""
-
     features = Features.from_dict(self.meta["features"])
     return np.asarray(features.decode(np.asarray(z_BxTxD), **self.meta["decoding"]))

@@ -132,7 +132,6 @@ class _Graph:
     return self.const(np.asarray(values, np.int64))
 
   def read(self, env: dict, var) -> str:
-
     if isinstance(var, Literal):
       return self.const(np.asarray(var.val, dtype=getattr(var.aval, "dtype", None)))
     return env[var]

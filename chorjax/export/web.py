@@ -41,7 +41,6 @@ def write_web(workdir, folder, *, ort_web=None, controls=None, checkpoint="kept"
   ``index.html``, the dancer (``dancer.onnx`` and its sidecar) and onnxruntime-web's files (``ort/``, with its
   licence). Any static file server serves it. The page draws the joints the graph decodes (rigid bones; the
   feet neither grounded nor locked). Returns the folder."""
-
   needs_onnx()
   out = as_path(folder, "--web")
   if out.exists() and (not out.is_dir() or any(out.iterdir())):

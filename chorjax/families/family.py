@@ -65,7 +65,6 @@ class Family:
   def check_keys(self, cfg) -> None:
     """Raises UserError, naming the key, where ``cfg`` sets a key another family owns (``own_keys``) away from
     its default (``load_config`` asks)."""
-
     m, family = cfg.model, cfg.model.family
     if m.lstm_kernel == "cudnn" and ("model.lstm_kernel" not in self.own_keys or m.cell != "lstm"):
       raise UserError(
@@ -112,7 +111,6 @@ class Family:
     """What a run ends with: ``(positions of samples/sample.csv, the motions of the player, its title)``;
     here ``sample.num`` dancers of ``sample.frames`` conditioned on take ``sample.motion`` (seed
     ``sample.seed``), the first in the CSV, all beside that take in the player."""
-
     s = cfg.sample
     features = with_ceiling(ds.features, graphdef, params, ds.train, cfg.data.seq_length, controls)
     key = jax.random.key(s.seed)
@@ -167,7 +165,6 @@ def frame_io(template, top: tuple[str, ...], batch: int, num_motions: int, num_g
   (a tuple of ``top`` parts): ``(treedef, example inputs, input names, output names)``: ``weights``,
   ``start`` (ones: every dancer starts), ``gumbel``, ``normal``, then each state leaf zeros, named by its
   place (``state.carry.0.1``); the outputs ``frame`` and each leaf's ``.next``."""
-
   paths, treedef = jax.tree_util.tree_flatten_with_path(template)
 
   def name(path) -> str:

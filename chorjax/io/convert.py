@@ -49,7 +49,6 @@ def convert(
   """Converts the takes of ``inputs`` (files or folders) and writes them to ``output``: a folder (one CSV a
   take) or one ``.bvh`` (onto ``skeleton``, a character BVH, where given). ``log`` hears what was done on
   the way (rest frames dropped, how joints were mapped). Returns ``[(path written, motion)]``."""
-
   out = Path(output)
   files = (*(s for s in formats.FORMATS if s not in (".csv", ".bvh", ".npz")), *OTHER_FILES)
   if out.suffix.lower() in files and not out.is_dir():  # a file's name, not a folder for the CSVs
@@ -96,7 +95,6 @@ def like_reference(motions, like: str) -> list:
   """``motions`` made like the takes of ``like`` (a bundled name, folder or file): their up axis and units,
   their mean body size, their frame rate, and the same average place of the root (the root is absolute in
   the features)."""
-
   ref = read_takes([like])
   canon = lambda m: np.asarray(transforms.to_y_up(m.positions, m.up_axis))
   ref_size = np.mean([body_size(canon(r), r.skeleton) for r in ref])
@@ -118,7 +116,6 @@ def like_reference(motions, like: str) -> list:
 
 def _write(motions, out: Path, character, joint_map, rigid: bool, force: bool) -> list:
   """One BVH (``out.bvh``, onto ``character`` where given) or one CSV a take in the folder ``out``."""
-
   if out.suffix.lower() == ".bvh":
     if len(motions) != 1:
       raise UserError(f"{out}: one .bvh holds one motion; give one input or an output folder")

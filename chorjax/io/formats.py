@@ -167,7 +167,6 @@ def _per_motion(write_one: Callable[[Any, Path], Path]):
 
 
 def _write_npz(motions, paths, writing: Writing) -> list[Path]:
-
   first = motions[0]
   positions = np.stack([m.positions for m in motions])
   meta = {"fps": first.fps, "skeleton": first.skeleton, "up_axis": first.up_axis, "units": first.units}
@@ -182,22 +181,18 @@ def _write_bvh(motions, paths, writing: Writing) -> list[Path]:
 
 
 def _write_player(motions, paths, writing: Writing) -> list[Path]:
-
   return [write_player(motions, paths[0], title=writing.title or paths[0].stem)]
 
 
 def _draw_player(motions, out: Path, drawing: Drawing) -> Path:
-
   return write_player(motions, out, title=drawing.title or out.stem, columns=drawing.columns)
 
 
 def _animation(motions, out: Path, drawing: Drawing) -> Path:
-
   return write_animation(motions, out, size=drawing.size)
 
 
 def _picture(motions, out: Path, drawing: Drawing) -> Path:
-
   if len(motions) > 1:
     drawing.warn(f"note: {out.suffix.lower()} shows one motion; rendering {motions[0].name}")
   if drawing.strip:

@@ -34,5 +34,4 @@ def write_motions(out: Path, motions, *, settings=None, character=None, title=No
 
 def as_motions(positions, fps, skeleton, up_axis, name: str = "dancer") -> list:
   """Drawn positions ``[K, T, J, 3]`` in a run's data space as motions ``{name} 0``, ``{name} 1`` ..."""
-
   return [Motion(p, fps, skeleton, up_axis, units="data", name=f"{name} {k}") for k, p in enumerate(positions)]

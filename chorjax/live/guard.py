@@ -23,7 +23,6 @@ class Budget:
   BURST: typing.ClassVar[dict[str, float]] = {"prime": 16.0, "prime_file": 4.0, "set": 60.0, "pause": 60.0}
 
   def __init__(self, clock=None):
-
     self.clock = clock or time.monotonic
     self.tokens = dict(self.BURST)
     self.at = dict.fromkeys(self.RATES, self.clock())
@@ -52,7 +51,6 @@ LOOPBACK = {"127.0.0.1", "localhost", "::1", "[::1]"}
 def server_names(host: str) -> set[str]:
   """The names a request's ``Host`` may use for a server listening on ``host``: loopback names alone on
   loopback; off it, also the listening address, this machine's host names and its addresses."""
-
   names = set(LOOPBACK)
   if host in LOOPBACK:
     return names

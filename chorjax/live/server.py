@@ -156,7 +156,6 @@ class Stream:
   def set(self, pi_temperature=None, sigma_temperature=None, mix=None) -> None:
     """New temperatures (from the next chunk) and/or a new motion mix (``"4:0.5,5:0.5"``): the model is
     conditioned on it and re-primed with the frames it just danced, so the dance changes without a jump."""
-
     given = {"pi_temperature": pi_temperature, "sigma_temperature": sigma_temperature}
     checked = {k: check_sample_control(k, v, f"set {k}") for k, v in given.items() if v is not None}
     weights = None if mix is None else self.run.motion_weights(mix=str(mix), source="mix")
@@ -185,7 +184,6 @@ class Live:
     self.ticks = 0  # frame periods gone by, paused ones left out
 
   def hello(self) -> str:
-
     f, run = self.stream.features, self.stream.run
     sk = f.skeleton
     draw = self.stream.draw
@@ -313,7 +311,6 @@ class Live:
 
   def read_file(self, value) -> np.ndarray:
     """A ``prime_file`` message's file, read as training reads takes (any format chorjax reads)."""
-
     if not isinstance(value, dict) or not isinstance(value.get("name"), str) or not isinstance(value.get("text"), str):
       raise UserError('prime_file: expected {"name": "phrase.csv", "text": "..."}')
     suffix = Path(value["name"]).suffix.lower()
@@ -498,7 +495,6 @@ def run_live(
 ) -> int:
   """``chorjax live``: loads the run, serves until Ctrl-C, writes the recording (``record``, an ``.npz`` not
   replaced unless ``force``); returns 0."""
-
   _check_flags(port, record, force, fps, alternate)
   for origin in allow_origins:
     if not origin.isprintable() or " " in origin:
@@ -534,7 +530,6 @@ def run_live(
 def _check_flags(port: int, record, force: bool, fps, alternate: float) -> None:
   """``chorjax live``'s flags checked before anything is loaded: the port, the recording (an ``.npz`` that
   is not there yet, unless ``force``), the frame rate and the alternation's seconds; and the live extra."""
-
   if not 0 <= port <= 65535:
     raise UserError(f"--port {port}: must be at least 0" if port < 0 else f"--port {port}: must be at most 65535")
   if record is not None:

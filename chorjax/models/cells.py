@@ -87,7 +87,6 @@ class LSTMCell(_Cell):
 
   def cudnn_scan(self, carry, x_TxBxD):
     """``scan(carry, project(x))`` as one cuDNN call (CUDA only; the numerics are ``scan``'s, see the tests)."""
-
     c0, h0 = carry
     x = jnp.swapaxes(x_TxBxD, 0, 1)
     lengths = jnp.full((x.shape[0],), x.shape[1], jnp.int32)

@@ -44,7 +44,6 @@ def render(
   ``.html`` (the player, ``columns`` side by side, ``title``), ``.gif``/``.mp4`` (``size``: ``WxH``),
   ``.png`` (the first take's trajectories, or its filmstrip with ``strip``: ``poses`` a row, ``every``
   frames apart). ``frames``: the first N frames only. Returns the path written."""
-
   if poses > MAX_POSES:
     raise UserError(f"--poses {poses}: at most {MAX_POSES} poses in a row")
   out, suffix = check_output(output, formats.suffixes("draw"))
@@ -63,7 +62,6 @@ def render(
 def plot_file(path, output, *, split: int = 200) -> Path:
   """``chorjax data plot``: the trajectories of the one take in ``path`` as a PNG (``split``: frames in the
   first row)."""
-
   motions = read_takes([path])
   if len(motions) != 1:
     raise UserError(f"{path}: holds {len(motions)} takes; plot one file at a time")

@@ -101,7 +101,6 @@ def strip_figure(motion: Motion, every: int = 6, poses: int = 12):
   A dance that freezes shows the same figure over and over in the end row; one that trembles, the
   same figure with its limbs slightly shaken. Positions are drawn y-up, each pose centred on its root.
   """
-
   figure = _figure_class()  # no pyplot: drawing a strip never changes a notebook's own plotting backend
   pos = np.asarray(transforms.to_y_up(motion.positions, motion.up_axis), np.float64)
   sk = motion.skeleton

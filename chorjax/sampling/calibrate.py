@@ -238,7 +238,6 @@ def calibrate(
   Returns:
     What ``calibration.json`` holds: the settings, the reference, and every setting's measurements.
   """
-
   run = load_run(workdir).serving("calibrate")
   if num is None:
     num = LABELLED_DANCERS if run.labels is not None else CALIBRATION_DANCERS
@@ -306,7 +305,6 @@ def calibrate_run(workdir, data=None, *, force: bool = False, noise_order=None, 
   """``chorjax calibrate``: :func:`calibrate` (``kw``: ``frames``, ``num``, ``seed``), refused before any draw
   where the run already has a calibration.json (unless ``force``) or ``noise_order`` / ``pace`` are not what
   ``[sample]`` allows."""
-
   refuse_existing([calibration_path(workdir)], force)
   if noise_order is not None:
     check_sample_control("noise_order", noise_order, "--noise-order")

@@ -236,7 +236,6 @@ def scale_ceiling(graphdef, params, train, seq_length: int, quantile: float):
   model predicts for its own training frames (``train``: ``(motion id, features [T, D])`` per take;
   teacher forced, the most likely component's scale), ``[S]``; no ceiling (inf) for a head without scales
   (MSE)."""
-
   model = nnx.merge(graphdef, params)
   if not isinstance(getattr(model, "head", None), MDNHead):
     return np.full(1, np.inf, np.float32)

@@ -31,7 +31,6 @@ class Finished:
   @functools.cached_property
   def kept(self):
     """The run as sample, eval and export load it (its kept checkpoint), read once for every hook."""
-
     return load_run(self.workdir)
 
 
@@ -49,7 +48,6 @@ def record_ceiling(run: Finished) -> dict:
   """``sample.scale_cap``'s ceiling for the kept checkpoint, measured on the training takes and saved in the
   run (``run.save_ceiling``): the run samples without its training data (moved, deleted, or a relative
   path read from elsewhere)."""
-
   kept = run.kept
   q = run.cfg.sample.scale_cap
   ceiling = scale_ceiling(kept.graphdef, kept.params, run.ds.train, run.cfg.data.seq_length, q)
@@ -60,13 +58,11 @@ def record_ceiling(run: Finished) -> dict:
 
 def calibrates(cfg) -> bool:
   """Whether training ends by calibrating (``train.calibrate``; a family whose draw a control can change)."""
-
   return cfg.train.calibrate and family_of(cfg).calibrated and bool(default_grid(cfg))
 
 
 def calibration(run: Finished) -> dict:
   """``train.calibrate``: ``chorjax calibrate`` on the kept checkpoint, then the end sample drawn with it."""
-
   calibrate(run.workdir, log=lambda line: print(line, flush=True))
   if run.cfg.sample.frames <= 0:
     return {}
@@ -84,7 +80,6 @@ def end_sample(run: Finished) -> dict:
 def write_end_sample(workdir: Path, graphdef, params, ds, cfg, controls: Controls | None = None) -> dict:
   """``samples/sample.csv`` and ``samples/player.html``: the dance the run ends with, as its family draws it
   (``Family.end_sample``: the generated dancers beside a real take, or an in-betweening piece beside its take)."""
-
   controls = controls or Controls.resolve(cfg.sample)
   named = dataclasses.replace(cfg, name=Path(workdir).resolve().name)  # a run is named by its folder
   positions, motions, title = family_of(cfg).end_sample(graphdef, params, ds, named, controls)

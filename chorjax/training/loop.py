@@ -305,7 +305,6 @@ def best_checkpoint_hook(manager, save: Callable, val_loss: Callable[[Loop], flo
 
 def figure_hook(writer, graphdef, host_params, ds: Dataset, cfg: Config):
   """A short generated sample beside a real one, as a TensorBoard figure (needs matplotlib)."""
-
   try:
     plt = require_matplotlib()
   except UserError:

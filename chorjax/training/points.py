@@ -63,7 +63,6 @@ MAX_POINTS = 1024  # models one vectorized program trains together; split a larg
 def expand_overrides(overrides) -> tuple[list[str], list[list[tuple[str, object]]]]:
   """``train.seed=[0,1,2]`` (a list for a vectorizable key) -> the plain overrides and the points:
   one ``[(key, value), ...]`` per combination (a single point, ``[[]]``, when no list is given)."""
-
   plain, lists = [], []
   for text in overrides:
     key, value = parse_override(text)

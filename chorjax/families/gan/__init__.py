@@ -44,15 +44,12 @@ class Gan(Family):
     return config["gan"]["cell"], f"gan ({config['gan']['loss']})"
 
   def check(self, cfg) -> None:
-
     check_gan(cfg, cfg.data.representation)
 
   def build_model(self, cfg, features, num_motions: int):
-
     return GanModel(cfg.gan, features.dim, rngs=nnx.Rngs(cfg.train.seed))
 
   def create_state(self, cfg, ds):
-
     return create_gan_state(cfg, ds.features)
 
   def parts(self, cfg, ds):
@@ -63,20 +60,16 @@ class Gan(Family):
     return gan_train_step, sampler, {}, None
 
   def controls(self, controls):
-
     return gan_controls(controls)
 
   def frame_program(self, graphdef, params, features, draw, batch: int, num_motions: int):
-
     return frame_program(graphdef, params, features, draw, batch, num_motions)
 
   def frame_numbers(self, graphdef, params, key, frames: int, batch: int):
-
     return frame_numbers(graphdef, params, key, frames, batch)
 
   def dance(self, graphdef, params, features, motion, key, num_frames, controls, prime=None):
     """Each dancer one sequence from noise (``motion`` only counts them; no prime)."""
-
     if prime is not None:
       raise UserError("--prime: a GAN draws whole sequences from noise; it cannot continue a phrase")
     controls = gan_controls(controls)

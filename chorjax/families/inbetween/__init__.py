@@ -37,19 +37,15 @@ class Inbetween(Family):
     return None if command == "inbetween" else _NO_DANCE.format(command=command)
 
   def check(self, cfg) -> None:
-
     check_inbetween(cfg)
 
   def build_model(self, cfg, features, num_motions: int):
-
     return transition_model(cfg, features)
 
   def create_state(self, cfg, ds):
-
     return create_inbetween_state(cfg, ds.features)
 
   def parts(self, cfg, ds):
-
     space, icfg = ib.Space.of(ds.features), cfg.inbetween
     sampler = ib.TransitionSampler(
       ib.training_takes(ds, cfg.data.augment), space, icfg, cfg.train.batch_size, cfg.train.seed
@@ -59,13 +55,11 @@ class Inbetween(Family):
 
   def end_sample(self, graphdef, params, ds, cfg, controls):
     """Key poses of a held-out take, the model writing every frame between, beside that take."""
-
     real, pieces, title = end_sample(graphdef, params, ds, cfg)
     motions = [real] + [Motion(p, real.fps, real.skeleton, real.up_axis, real.units, name=title) for p in pieces]
     return pieces[0], motions, cfg.name
 
   def transitions(self, run, context, targets, frames, key, num: int):
-
     return write_transitions(
       run.graphdef, run.params, run.features, run.config.inbetween, context, targets, frames, key, num
     )

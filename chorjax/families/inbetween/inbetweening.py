@@ -95,7 +95,6 @@ def _rotate_y(v, angle):
 def training_takes(ds, augment) -> list[np.ndarray]:
   """The training takes as canonical positions ``[T, J, 3]``, with their mirror images and/or the takes
   played backwards as ``augment`` (``data.augment``) asks."""
-
   f = ds.features
   by_name = {m.name: m for m in ds.motions}
   out = []

@@ -79,7 +79,6 @@ class Patch(Family):
     return PatchTakes(cfg.patch, features.dim)
 
   def create_state(self, cfg, ds):
-
     takes = [np.asarray(x, np.float32) for _, x in ds.train]
     total, size = sum(map(len, takes)), cfg.patch.size
     if total > cfg.patch.max_frames:
@@ -95,7 +94,6 @@ class Patch(Family):
     return state, PatchSpec(graphdef)
 
   def parts(self, cfg, ds):
-
     return _keep, WindowSampler(ds.train, cfg.data.seq_length, 1, cfg.train.seed), {}, None
 
   def controls(self, controls):
@@ -103,7 +101,6 @@ class Patch(Family):
 
   def dance(self, graphdef, params, features, motion, key, num_frames, controls, prime=None):
     """Each dancer one recombination of the takes (``motion`` only counts them; no prime)."""
-
     if prime is not None:
       raise UserError("--prime: a patch run recombines its takes; it cannot continue a phrase")
     model = nnx.merge(graphdef, params)

@@ -34,7 +34,6 @@ def mdn_basis(model_cfg, takes, white: int = 0):
   """The MDN's ``[D, D]`` coordinates (``model.mdn_basis``): the principal axes of the training frames
   (``takes``, ``[T, D]`` each) or of their second differences; the last ``white`` features
   (``heads.white_axes``) are axes of their own, left out of the others."""
-
   lag = 2 if model_cfg.mdn_basis == "acceleration" else 0
   d = takes[0].shape[-1]
   axes = principal_axes([np.diff(z[:, : d - white], lag, axis=0) for z in takes])
@@ -50,7 +49,6 @@ class Recurrent(Family):
   own_keys = frozenset({"model.lstm_kernel", "model.condition_every_frame", "train.batch_parts"})
 
   def check(self, cfg) -> None:
-
     if cfg.model.memory and cfg.train.feedback != "none":
       raise UserError(
         "model.mdn_memory trains teacher forced (its draw carries the residuals the loss does): "
@@ -58,50 +56,40 @@ class Recurrent(Family):
       )
 
   def build_model(self, cfg, features, num_motions: int):
-
     return create_model(cfg.model, features.dim, num_motions, cfg.train.seed, white_axes(cfg.model, features))
 
   def create_state(self, cfg, ds):
-
     white = white_axes(cfg.model, ds.features)
     basis = mdn_basis(cfg.model, [z for _, z in ds.train], white) if cfg.model.pca_basis else None
     return create_train_state(cfg, ds.features.dim, ds.num_motions, basis, white)
 
   def parts(self, cfg, ds):
-
     sampler = WindowSampler(ds.train, cfg.data.seq_length, cfg.train.batch_size, cfg.train.seed)
     val = eval_windows(ds.val, cfg.data.seq_length, cfg.train.val_windows)
     step = train_step if cfg.train.batch_parts == 1 else parted_train_step
     return step, sampler, val, lambda params, val, spec: eval_step(params, val, spec.graphdef)
 
   def window_loss(self, graphdef, params, windows: dict) -> float:
-
     return float(eval_step(params, windows, graphdef))
 
   def parallel_step(self, parallel):
-
     return sharded_train_step(parallel)
 
   def dance(self, graphdef, params, features, motion, key, num_frames, controls, prime=None):
-
     return dance(graphdef, params, features, motion, key, num_frames, controls, prime)
 
   def stream(self):
-
     return start_stream, continue_stream
 
   def frame_program(self, graphdef, params, features, draw, batch: int, num_motions: int):
-
     return frame_program(graphdef, params, draw, batch)
 
   def frame_numbers(self, graphdef, params, key, frames: int, batch: int):
-
     model = nnx.merge(graphdef, params)
     k, d = model.num_mixtures, model.dim
     return jax.vmap(lambda f: frame_numbers(f, batch, k, d))(jax.random.split(key, frames))
 
   def vector_step(self):
-
     return _train_step, eval_step
 
 
