@@ -33,9 +33,11 @@ from chorjax.config import (  # noqa: F401
   to_toml,
   toml_value,
 )
+from chorjax.data import formats  # noqa: F401  (the formats each command reads, writes and draws)
 from chorjax.data import motion as _motion
 from chorjax.data.dataset import read_motions, read_takes
 from chorjax.data.features import Features  # noqa: F401
+from chorjax.data.formats import suffixes, written_paths
 from chorjax.data.motion import Skeleton  # noqa: F401
 from chorjax.errors import (
   Interrupted,  # noqa: F401
@@ -57,9 +59,7 @@ from chorjax.export.dancer import (
   write_onnx,  # noqa: F401
 )
 from chorjax.export.web import write_web  # noqa: F401
-from chorjax.io import formats  # noqa: F401  (the formats each command reads, writes and draws)
 from chorjax.io.convert import convert  # noqa: F401
-from chorjax.io.formats import suffixes, written_paths
 from chorjax.io.output import write_motions
 from chorjax.live.server import run_live  # noqa: F401
 from chorjax.render.files import plot_file, render  # noqa: F401

@@ -245,8 +245,8 @@ def as_path(value, what: str = "path") -> Path:
 
 
 def either(words) -> str:
-  """``a, b or c`` (one word alone as itself): the choices an error line names."""
-  words = list(words)
+  """``a, b or c`` (one word alone as itself, none as ``none``): the choices an error line names."""
+  words = list(words) or ["none"]
   return words[0] if len(words) == 1 else f"{', '.join(words[:-1])} or {words[-1]}"
 
 

@@ -11,8 +11,8 @@ import jax
 import numpy as np
 
 from chorjax.data.dataset import conform, read_takes
+from chorjax.data.formats import output_paths, suffixes, written_paths
 from chorjax.errors import UserError, check_output, refuse_existing
-from chorjax.io.formats import output_paths, suffixes, written_paths
 from chorjax.io.output import as_motions, load_character, write_motions
 from chorjax.run import load_run
 

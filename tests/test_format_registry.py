@@ -1,4 +1,4 @@
-"""The format registry (``chorjax.io.formats``): every format declared once, and a new one is one registration that
+"""The format registry (``chorjax.data.formats``): every format declared once, and a new one is one registration that
 ``chorjax data info``, ``sample -o``, ``render`` and the help then handle."""
 
 import json
@@ -9,9 +9,9 @@ import pytest
 from helpers import tiny_config
 
 from chorjax import cli
+from chorjax.data import formats
 from chorjax.data.dataset import bundled_path
 from chorjax.data.motion import Motion, Skeleton
-from chorjax.io import formats
 from chorjax.training.driver import train_and_evaluate
 
 TAKE = bundled_path("cmu94") / "94_07_skeleton_3d.csv"

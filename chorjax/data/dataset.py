@@ -15,7 +15,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from chorjax.data import transforms
+from chorjax.data import formats, transforms
 from chorjax.data.cache import Cache, cache_root, in_processes, workers_for
 from chorjax.data.features import Features, feature_dim, floor_height, takes_joint_pace
 from chorjax.data.labels import Labels, read_labels, search_name, take_condition
@@ -24,7 +24,6 @@ from chorjax.data.motion import Motion, bone_lengths
 from chorjax.data.rest import drop_leading_rests
 from chorjax.data.transforms import to_up_axis
 from chorjax.errors import UserError
-from chorjax.io import formats
 
 BUNDLED = ("cmu94",)
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from chorjax.data import transforms
+from chorjax.data import formats, transforms
 from chorjax.data.bvh import write_bvh
 from chorjax.data.csv import write_csv, written_paths
 from chorjax.data.dataset import read_motions, read_takes, resolve_files, to_rate, to_up_axis
@@ -18,7 +18,6 @@ from chorjax.data.rest import drop_leading_rests
 from chorjax.data.retarget import write_retargeted
 from chorjax.errors import UserError, is_run_folder, refuse_existing
 from chorjax.evaluation.metrics import body_size
-from chorjax.io import formats
 from chorjax.io.output import load_character
 
 # Names that say a file of a format data convert does not write (every registered format's but CSV's, BVH's and

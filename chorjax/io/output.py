@@ -7,10 +7,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from chorjax.data import formats
 from chorjax.data.motion import Motion
 from chorjax.data.retarget import Character
 from chorjax.errors import UserError
-from chorjax.io import formats
+from chorjax.render import drawers  # noqa: F401  (registers the HTML player's writer)
 
 
 def load_character(path, out: Path):
@@ -25,7 +26,7 @@ def load_character(path, out: Path):
 
 
 def write_motions(out: Path, motions, *, settings=None, character=None, title=None) -> list:
-  """Writes ``motions`` (of one skeleton and rate) as ``out``'s suffix says (:mod:`chorjax.io.formats`): one
+  """Writes ``motions`` (of one skeleton and rate) as ``out``'s suffix says (:mod:`chorjax.data.formats`): one
   ``.npz`` with all of them and ``settings``, one ``.html`` player (``title``), or a ``.csv`` / ``.bvh`` /
   ``.glb`` per motion (``output_paths``; ``character``: a BVH onto that character's hierarchy). Returns the
   paths written."""

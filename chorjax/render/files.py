@@ -6,9 +6,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
+from chorjax.data import formats
 from chorjax.data.dataset import read_motions, read_takes, resolve_files
 from chorjax.errors import UserError, check_output, refuse_existing
-from chorjax.io import formats
 from chorjax.render.plot import plot_trajectories
 
 MAX_SIDE = 7680  # pixels: 8K video's width

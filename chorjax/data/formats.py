@@ -21,9 +21,6 @@ import numpy as np
 from chorjax.data.mapping import to_mpii16
 from chorjax.data.retarget import write_retargeted
 from chorjax.errors import UserError, either
-from chorjax.render import plot
-from chorjax.render.html import write_player
-from chorjax.render.video import write_animation
 
 
 @dataclass(frozen=True)
@@ -155,8 +152,8 @@ def draw(motions: Sequence, out: Path, drawing: Drawing | None = None) -> Path:
   return format_of(out, "draw").draw(list(motions), out, drawing or Drawing())  # type: ignore[misc]
 
 
-# The formats chorjax ships. Their modules are numpy only; the drawers' (matplotlib, imageio, the player's
-# jax transforms) are imported when a picture is drawn, so reading a take never loads them.
+# The motion formats chorjax ships (numpy only). The pictures (PNG, GIF/MP4 and the HTML player) are
+# chorjax.render's, registered by that package when it is imported (chorjax.render.drawers).
 from chorjax.data import amc, bvh, c3d, csv, gltf, npz  # noqa: E402
 from chorjax.data.skeletons import get_skeleton  # noqa: E402
 
@@ -180,26 +177,6 @@ def _write_bvh(motions, paths, writing: Writing) -> list[Path]:
   return [write_retargeted(to_mpii16(m), writing.character, p) for m, p in zip(motions, paths)]
 
 
-def _write_player(motions, paths, writing: Writing) -> list[Path]:
-  return [write_player(motions, paths[0], title=writing.title or paths[0].stem)]
-
-
-def _draw_player(motions, out: Path, drawing: Drawing) -> Path:
-  return write_player(motions, out, title=drawing.title or out.stem, columns=drawing.columns)
-
-
-def _animation(motions, out: Path, drawing: Drawing) -> Path:
-  return write_animation(motions, out, size=drawing.size)
-
-
-def _picture(motions, out: Path, drawing: Drawing) -> Path:
-  if len(motions) > 1:
-    drawing.warn(f"note: {out.suffix.lower()} shows one motion; rendering {motions[0].name}")
-  if drawing.strip:
-    return plot.plot_strip(motions[0], out, every=drawing.every, poses=drawing.poses)
-  return plot.plot_trajectories(motions[0], out)
-
-
 register(
   Format(
     "CSV",
@@ -214,6 +191,3 @@ register(Format("BVH", (".bvh",), read=lambda p, r: [bvh.read_bvh(p)], write=_wr
 register(Format("ASF/AMC", (".amc",), read=lambda p, r: [amc.read_amc(p, r.asf, fps=r.amc_fps)]))
 register(Format("C3D", (".c3d",), read=lambda p, r: [c3d.read_c3d(p)], extra="c3d"))
 register(Format("glTF", (".glb",), write=_per_motion(gltf.write_glb), extra="export"))
-register(Format("PNG", (".png",), draw=_picture, extra="viz"))
-register(Format("GIF/MP4", (".gif", ".mp4"), draw=_animation, extra="viz"))
-register(Format("HTML player", (".html",), write=_write_player, draw=_draw_player, whole=True))
