@@ -435,7 +435,7 @@ def _add_calibrate_command(sub) -> None:
   cal.add_argument(
     "--data", nargs="+", metavar="PATH_OR_NAME", help="reference takes (default: the run's training takes)"
   )
-  cal.add_argument("--frames", type=int, default=1200, help="frames per drawn dancer (default 1200)")
+  cal.add_argument("--frames", type=int, help="frames per drawn dancer (default 1200; 3600 for a carried MDN)")
   cal.add_argument(
     "--num",
     type=int,

@@ -226,7 +226,7 @@ def test_an_mse_head_calibrates_only_what_can_change_its_dance():
   """An MSE head draws no noise (its frame is its prediction): of the calibrated controls only foot_lock
   can change its dance, and on non-canonical features nothing can (training then skips calibration)."""
   from chorjax.config import load_config
-  from chorjax.sampling.calibrate import default_grid
+  from chorjax.sampling.calibrate import default_frames, default_grid
 
   assert set(default_grid(load_config("configs/quickstart.toml"))) == set(CALIBRATED)
   assert default_grid(load_config("configs/quickstart.toml", ["model.head=mse"])) == {"foot_lock": (True, False)}
@@ -236,6 +236,9 @@ def test_an_mse_head_calibrates_only_what_can_change_its_dance():
   carried = default_grid(load_config("configs/quickstart.toml", ["model.mdn_memory=2"]))
   assert set(carried) == {"noise_order", "pace", "sigma_temperature", "foot_lock"}
   assert len(carried["sigma_temperature"]) == 8 and carried["foot_lock"] == (True, False)
+  # and draws three times as long a dancer (its pose measure is noisy over 1,200 frames)
+  assert default_frames(load_config("configs/quickstart.toml", ["model.mdn_memory=2"])) == 3 * 1200
+  assert default_frames(load_config("configs/quickstart.toml", ["model.mdn_memory=0"])) == 1200
 
 
 def test_a_run_that_carries_its_noise_calibrates_its_temperature_and_feet(tmp_path):

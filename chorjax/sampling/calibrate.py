@@ -60,6 +60,11 @@ MEASURES = (*RATES, "poses")
 
 
 CALIBRATION_DANCERS = 4  # dancers drawn per setting
+CALIBRATION_FRAMES = 1200  # frames per dancer
+# ... for an MDN that carries its noise, whose small grid affords longer draws: at 1,200 frames the pose measure
+# is noisy enough to pick a scale temperature whose calmest 1,000 of 10,000 frames fall under the bar
+# (docs/perf-notes.md, "Calibration")
+CARRIED_FRAMES = 3600
 # A labelled library's dancers: its label combinations are many, and a few dancers would stand for one action
 # (on Bandai's library, 16 spread over its takes against the first 4, four bows, three training seeds: samples
 # named their action at 0.39-0.48 of the held-out takes' rate against 0.27-0.45, their style at 0.35-0.40
@@ -81,6 +86,11 @@ def default_grid(config, noise_order: int | None = None, pace: float | None = No
   if config.model.head == "mse":
     grid = {k: v for k, v in grid.items() if k in DECODING}
   return grid
+
+
+def default_frames(config) -> int:
+  """Frames per dancer: ``CARRIED_FRAMES`` for an MDN that carries its noise, else ``CALIBRATION_FRAMES``."""
+  return CARRIED_FRAMES if config.model.memory else CALIBRATION_FRAMES
 
 
 def objective(measured: dict) -> float:
@@ -213,7 +223,7 @@ def calibrate(
   workdir,
   data: Sequence[str] | None = None,
   *,
-  frames: int = 1200,
+  frames: int | None = None,
   num: int | None = None,
   seed: int = 0,
   grid: dict | None = None,
@@ -228,7 +238,8 @@ def calibrate(
     workdir: a trained run of a family whose draw calibration can change.
     data: the reference takes (default: the run's training takes).
     frames, num, seed: each setting draws ``num`` dancers of ``frames`` frames with sampling seed ``seed``
-      (``num`` default: ``CALIBRATION_DANCERS``, or ``LABELLED_DANCERS`` for a run conditioned on labels, whose
+      (``frames`` default: ``CALIBRATION_FRAMES``, ``CARRIED_FRAMES`` for an MDN that carries its noise; ``num``
+      default: ``CALIBRATION_DANCERS``, or ``LABELLED_DANCERS`` for a run conditioned on labels, whose
       dancers are conditioned on takes spread over the reference: ``Run.dancer_conditions``).
     grid: the values tried per control (default ``GRID``; ``foot_lock`` only where the run can lock feet).
     log: where the summary line goes (a terminal also shows a progress bar).
@@ -241,6 +252,7 @@ def calibrate(
   run = load_run(workdir).serving("calibrate")
   if num is None:
     num = LABELLED_DANCERS if run.labels is not None else CALIBRATION_DANCERS
+  frames = default_frames(run.config) if frames is None else frames
   _check_size(frames, num)
   run.check_drawn(frames * num, f"--frames {frames} x --num {num}")
   reference, train = read_reference(run, list(data) if data else None)
