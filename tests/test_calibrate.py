@@ -228,8 +228,8 @@ def test_an_mse_head_calibrates_only_what_can_change_its_dance():
   from chorjax.config import load_config
   from chorjax.sampling.calibrate import default_frames, default_grid
 
-  assert set(default_grid(load_config("configs/quickstart.toml"))) == set(CALIBRATED)
-  assert default_grid(load_config("configs/quickstart.toml", ["model.head=mse"])) == {"foot_lock": (True, False)}
+  assert set(default_grid(load_config("configs/white.toml"))) == set(CALIBRATED)
+  assert default_grid(load_config("configs/white.toml", ["model.head=mse"])) == {"foot_lock": (True, False)}
   assert default_grid(load_config(None, ["model.head=mse", "data.representation=directions"])) == {}
   assert "foot_lock" not in default_grid(load_config(None, ["data.representation=directions"]))
   # an MDN that carries its noise: how wide it draws and whether its feet lock, nothing more
@@ -238,7 +238,7 @@ def test_an_mse_head_calibrates_only_what_can_change_its_dance():
   assert len(carried["sigma_temperature"]) == 8 and carried["foot_lock"] == (True, False)
   # and draws three times as long a dancer (its pose measure is noisy over 1,200 frames)
   assert default_frames(load_config("configs/quickstart.toml", ["model.mdn_memory=2"])) == 3 * 1200
-  assert default_frames(load_config("configs/quickstart.toml", ["model.mdn_memory=0"])) == 1200
+  assert default_frames(load_config("configs/white.toml")) == 1200
 
 
 def test_a_run_that_carries_its_noise_calibrates_its_temperature_and_feet(tmp_path):

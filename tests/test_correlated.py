@@ -154,15 +154,15 @@ def test_a_correlated_run_samples_live_streams_and_primes(tmp_path, prime):
   assert len(state[3]) == 2 + 2 and float(jnp.abs(state[3][2]).max()) > 0  # the residuals ride in the state
 
 
-def test_the_carried_recipe_draws_with_three_controls_and_calibrates_two():
-  """``configs/carried.toml``: the quickstart's model carrying its noise; its draw is the plain draw but for
+def test_the_quickstart_carries_its_noise_draws_with_three_controls_and_calibrates_two():
+  """``configs/quickstart.toml``: an MDN carrying its noise; its draw is the plain draw but for
   three controls, the scale temperature, the pace governor and the clip to the training range (decoding
   aside), and calibration chooses the scale temperature and foot lock."""
   from chorjax.config import load_config
   from chorjax.sampling.calibrate import default_grid
   from chorjax.sampling.controls import PLAIN, Controls
 
-  cfg = load_config("configs/carried.toml")
+  cfg = load_config("configs/quickstart.toml")
   assert cfg.model.memory == 3 and cfg.model.mdn_carry == "smooth" and cfg.model.mdn_basis == "acceleration"
   assert cfg.train.calibrate and cfg.train.keep == "last" and cfg.train.num_steps == 4000
   drawn = Controls.resolve(cfg.sample).to_dict()

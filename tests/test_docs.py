@@ -182,10 +182,13 @@ def test_every_experiment_has_one_shape_and_every_figure_is_shown():
 
 
 def test_the_readme_results_table_names_the_command_that_reproduces_it():
+  from chorjax.sweeps import load_sweep
+
   text = (ROOT / "README.md").read_text()
   section = text[text.index("## How well it dances") : text.index("## Commands")]
   assert re.search(r"^\| dataset", section, flags=re.M)
-  assert "chorjax sweep experiments/dancers/sweep.toml" in section
+  (sweep,) = re.findall(r"chorjax sweep (experiments/\w+/\w+\.toml)", section)
+  assert load_sweep(ROOT / sweep)["base"].endswith("configs/quickstart.toml")  # the shipped recipe's benchmark
   for image in _shown_images(ROOT / "README.md"):
     assert image.exists(), image
   assert len(text.splitlines()) <= 200

@@ -34,26 +34,41 @@ def trained(where: Path, *overrides: str, config: Path | None = None) -> Path:
 
 @pytest.fixture(scope="module")
 def quickstart(tmp_path_factory):
-  """A tiny run of the shipped quick-start recipe (its sampling: smoothed noise of order 4, persistence,
-  crossfade, the training range and steps, the pace governor, the scale ceiling, rigid bones, ground, foot lock)."""
+  """A tiny run of the shipped quick-start recipe (an MDN carrying its noise over 3 frames; its draw: the scale
+  temperature, the pace governor, the training range; rigid bones, ground, foot lock)."""
   where = tmp_path_factory.mktemp("export") / "run"
   return trained(where, "train.num_steps=4", config=ROOT / "configs" / "quickstart.toml")
+
+
+@pytest.fixture(scope="module")
+def white(tmp_path_factory):
+  """A tiny run of configs/white.toml (a white-noise MDN; its draw: smoothed noise of order 4, persistence,
+  crossfade, the training range and steps, the pace governor, the scale ceiling)."""
+  where = tmp_path_factory.mktemp("export_white") / "run"
+  return trained(where, "train.num_steps=4", config=ROOT / "configs" / "white.toml")
+
+
+# what each was exported with
+EXPORTED = {"quickstart": {"noise_order": 1, "pace": 2.0, "persistence": 0.0}, "white": {"noise_order": 4, "pace": 2.0}}
 
 
 def body_size(pos) -> float:
   return float(np.ptp(pos.reshape(-1, 3), axis=0).max())
 
 
-def test_the_onnx_dancer_draws_what_chorjax_sample_draws(quickstart, tmp_path):
+@pytest.mark.parametrize("recipe", EXPORTED)
+def test_the_onnx_dancer_draws_what_chorjax_sample_draws(recipe, request, tmp_path):
   """600 frames from onnxruntime, fed the random numbers `chorjax sample --seed 3` draws, are its frames within
-  1e-4 of the body size on every joint of every frame."""
+  1e-4 of the body size on every joint of every frame: the quickstart's run, and a white-noise MDN's whose draw
+  filters its noise and holds its components."""
+  quickstart = request.getfixturevalue(recipe)
   dancer_path = tmp_path / "dancer.onnx"
   assert cli.main(["export", str(quickstart), "-o", str(dancer_path)]) == 0
   run = load_run(quickstart)
   dancer = OnnxDancer(dancer_path)
   meta = dancer.meta
   assert (meta["num_mixtures"], meta["dim"], meta["batch"]) == (3, run.features.dim, 1)
-  assert meta["controls"]["noise_order"] == 4 and meta["controls"]["pace"] == 2.0  # what it was exported with
+  assert EXPORTED[recipe].items() <= meta["controls"].items()
 
   frames, seed = 600, 3
   gumbel, normal = sample_numbers(run, seed, frames)

@@ -135,8 +135,8 @@ def _start_live(run_dir, *flags):
 
 
 @pytest.mark.slow
-def test_a_stream_draws_its_noise_through_the_quickstarts_four_filters(live_run):
-  """The quickstart's noise order (4) in an endless dance: the same seed draws the same frames, another order
+def test_a_stream_draws_its_noise_through_four_filters(live_run):
+  """A noise order of 4 (configs/white.toml's) in an endless dance: the same seed draws the same frames, another order
   draws others, and a stream may change the order between chunks (its state holds every filter)."""
   run = load_run(live_run)
   sampling = run.sampling(noise_order=4)

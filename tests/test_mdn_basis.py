@@ -135,10 +135,10 @@ def test_an_acceleration_basis_is_the_principal_axes_of_the_frames_second_differ
 
 
 def test_an_mse_head_ignores_the_quickstarts_basis_and_trains(tmp_path):
-  """The quickstart with `model.head=mse` (the MDN-vs-MSE comparison): the basis is the MDN's, so an MSE head
-  has none (as it has no mixtures), and trains."""
+  """The quickstart with `model.head=mse` (an MDN-vs-MSE comparison): the basis and the carried residuals are the
+  MDN's, so an MSE head has neither (as it has no mixtures), and trains."""
   cfg = load_config("configs/quickstart.toml", ["model.head=mse", *TINY, "train.calibrate=false"])
-  assert cfg.model.mdn_basis == "pca" and not cfg.model.pca_basis
+  assert cfg.model.mdn_basis == "acceleration" and not cfg.model.pca_basis and not cfg.model.memory
   train_and_evaluate(cfg, tmp_path / "w")
   assert "basis" not in load_run(tmp_path / "w").params["head"]
 
