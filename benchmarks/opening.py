@@ -47,7 +47,7 @@ def rows() -> list[tuple[str, str, str, str, str]]:
   step, peer = gpu["chorjax lstm shipped"], gpu["torch lstm shipped"]
   out.append(("train step, MDN head", _ms(step), _ms(peer), f"{peer / step:.2f}x", device))
   drawn, peer = gpu["chorjax sample smoothed b1"], gpu["torch sample b1"]
-  measure = "sampling 1,000 frames, batch 1 (the quickstart's smoothed draw)"
+  measure = "sampling 1,000 frames, batch 1 (configs/white.toml's smoothed draw)"
   out.append((measure, f"{drawn:.3f} s", f"{peer:.3f} s", f"{peer / drawn:.0f}x", device))
   wall = _read("results_wall.json")
   said = {

@@ -9,7 +9,7 @@ from helpers import TINY, tiny_config
 from chorjax import cli
 from chorjax.data.bvh import read_bvh, write_bvh
 from chorjax.data.csv import read_csv, sidecar_path
-from chorjax.data.dataset import dataset_notes, load_dataset
+from chorjax.data.dataset import bundled_path, dataset_notes, load_dataset
 from chorjax.errors import UserError
 from chorjax.run import load_run
 
@@ -135,3 +135,31 @@ def test_data_check_command_reports_and_fails_on_fatal_problems(shared_data, tmp
   err = capsys.readouterr().err.strip().splitlines()
   assert code == 2 and len(err) == 2
   assert "Optotrak.c3d: header declares 1149 frames" in err[0] and "bad.csv:1: expected 48 columns" in err[1]
+
+
+def test_the_one_take_recipe_trains_on_one_bvh_csv_or_amc_file_and_refuses_a_take_too_short(
+  shared_data, tmp_path, capsys
+):
+  """``chorjax train configs/one_take.toml data.dataset=FILE``, as a user runs it on one recording: each format
+  trains, validating on the take's own last tenth; a take too short for that is one line naming the file, and
+  no run is started."""
+  tiny = [t for t in TINY if not t.startswith("data.seq_length")] + ["data.seq_length=32", "log.tensorboard=false"]
+  takes = [
+    shared_data / "bvh" / "cmu131" / "131_01.bvh",
+    shared_data / "asfamc" / "cmu05" / "md_02.amc",
+    bundled_path("cmu94") / "94_03_skeleton_3d.csv",
+  ]
+  for k, take in enumerate(takes):
+    work = tmp_path / f"run{k}"
+    args = ["train", "configs/one_take.toml", f"data.dataset={take}", *tiny, "train.calibrate=false"]
+    assert cli.main([*args, "--workdir", str(work)]) == 0, take
+    run = load_run(work)
+    assert run.config.data.val_tail == 0.1 and run.fps == 30.0
+    assert [json.loads(line) for line in (work / "metrics.jsonl").read_text().splitlines() if "val_loss" in line]
+  capsys.readouterr()
+  short = tmp_path / "short.csv"
+  short.write_text("\n".join(takes[2].read_text().splitlines()[:100]) + "\n")  # 3.3 s
+  assert cli.main(["train", "configs/one_take.toml", f"data.dataset={short}", "--workdir", str(tmp_path / "s")]) == 2
+  err = capsys.readouterr().err
+  assert err.count("\n") == 1 and "short.csv: 100 frames; data.val_tail = 0.1 needs at least" in err
+  assert not (tmp_path / "s").exists()
