@@ -431,10 +431,10 @@ def dataset_notes(ds: Dataset) -> list[str]:
   if minutes < SMALL_DATA_MINUTES:
     out.append(
       f"note: {minutes:.1f} minutes of training motion: on the dancers benchmark, sets under "
-      f"{SMALL_DATA_MINUTES:g} minutes keep dancing, martial arts (1.3) at its held-out takes' movement (every "
-      "1,000 frames 0.90-1.22) a little faster than them (speed 1.14-1.20), CMU 5 and 131 (0.5) calmer (their "
-      "calmest 1,000 frames at 0.65-0.76) and in poses less like the held-out takes' (FID_g 1.0-2.3x); more "
-      "takes help most (README: How well the quickstart dances)"
+      f"{SMALL_DATA_MINUTES:g} minutes keep dancing with the quickstart, martial arts (1.3) at its held-out takes' "
+      "movement (every 1,000 frames 0.72-1.19) a little faster than them (speed 1.01-1.16), CMU 5 and 131 (0.5) "
+      "calmer (their calmest 1,000 frames at 0.67-0.76) and travelling less (root travel 0.71-0.88); more takes "
+      "help most (README: How well it dances)"
     )
   if not ds.val_names:
     why = "a single take" if len(ds.motions) == 1 else "data.val_takes = []"
