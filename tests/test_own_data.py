@@ -11,6 +11,7 @@ from chorjax.data.bvh import read_bvh, write_bvh
 from chorjax.data.csv import read_csv, sidecar_path
 from chorjax.data.dataset import bundled_path, dataset_notes, load_dataset
 from chorjax.errors import UserError
+from chorjax.evaluation.scoring import mean_of
 from chorjax.run import load_run
 
 
@@ -141,8 +142,8 @@ def test_the_one_take_recipe_trains_on_one_bvh_csv_or_amc_file_and_refuses_a_tak
   shared_data, tmp_path, capsys
 ):
   """``chorjax train configs/one_take.toml data.dataset=FILE``, as a user runs it on one recording: each format
-  trains, validating on the take's own last tenth; a take too short for that is one line naming the file, and
-  no run is started."""
+  trains, validating on the take's own last tenth, and ``eval --data held-out`` judges it on that tenth; a take
+  too short for that is one line naming the file, and no run is started."""
   tiny = [t for t in TINY if not t.startswith("data.seq_length")] + ["data.seq_length=32", "log.tensorboard=false"]
   takes = [
     shared_data / "bvh" / "cmu131" / "131_01.bvh",
@@ -156,7 +157,13 @@ def test_the_one_take_recipe_trains_on_one_bvh_csv_or_amc_file_and_refuses_a_tak
     run = load_run(work)
     assert run.config.data.val_tail == 0.1 and run.fps == 30.0
     assert [json.loads(line) for line in (work / "metrics.jsonl").read_text().splitlines() if "val_loss" in line]
-  capsys.readouterr()
+  # judged on its held-out tail (82 frames): too short for a distribution, the rest is measured, with a note
+  out = tmp_path / "tail.json"
+  assert cli.main(["eval", str(work), "--data", "held-out", "--frames", "300", "--num", "1", "-o", str(out)]) == 0
+  tail = json.loads(out.read_text())
+  assert tail["fid_g"] is None and tail["fid_k"] is None and "too few 60-frame windows" in tail["fid_note"]
+  assert mean_of(tail["jitter"]) > 0 and tail["coverage"] is not None  # the coverage: against the take it learned
+  assert "note: FIDs and diversities not measured" in capsys.readouterr().out
   short = tmp_path / "short.csv"
   short.write_text("\n".join(takes[2].read_text().splitlines()[:100]) + "\n")  # 3.3 s
   assert cli.main(["train", "configs/one_take.toml", f"data.dataset={short}", "--workdir", str(tmp_path / "s")]) == 2

@@ -83,6 +83,8 @@ def metric_lines(result: dict, keys) -> list[str]:
   lines = []
   if "segment_frames" in result:
     lines.append(f"segments of {result['segment_frames']} frames (movement_first/last/min/max, jitter_max)")
+  if result.get("fid_note"):
+    lines.append(f"note: {result['fid_note']}")
   for k in keys:
     real = result.get(k + "_real")
     if result.get(k) is None and k in WHERE_MEASURED:

@@ -185,6 +185,21 @@ def _reference_rows(reference, features, window: int) -> tuple:
   return piece_rows, ref_all
 
 
+class TooFewWindows(UserError):
+  """The reference takes (or the motions) hold too few windows for a Frechet distance."""
+
+
+def _measured(j: Judged, keys, measure) -> dict:
+  """``measure()`` (a distribution metric's dict), or each of ``keys`` None with a note where the reference is
+  too short for a distribution (a single take's held-out tail): the other metrics still stand."""
+  try:
+    return measure()
+  except TooFewWindows:
+    frames = sum(len(t) for t in j.reference)
+    note = f"FIDs and diversities not measured: the reference's {frames} frames hold too few {j.window}-frame windows"
+    return {**dict.fromkeys(keys), "fid_note": note}
+
+
 def _distribution(
   motions, reference, features, window: int, splits: int, seed: int, std_floor: float, rows=None, diversity=True
 ) -> tuple:
@@ -211,7 +226,7 @@ def _distribution(
     fids.append(metrics.frechet_distance(norm(fa), norm(gen_n)))
     reals.append(metrics.frechet_distance(norm(fa), norm(fb_n)))
   if not fids:
-    raise UserError(
+    raise TooFewWindows(
       f"--data: too few {window}-frame windows in the reference takes or the motions to compare distributions "
       "(longer takes, or a smaller --window)"
     )
@@ -298,16 +313,28 @@ def root_steps(j: Judged) -> dict:
 
 @metric("kinetic FID", "fid_k", "div_k")
 def kinetic_fid(j: Judged) -> dict:
-  """Frechet distance on kinetic window features (and the reference halves' own), diversity of both."""
-  fid, real, div, div_real = j.distribution(j.motions, j.kinetic, 1e-10)
-  return {"fid_k": spread(fid), "fid_k_real": spread(real), "div_k": div, "div_k_real": div_real}
+  """Frechet distance on kinetic window features (and the reference halves' own), diversity of both.
+
+  None each, with ``fid_note``, where the reference is too short for a distribution."""
+
+  def measure():
+    fid, real, div, div_real = j.distribution(j.motions, j.kinetic, 1e-10)
+    return {"fid_k": spread(fid), "fid_k_real": spread(real), "div_k": div, "div_k_real": div_real}
+
+  return _measured(j, ("fid_k", "fid_k_real", "div_k", "div_k_real"), measure)
 
 
 @metric("geometric FID", "fid_g", "div_g")
 def geometric_fid(j: Judged) -> dict:
-  """Frechet distance on geometric (pose question) window features (and the reference's own), diversity."""
-  fid, real, div, div_real = j.distribution(j.motions, _pose_features(j.skeleton, j.size), GEO_STD_FLOOR)
-  return {"fid_g": spread(fid), "fid_g_real": spread(real), "div_g": div, "div_g_real": div_real}
+  """Frechet distance on geometric (pose question) window features (and the reference's own), diversity.
+
+  None each, with ``fid_note``, where the reference is too short for a distribution."""
+
+  def measure():
+    fid, real, div, div_real = j.distribution(j.motions, _pose_features(j.skeleton, j.size), GEO_STD_FLOOR)
+    return {"fid_g": spread(fid), "fid_g_real": spread(real), "div_g": div, "div_g_real": div_real}
+
+  return _measured(j, ("fid_g", "fid_g_real", "div_g", "div_g_real"), measure)
 
 
 @metric("feet", "pfc", "foot_sliding", "airborne")
@@ -367,7 +394,8 @@ def training_takes(j: Judged) -> dict:
   out: dict = {}
   geo = _pose_features(j.skeleton, j.size)
   for name, feats, floor in (("fid_k_train", j.kinetic, 1e-10), ("fid_g_train", geo, GEO_STD_FLOOR)):
-    out[name] = spread(j.distribution(j.train, feats, floor)[0]) if j.train and j.unseen else None
+    measure = lambda name=name, feats=feats, floor=floor: {name: spread(j.distribution(j.train, feats, floor)[0])}
+    out |= _measured(j, (name,), measure) if j.train and j.unseen else {name: None}
   return out
 
 
