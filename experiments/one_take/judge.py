@@ -76,22 +76,15 @@ def mean(v):
   return v["mean"] if isinstance(v, dict) else v
 
 
+# the figures against the take, then against the dancer's other takes
+AGAINST_TAKE = ("movement_min", "movement_max", "jitter", "speed", "coverage", "global_diversity")
+AGAINST_TAKE += ("local_diversity", "inter_diversity")
+COLUMNS = (*AGAINST_TAKE, "fid_g_other")
+
+
 def figures(run: Path) -> dict:
   one = json.loads((run / "one_take.json").read_text())
-  out = {
-    k: mean(one[k])
-    for k in (
-      "movement_min",
-      "movement_max",
-      "jitter",
-      "speed",
-      "coverage",
-      "global_diversity",
-      "local_diversity",
-      "inter_diversity",
-    )
-    if k in one
-  }
+  out = {k: mean(one[k]) for k in AGAINST_TAKE if k in one}
   if (run / "other_takes.json").exists():
     o = json.loads((run / "other_takes.json").read_text())
     out["fid_g_other"] = mean(o["fid_g"]) / mean(o["fid_g_train"])
@@ -107,19 +100,6 @@ def record(runs: list[Path]) -> dict:
   results |= {run.name: figures(run) for run in runs if (run / "one_take.json").exists()}
   RESULTS.write_text(json.dumps(results, indent=1, sort_keys=True) + "\n")
   return results
-
-
-COLUMNS = (
-  "movement_min",
-  "movement_max",
-  "jitter",
-  "speed",
-  "coverage",
-  "global_diversity",
-  "local_diversity",
-  "inter_diversity",
-  "fid_g_other",
-)
 
 
 def table(results: dict) -> str:
