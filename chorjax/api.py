@@ -71,7 +71,13 @@ from chorjax.runtime import keep_compiled_programs, keep_freed_memory  # noqa: F
 from chorjax.sample import sample_dancers, write_inbetween, write_sample  # noqa: F401
 
 # What every command does, as functions (the command line calls these and prints what they return).
-from chorjax.sampling.calibrate import CALIBRATION_DANCERS, LABELLED_DANCERS, calibrate_run  # noqa: F401
+from chorjax.sampling.calibrate import (  # noqa: F401
+  CALIBRATION_DANCERS,
+  CALIBRATION_FRAMES,
+  CARRIED_FRAMES,
+  LABELLED_DANCERS,
+  calibrate_run,
+)
 from chorjax.sampling.controls import Controls  # noqa: F401
 from chorjax.sampling.table import CALIBRATED, FLAGGED, PLAIN, RECORDS, check_sample_control  # noqa: F401
 from chorjax.sampling.table import SWITCHES as CONTROL_SWITCHES  # noqa: F401

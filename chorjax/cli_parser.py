@@ -435,12 +435,10 @@ def _add_calibrate_command(sub) -> None:
   cal.add_argument(
     "--data", nargs="+", metavar="PATH_OR_NAME", help="reference takes (default: the run's training takes)"
   )
-  cal.add_argument("--frames", type=int, help="frames per drawn dancer (default 1200; 3600 for a carried MDN)")
-  cal.add_argument(
-    "--num",
-    type=int,
-    help=f"dancers drawn per setting (default {api.CALIBRATION_DANCERS}; {api.LABELLED_DANCERS} for a run with labels)",
-  )
+  frames = f"frames per drawn dancer (default {api.CALIBRATION_FRAMES}; {api.CARRIED_FRAMES} for a carried MDN)"
+  num = f"dancers drawn per setting (default {api.CALIBRATION_DANCERS}; {api.LABELLED_DANCERS} for a run with labels)"
+  cal.add_argument("--frames", type=int, help=frames)
+  cal.add_argument("--num", type=int, help=num)
   cal.add_argument("--seed", type=_seed, default=0, help="sampling seed (default 0)")
   cal.add_argument(
     "--noise-order",

@@ -189,15 +189,14 @@ class TooFewWindows(UserError):
   """The reference takes (or the motions) hold too few windows for a Frechet distance."""
 
 
-def _measured(j: Judged, keys, measure) -> dict:
-  """``measure()`` (a distribution metric's dict), or each of ``keys`` None with a note where the reference is
-  too short for a distribution (a single take's held-out tail): the other metrics still stand."""
+def _measured(keys, measure) -> dict:
+  """``measure()`` (a distribution metric's dict), or each of ``keys`` None with a note (the reason
+  :func:`_distribution` gives) where the reference or the motions are too short for a distribution (a single
+  take's held-out tail): the other metrics still stand."""
   try:
     return measure()
-  except TooFewWindows:
-    frames = sum(len(t) for t in j.reference)
-    note = f"FIDs and diversities not measured: the reference's {frames} frames hold too few {j.window}-frame windows"
-    return {**dict.fromkeys(keys), "fid_note": note}
+  except TooFewWindows as e:
+    return {**dict.fromkeys(keys), "fid_note": f"FIDs and diversities not measured: {str(e).removeprefix('--data: ')}"}
 
 
 def _distribution(
@@ -321,7 +320,7 @@ def kinetic_fid(j: Judged) -> dict:
     fid, real, div, div_real = j.distribution(j.motions, j.kinetic, 1e-10)
     return {"fid_k": spread(fid), "fid_k_real": spread(real), "div_k": div, "div_k_real": div_real}
 
-  return _measured(j, ("fid_k", "fid_k_real", "div_k", "div_k_real"), measure)
+  return _measured(("fid_k", "fid_k_real", "div_k", "div_k_real"), measure)
 
 
 @metric("geometric FID", "fid_g", "div_g")
@@ -334,7 +333,7 @@ def geometric_fid(j: Judged) -> dict:
     fid, real, div, div_real = j.distribution(j.motions, _pose_features(j.skeleton, j.size), GEO_STD_FLOOR)
     return {"fid_g": spread(fid), "fid_g_real": spread(real), "div_g": div, "div_g_real": div_real}
 
-  return _measured(j, ("fid_g", "fid_g_real", "div_g", "div_g_real"), measure)
+  return _measured(("fid_g", "fid_g_real", "div_g", "div_g_real"), measure)
 
 
 @metric("feet", "pfc", "foot_sliding", "airborne")
@@ -395,7 +394,7 @@ def training_takes(j: Judged) -> dict:
   geo = _pose_features(j.skeleton, j.size)
   for name, feats, floor in (("fid_k_train", j.kinetic, 1e-10), ("fid_g_train", geo, GEO_STD_FLOOR)):
     measure = lambda name=name, feats=feats, floor=floor: {name: spread(j.distribution(j.train, feats, floor)[0])}
-    out |= _measured(j, (name,), measure) if j.train and j.unseen else {name: None}
+    out |= _measured((name,), measure) if j.train and j.unseen else {name: None}
   return out
 
 
