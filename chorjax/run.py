@@ -157,7 +157,8 @@ class Run:
     calibration)."""
     family = self.family
     calibrated = read_calibration(self.workdir) if use_calibration and self.workdir and family.calibrated else {}
-    return family.controls(Controls.resolve(self.config.sample, calibrated, **given))
+    controls = Controls.resolve(self.config.sample, calibrated, **given)
+    return controls if family.draws_frames else controls.without_frame_draw()
 
   def check_drawn(self, frames: int, what: str) -> None:
     """Refuses a draw of ``frames`` frames in all (frames x dancers) that this machine cannot hold: each

@@ -2,7 +2,9 @@
 conditions every frame on what the draw carries, a prime hands its residuals to the draw, and the model's own
 draw (``--plain``) of such a run is smoother than a white-noise run's."""
 
+import dataclasses
 import json
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -48,6 +50,26 @@ def test_the_loss_conditions_each_frame_on_the_residuals_the_draw_carries(memory
   # the residuals matter: the same outputs read as white noise are another likelihood
   white = -float(jnp.mean(mdn_log_prob(*head.params(out), u)))
   assert abs(white - loss) > 1e-3 * abs(loss)
+
+
+def test_fed_back_frames_carry_their_own_residuals_and_none_fed_back_is_teacher_forcing():
+  """Training with feedback on a model that carries residuals: with nothing fed back the loss is the
+  teacher-forced one; with every frame its own, it is the loss of the real targets under the frames drawn and
+  fed, each own frame drawn carrying the residuals of the frames fed before it (and another loss)."""
+  from chorjax.data.dataset import WindowSampler
+  from chorjax.families.recurrent.steps import Feedback, _feedback_loss_fn, _loss_fn, create_train_state
+
+  cfg = tiny_config("model.mdn_memory=2", "data.representation=canonical")
+  ds = load_dataset(cfg.data)
+  state, spec = create_train_state(cfg, ds.features.dim, ds.num_motions)
+  batch = WindowSampler(ds.train, cfg.data.seq_length, 4, seed=0).batch(0)
+  key, step = jax.random.key(1), jnp.asarray(5)
+  fb = lambda fraction: Feedback("scheduled", 2, 3, fraction, 0, 0, "sample", 1.0, 1.0)
+  spec = dataclasses.replace(spec, input_noise=0.0, dropout=0.0, feedback=fb(0.0))
+  teacher = float(_loss_fn(state["params"], batch, key, spec)[0])
+  assert float(_feedback_loss_fn(state["params"], batch, key, step, spec)[0]) == pytest.approx(teacher, rel=1e-5)
+  own = float(_feedback_loss_fn(state["params"], batch, key, step, dataclasses.replace(spec, feedback=fb(1.0)))[0])
+  assert np.isfinite(own) and own != pytest.approx(teacher, rel=1e-3)
 
 
 @pytest.mark.parametrize("memory", [1, 3])
@@ -113,21 +135,78 @@ def test_the_plain_draw_of_a_correlated_run_is_smoother_than_a_white_runs(tmp_pa
   assert correlated < 0.5 * white, (correlated, white)
 
 
+def _files_the_value_enters(value: float, argv: list) -> dict:
+  """``{file: functions}`` of the package's functions called with ``value`` among their arguments (itself, in a
+  dict, or as a record's or a namespace's ``pace``) while ``chorjax ARGV`` runs: where a control travels."""
+  import argparse
+  import dataclasses
+  import sys
+
+  def holds(v, depth=0):
+    if isinstance(v, float):
+      return v == value
+    if isinstance(v, dict) and depth == 0:
+      return any(holds(x, 1) for x in v.values())
+    record = isinstance(v, argparse.Namespace) or (dataclasses.is_dataclass(v) and not isinstance(v, type))
+    return record and getattr(v, "pace", None) == value
+
+  files: dict = {}
+  package = str(Path(cli.__file__).parent)
+
+  def profile(frame, event, _):
+    name = frame.f_code.co_filename
+    if event == "call" and name.startswith(package) and any(holds(v) for v in list(frame.f_locals.values())):
+      files.setdefault("chorjax" + Path(name).as_posix()[len(package) :], set()).add(frame.f_code.co_name)
+
+  sys.setprofile(profile)
+  try:
+    assert cli.main(argv) == 0
+  finally:
+    sys.setprofile(None)
+  return files
+
+
+def test_a_control_goes_from_its_flag_to_where_it_acts_through_six_files(tmp_path):
+  """``chorjax sample RUN --pace G``: the value, followed through every function it is handed to, reaches the
+  pace governor through the command line (its flag made in cli_parser from the controls' table), the sample,
+  the run's resolution, the controls' home and the generator; besides that route it is only checked against
+  the table and written beside the sample."""
+  common = [*TINY, "train.num_steps=10", "model.hidden_size=16", "data.seq_length=24", "train.batch_size=4"]
+  common += ["data.representation=canonical", "train.calibrate=false", "log.tensorboard=false"]
+  train_and_evaluate(tiny_config(*common, "model.mdn_memory=2"), tmp_path / "run")
+  gain = 1.2345
+  files = _files_the_value_enters(
+    gain, ["sample", str(tmp_path / "run"), "-o", str(tmp_path / "s.csv"), "--frames", "20", "--pace", str(gain)]
+  )
+  assert "_governed" in files["chorjax/families/recurrent/generation.py"]  # where it acts
+  checks = {"chorjax/sampling/table.py", "chorjax/fields.py"}  # validated as the config key is
+  assert all(n.startswith("check_") for f in checks & files.keys() for n in files[f])
+  route = sorted(set(files) - checks - {"chorjax/io/output.py"})  # the sample's settings written beside it
+  assert route == [
+    "chorjax/cli.py",
+    "chorjax/families/recurrent/generation.py",
+    "chorjax/run.py",
+    "chorjax/sample.py",
+    "chorjax/sampling/controls.py",
+  ], route  # with chorjax/cli_parser.py, where the flag is made: six files
+
+
 def test_what_a_correlated_draw_cannot_be_given_is_refused_in_one_line(tmp_path, capsys):
-  """Training with own outputs fed back (the draw there carries no residuals) and ``--plain`` beside a draw
-  flag are refused, exit 2, one line, nothing written."""
+  """Training that feeds back its mixture mean (a carried draw feeds back what it draws) and ``--plain`` beside
+  a draw flag are refused, exit 2, one line, nothing written."""
   code = cli.main(
     [
       "train",
       "configs/quickstart.toml",
       "model.mdn_memory=2",
       "train.feedback=auto",
+      "train.feedback_draw=mean",
       "--workdir",
       str(tmp_path / "r"),
     ]
   )
   err = capsys.readouterr().err
-  assert code == 2 and "train.feedback" in err and len(err.strip().splitlines()) == 1
+  assert code == 2 and "train.feedback_draw" in err and len(err.strip().splitlines()) == 1
   assert not (tmp_path / "r").exists()
   code = cli.main(
     ["sample", str(tmp_path / "r"), "-o", str(tmp_path / "s.csv"), "--plain", "--set", "sample.noise_smoothing=0.5"]

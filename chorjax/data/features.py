@@ -254,23 +254,9 @@ class Features:
       pos = transforms.rotate_y(pos - floor(pos[0]), turn) + floor(target)
     return np.asarray(self.uncanonical(pos[1:]), np.float32)
 
-  def check_decode(
-    self,
-    rigid: bool = False,
-    lock_feet: bool = False,
-    clamp: bool = False,
-    pace: float = 0,
-    ground: bool = False,
-    clamp_steps: bool = False,
-  ) -> None:
-    """Raises ValueError if :meth:`decode` (or generation clipped to the training range: ``clamp``)
-    cannot do what is asked (callers check before long work)."""
-    if clamp and any(getattr(self, k) is None for k in self.RANGES):
-      raise ValueError("clamp: this run records no training range (trained before the option existed)")
-    if clamp_steps and any(getattr(self, k) is None for k in self.STEPS):
-      raise ValueError("clamp_steps: this run records no training steps (Run.ranged measures them on its takes)")
-    if pace and self.pace is None:
-      raise ValueError("pace: this run records no training pace (trained before the option existed)")
+  def check_decode(self, rigid: bool = False, lock_feet: bool = False, ground: bool = False) -> None:
+    """Raises ValueError if :meth:`decode` cannot do what is asked (callers check before long work; the draw's
+    own needs: ``Controls.draw``)."""
     if rigid and self.lengths is None:
       raise ValueError("rigid_bones: this run records no bone lengths (trained before the option existed)")
     if lock_feet and self.representation != "canonical":

@@ -32,6 +32,8 @@ class Family:
     data_parallel: it trains data-parallel over processes (``[parallel]``).
     calibrated: its draw has the controls ``chorjax calibrate`` chooses (the run's calibration.json applies).
     conditioned: a dance is conditioned on a take or labels (``--motion``, ``--mix``); else drawn from noise alone.
+    draws_frames: it draws frame by frame (the draw's controls apply); else they are recorded at their neutral
+      values, the clip to the training range and decoding as given (``Controls.without_frame_draw``).
     section: the family's own config section (``[gan]``), a frozen dataclass of ``fields.config_field``s keyed
       by its name; None for none. The schema asks the registry for them (``registry.sections``).
     own_keys: the keys other families refuse, which this one reads (``model.lstm_kernel = "cudnn"``, ...).
@@ -43,6 +45,7 @@ class Family:
   data_parallel: bool = False
   calibrated: bool = False
   conditioned: bool = True
+  draws_frames: bool = True
   section: tuple[str, type] | None = None
   own_keys: frozenset[str] = frozenset()
 
@@ -98,10 +101,6 @@ class Family:
   def parallel_step(self, parallel) -> Callable:
     """The jitted step of a data-parallel run (families with ``data_parallel``)."""
     raise NotImplementedError
-
-  def controls(self, controls: Controls) -> Controls:
-    """The sampling controls as this family's draw applies them (what does not apply recorded as off)."""
-    return controls
 
   def dance(self, graphdef, params, features, motion, key, num_frames: int, controls: Controls, prime=None):
     """Dancers in data space ``[B, T, J, 3]`` (``motion``: ids ``[B]`` or weights ``[B, M]``)."""

@@ -77,7 +77,13 @@ class Controls(ControlFields):
     target (``pace``) and scale ceiling (``scale_cap``) filled in from ``features``. A UserError if the run
     cannot do what is asked (checked before generating, not after)."""
     try:
-      features.check_decode(self.rigid_bones, self.foot_lock, self.clamp, self.pace, self.ground, self.clamp_steps)
+      features.check_decode(**self.decoding())
+      if self.clamp and any(getattr(features, k) is None for k in features.RANGES):
+        raise ValueError("clamp: this run records no training range (trained before the option existed)")
+      if self.clamp_steps and any(getattr(features, k) is None for k in features.STEPS):
+        raise ValueError("clamp_steps: this run records no training steps (Run.ranged measures them on its takes)")
+      if self.pace and features.pace is None:
+        raise ValueError("pace: this run records no training pace (trained before the option existed)")
       if self.scale_cap and features.scale_ceiling is None:
         raise ValueError("scale_cap: the run's scale ceiling was not measured (Run.ranged, controls.with_ceiling)")
     except ValueError as e:

@@ -28,7 +28,9 @@ from sklearn.metrics import confusion_matrix
 from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 
+from chorjax.data import transforms
 from chorjax.data.dataset import load_dataset
+from chorjax.data.features import hips
 from chorjax.data.transforms import to_y_up
 from chorjax.evaluation import metrics, scoring
 from chorjax.run import load_run
@@ -43,6 +45,13 @@ def window_features(pos_TxJx3, skeleton, size: float, fps: float) -> np.ndarray:
   geo = lambda w: metrics.geometric_features(w, skeleton, size).mean(0)
   rows = [np.concatenate([kin(w), geo(w)]) for w in metrics.windows(pos_TxJx3, WINDOW, HOP)]
   return np.stack(rows) if rows else np.zeros((0, 0))
+
+
+def turn_rate(pos_TxJx3, skeleton, fps: float) -> float:
+  """How fast the heading turns: the mean absolute change of the facing angle (from the hips), degrees a second."""
+  left, right = hips(skeleton)
+  angle = np.unwrap(np.asarray(transforms.heading(pos_TxJx3, left, right)))
+  return float(np.degrees(np.abs(np.diff(angle)).mean()) * fps) if len(angle) > 1 else 0.0
 
 
 def fit(features_by_take: dict, labels_of: dict, field: str):
@@ -116,10 +125,15 @@ def judge(workdir: Path, frames: int, seed: int, controls: dict | None = None, p
         "take": name,
         "movement": metrics.displacement(s, sk.root, lag) / disp,
         "jitter": metrics.roughness(s) / rough,
+        "turn_rate": turn_rate(s, sk, fps),
+        "take_turn_rate": turn_rate(takes[name], sk, fps),
         **{f"{f}_accuracy": float((classifiers[f].predict(x) == p[f]).mean()) for f in fields},
       }
     )
   out["per_pair"] = per_pair
+  if "action" in fields:  # the walks' turning: every walk take's, the samples' per pair above
+    walks = [n for n in takes if labels_of[n]["action"] == "walk"]
+    out["walk_take_turn_rates"] = [turn_rate(takes[n], sk, fps) for n in walks]
   pooled = scoring.score(samples, [takes[n] for n in run.val_takes], sk, fps, seed=seed)
   out["pooled"] = {k: pooled[k] for k in POOLED}
   return out

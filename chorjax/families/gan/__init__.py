@@ -19,7 +19,6 @@ from chorjax.families.gan.networks import (
   GanModel,
   frame_numbers,
   frame_program,
-  gan_controls,
   generate_sequences,
   pose_layer,
 )
@@ -28,6 +27,7 @@ from chorjax.registry import register
 
 class Gan(Family):
   name = "gan"
+  draws_frames = False  # whole sequences from noise
   likelihood = False
   conditioned = False
   section = ("gan", GanConfig)
@@ -59,9 +59,6 @@ class Gan(Family):
     sampler = WindowSampler(ds.train, cfg.data.seq_length, per_step, cfg.train.seed)
     return gan_train_step, sampler, {}, None
 
-  def controls(self, controls):
-    return gan_controls(controls)
-
   def frame_program(self, graphdef, params, features, draw, batch: int, num_motions: int):
     return frame_program(graphdef, params, features, draw, batch, num_motions)
 
@@ -72,7 +69,7 @@ class Gan(Family):
     """Each dancer one sequence from noise (``motion`` only counts them; no prime)."""
     if prime is not None:
       raise UserError("--prime: a GAN draws whole sequences from noise; it cannot continue a phrase")
-    controls = gan_controls(controls)
+    controls = controls.without_frame_draw()
     model = nnx.merge(graphdef, params)
     assert isinstance(model, GanModel)
     projection = pose_layer(features, model.pose)

@@ -273,10 +273,3 @@ def frame_program(graphdef, params, features, draw, batch: int, num_motions: int
   template = jax.eval_shape(fresh, jax.ShapeDtypeStruct((batch, z_size + f_size), jnp.float32))
   treedef, args, inputs, outputs = frame_io(template, ("carry", "vector"), batch, num_motions, 1, z_size + f_size)
   return program, args, inputs, outputs
-
-
-def gan_controls(controls):
-  """Sampling ``controls`` (``SampleConfig.controls``) as a GAN applies them: the frame-by-frame MDN draw
-  controls at their neutral values (temperatures 1, the rest off); ``clamp``, ``rigid_bones`` and
-  ``foot_lock`` (decoding) as given."""
-  return controls.without_frame_draw()

@@ -61,6 +61,7 @@ class Patch(Family):
   likelihood = False
   figures = False
   conditioned = False
+  draws_frames = False  # recombined, nothing drawn frame by frame
   section = ("patch", PatchConfig)
 
   def refusal(self, command: str) -> str | None:
@@ -96,9 +97,6 @@ class Patch(Family):
   def parts(self, cfg, ds):
     return _keep, WindowSampler(ds.train, cfg.data.seq_length, 1, cfg.train.seed), {}, None
 
-  def controls(self, controls):
-    return controls.without_frame_draw()  # nothing drawn frame by frame
-
   def dance(self, graphdef, params, features, motion, key, num_frames, controls, prime=None):
     """Each dancer one recombination of the takes (``motion`` only counts them; no prime)."""
     if prime is not None:
@@ -108,7 +106,7 @@ class Patch(Family):
     seeds = np.asarray(jax.random.randint(key, (int(np.shape(motion)[0]),), 0, 2**31 - 1))
     takes = model.takes()
     z = np.stack([synthesize(takes, num_frames, model.settings, np.random.default_rng(int(s))) for s in seeds])
-    return np.asarray(features.decode(z, **self.controls(controls).decoding()))
+    return np.asarray(features.decode(z, **controls.decoding()))
 
 
 register(Patch())

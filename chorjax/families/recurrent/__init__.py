@@ -49,10 +49,10 @@ class Recurrent(Family):
   own_keys = frozenset({"model.lstm_kernel", "model.condition_every_frame", "train.batch_parts"})
 
   def check(self, cfg) -> None:
-    if cfg.model.memory and cfg.train.feedback != "none":
+    if cfg.model.memory and cfg.train.feedback != "none" and cfg.train.feedback_draw == "mean":
       raise UserError(
-        "model.mdn_memory trains teacher forced (its draw carries the residuals the loss does): "
-        "set train.feedback = 'none' or model.mdn_memory = 0"
+        "model.mdn_memory feeds back what it draws (the residuals it carries are the draw's): "
+        "set train.feedback_draw = 'sample' or model.mdn_memory = 0"
       )
 
   def build_model(self, cfg, features, num_motions: int):
@@ -75,8 +75,7 @@ class Recurrent(Family):
   def parallel_step(self, parallel):
     return sharded_train_step(parallel)
 
-  def dance(self, graphdef, params, features, motion, key, num_frames, controls, prime=None):
-    return dance(graphdef, params, features, motion, key, num_frames, controls, prime)
+  dance = staticmethod(dance)  # pyright: ignore[reportAssignmentType]  (generation's, the family's arguments)
 
   def stream(self):
     return start_stream, continue_stream
