@@ -47,11 +47,13 @@ def window_features(pos_TxJx3, skeleton, size: float, fps: float) -> np.ndarray:
   return np.stack(rows) if rows else np.zeros((0, 0))
 
 
-def turn_rate(pos_TxJx3, skeleton, fps: float) -> float:
-  """How fast the heading turns: the mean absolute change of the facing angle (from the hips), degrees a second."""
+def turn_rate(pos_TxJx3, skeleton, fps: float, lag_s: float = 1.0) -> float:
+  """How fast the heading turns: the mean absolute change of the facing angle (from the hips) over ``lag_s``
+  seconds, in degrees a second (over a second a stride's sway cancels: what is left is turning)."""
   left, right = hips(skeleton)
   angle = np.unwrap(np.asarray(transforms.heading(pos_TxJx3, left, right)))
-  return float(np.degrees(np.abs(np.diff(angle)).mean()) * fps) if len(angle) > 1 else 0.0
+  lag = max(round(lag_s * fps), 1)
+  return float(np.degrees(np.abs(angle[lag:] - angle[:-lag]).mean()) / (lag / fps)) if len(angle) > lag else 0.0
 
 
 def fit(features_by_take: dict, labels_of: dict, field: str):
@@ -127,6 +129,8 @@ def judge(workdir: Path, frames: int, seed: int, controls: dict | None = None, p
         "jitter": metrics.roughness(s) / rough,
         "turn_rate": turn_rate(s, sk, fps),
         "take_turn_rate": turn_rate(takes[name], sk, fps),
+        "sway_rate": turn_rate(s, sk, fps, 1 / fps),
+        "take_sway_rate": turn_rate(takes[name], sk, fps, 1 / fps),
         **{f"{f}_accuracy": float((classifiers[f].predict(x) == p[f]).mean()) for f in fields},
       }
     )
