@@ -162,7 +162,7 @@ def _feedback_loss_fn(params, batch, key, step, spec: StepSpec):
   def body(c, inputs):
     carry, prev_BxP, state = c
     x_BxD, own_B, first, k = inputs
-    drawn, state = _own_frame(model, fb, prev_BxP, k, state)
+    drawn = _own_frame(model, fb, prev_BxP, k, state)
     x_in = jnp.where(own_B[:, None], jax.lax.stop_gradient(drawn), x_BxD)
     if model.remembers:  # the residual of the frame fed, none before the window's first
       r = jnp.where(first, 0.0, model.head.residual(prev_BxP, model.head.to_basis(x_in)))
@@ -177,23 +177,23 @@ def _feedback_loss_fn(params, batch, key, step, spec: StepSpec):
   )
   xs = (jnp.swapaxes(x_BxTxD, 0, 1), mask_BxT.T, jnp.arange(t) == 0, jax.random.split(draw_key, t))
   _, out_TxBxP = jax.lax.scan(body, init, xs)
-  out_BxTxP, targets = jnp.swapaxes(out_TxBxP, 0, 1), batch["targets"]
-  loss, aux = model.loss(out_BxTxP, targets)
+  loss, aux = model.loss(jnp.swapaxes(out_TxBxP, 0, 1), batch["targets"])
   return loss, {**aux, "feedback": mask_BxT.mean()}
 
 
 def _own_frame(model, fb: Feedback, prev_BxP, key, state):
-  """The frame the model would feed itself after ``prev`` (``(frame, draw state)``): a draw at the feedback's
-  temperatures carrying ``state``'s residuals (``model.draw``), or the mixture mean."""
+  """The frame the model would feed itself after ``prev``: a draw at the feedback's temperatures carrying
+  ``state``'s residuals (``model.draw``; its state is left to the caller, who carries the frame actually fed),
+  or the mixture mean."""
   if fb.draw == "mean":
-    return model.mean(prev_BxP), state
+    return model.mean(prev_BxP)
   if not model.remembers:
-    return model.sample(prev_BxP, key, fb.pi_temperature, fb.sigma_temperature), state
+    return model.sample(prev_BxP, key, fb.pi_temperature, fb.sigma_temperature)
   gumbel, noise = frame_numbers(key, prev_BxP.shape[0], model.num_mixtures, model.head.dim)
   drawn, _ = model.draw(
     prev_BxP, gumbel, noise, state, pi_temperature=fb.pi_temperature, sigma_temperature=fb.sigma_temperature
   )
-  return drawn, state
+  return drawn
 
 
 def _train_step(state, batch, key, spec: StepSpec, lr_scale=None, noise=None):
