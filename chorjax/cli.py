@@ -216,10 +216,11 @@ def _counts(args, **minimum) -> None:
 
 
 def _controls(args) -> dict:
-  """The sampling flags and ``--set sample.KEY=VALUE`` keys given on the command line, checked as the same keys
-  are in a config file (unset ones are None: the run's calibration, then its config)."""
+  """The sampling flags and ``--set sample.KEY=VALUE`` keys given on the command line, each with the flag that
+  gave it (``Controls.resolve`` checks them as the same keys are in a config file and names the flag; unset
+  ones are None: the run's calibration, then its config)."""
   given = {k: getattr(args, k, None) for k in api.Controls.names()}
-  where = {k: f"--{k.replace('_', '-')}" for k in given}
+  given = {k: None if v is None else api.Given(v, f"--{k.replace('_', '-')}") for k, v in given.items()}
   for text in getattr(args, "set", []):
     key, value = api.parse_override(text)
     section, _, name = key.partition(".")
@@ -227,12 +228,11 @@ def _controls(args) -> dict:
       raise UserError(f"--set {text}: expected sample.KEY=VALUE, KEY a sampling control ({', '.join(given)})")
     if given[name] is not None:
       raise UserError(f"--set {text}: sample.{name} is given twice")
-    given[name], where[name] = value, f"--set sample.{name}"
-  given = {k: v if v is None else api.check_sample_control(k, v, where[k]) for k, v in given.items()}
+    given[name] = api.Given(value, f"--set sample.{name}")
   if getattr(args, "plain", False):
-    both = [k for k in api.PLAIN if given[k] is not None]
+    both = [v.where for k, v in given.items() if k in api.PLAIN and v is not None]
     if both:
-      raise UserError(f"--plain is the model's own draw: not with {where[both[0]]}")
+      raise UserError(f"--plain is the model's own draw: not with {both[0]}")
     given.update(api.PLAIN)
   return given
 

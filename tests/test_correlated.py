@@ -2,6 +2,7 @@
 conditions every frame on what the draw carries, a prime hands its residuals to the draw, and the model's own
 draw (``--plain``) of such a run is smoother than a white-noise run's."""
 
+import collections
 import dataclasses
 import json
 from pathlib import Path
@@ -137,7 +138,8 @@ def test_the_plain_draw_of_a_correlated_run_is_smoother_than_a_white_runs(tmp_pa
 
 def _files_the_value_enters(value: float, argv: list) -> dict:
   """``{file: functions}`` of the package's functions called with ``value`` among their arguments (itself, in a
-  dict, or as a record's or a namespace's ``pace``) while ``chorjax ARGV`` runs: where a control travels."""
+  dict, or as a record's or a namespace's ``pace``, or a given flag's ``value``) while ``chorjax ARGV`` runs:
+  where a control travels; ``{function: calls}`` under ``"calls"``."""
   import argparse
   import dataclasses
   import sys
@@ -148,15 +150,16 @@ def _files_the_value_enters(value: float, argv: list) -> dict:
     if isinstance(v, dict) and depth == 0:
       return any(holds(x, 1) for x in v.values())
     record = isinstance(v, argparse.Namespace) or (dataclasses.is_dataclass(v) and not isinstance(v, type))
-    return record and getattr(v, "pace", None) == value
+    return record and value in (getattr(v, "pace", None), getattr(v, "value", None))
 
-  files: dict = {}
+  files: dict = {"calls": collections.Counter()}
   package = str(Path(cli.__file__).parent)
 
   def profile(frame, event, _):
     name = frame.f_code.co_filename
     if event == "call" and name.startswith(package) and any(holds(v) for v in list(frame.f_locals.values())):
       files.setdefault("chorjax" + Path(name).as_posix()[len(package) :], set()).add(frame.f_code.co_name)
+      files["calls"][frame.f_code.co_name] += 1
 
   sys.setprofile(profile)
   try:
@@ -181,6 +184,7 @@ def test_a_control_goes_from_its_flag_to_where_it_acts_through_six_files(tmp_pat
   assert "_governed" in files["chorjax/families/recurrent/generation.py"]  # where it acts
   checks = {"chorjax/sampling/table.py", "chorjax/fields.py"}  # validated as the config key is
   assert all(n.startswith("check_") for f in checks & files.keys() for n in files[f])
+  assert files.pop("calls")["check_sample_control"] == 1  # validated once
   route = sorted(set(files) - checks - {"chorjax/io/output.py"})  # the sample's settings written beside it
   assert route == [
     "chorjax/cli.py",

@@ -23,7 +23,7 @@ from flax import nnx
 from chorjax.data.dataset import eval_windows
 from chorjax.errors import UserError
 from chorjax.models.heads import MDNHead
-from chorjax.sampling.table import HEAD, NAMES, PLAIN, SWITCHES, TRACED, ControlFields, check_sample_control
+from chorjax.sampling.table import HEAD, NAMES, PLAIN, SWITCHES, TRACED, ControlFields, Given, check_sample_control
 
 LABEL_PACE_WIDTH = 0.05  # two label combinations that differ in one value are 2 apart: each its own pace
 
@@ -40,19 +40,20 @@ class Controls(ControlFields):
 
   @classmethod
   def resolve(cls, sample_config, calibrated: dict | None = None, **given) -> Controls:
-    """The controls a draw uses: each one ``given`` (not None), else ``calibrated`` (a run's calibration.json
-    settings), else ``sample_config``'s (a ``SampleConfig``). A name that is no control is a UserError that
-    suggests the closest."""
+    """The controls a draw uses: each one ``given`` (not None; a value, or a :class:`Given` that names the flag
+    it came from), else ``calibrated`` (a run's calibration.json settings), else ``sample_config``'s (a
+    ``SampleConfig``). A name that is no control is a UserError that suggests the closest."""
     names = cls.names()
     for name in [*given, *(calibrated or {})]:
       if name not in names:
         close = difflib.get_close_matches(name, names, n=1)
         raise UserError(f"{name!r} is not a sampling control" + (f"; did you mean {close[0]!r}?" if close else ""))
 
-    # checked as the same keys are in a config file: a value the CLI or a calibration.json gives that no
-    # [sample] could hold is refused here too (the API's keywords, a calibration edited by hand)
+    # checked once, here, as the same keys are in a config file: a value the CLI, the API's keywords or a
+    # calibration.json (edited by hand) gives that no [sample] could hold is refused, named by where it came from
+    check = lambda k, v: check_sample_control(k, *((v.value, v.where) if isinstance(v, Given) else (v, k)))
     saved = {k: check_sample_control(k, v, "calibration.json") for k, v in (calibrated or {}).items()}
-    given = {**saved, **{k: check_sample_control(k, v, k) for k, v in given.items() if v is not None}}
+    given = {**saved, **{k: check(k, v) for k, v in given.items() if v is not None}}
     values = {k: given.get(k, getattr(sample_config, k)) for k in names}
     return cls(**{**values, **{k: bool(values[k]) for k in SWITCHES}})
 

@@ -232,6 +232,15 @@ RECORDED = tuple(n for n, c in RECORDS.items() if c.recorded)  # not searched: w
 CALIBRATED = tuple(n for n, c in RECORDS.items() if c.grid or c.carried_grid or c.recorded)
 
 
+@dataclasses.dataclass(frozen=True)
+class Given:
+  """A control's value as the command line gave it, with the flag that gave it (``--pace``, ``--set
+  sample.pace``): ``Controls.resolve`` checks it once and names the flag in its error."""
+
+  value: Any
+  where: str
+
+
 def check_sample_control(name: str, value, where: str):
   """``value`` checked as ``[sample] name`` is in a config file (type, range, finite); ``where`` names
   its source in the error (e.g. the command-line flag)."""
