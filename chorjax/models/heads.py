@@ -318,8 +318,14 @@ class MDNHead(nnx.Module):
     switched = ((comp != previous_B) & (previous_B >= 0))[:, None]
     offset_BxD = crossfade * (offset_BxD + jnp.where(switched, mean_of(previous_B) - mean_of(comp), 0.0))
     u = x + offset_BxD
-    memory = [self.residual(out_BxP, u), *memory[:-1]] if self.correlated else []
-    return self.from_basis(u), (comp, offset_BxD, *memory)
+    state = (comp, offset_BxD, *memory)
+    return self.from_basis(u), self.remember(state, self.residual(out_BxP, u)) if self.correlated else state
+
+  def remember(self, state, residual_BxKxD):
+    """The draw's ``state`` (:meth:`draw`) with ``residual`` the latest of the residuals it carries, the oldest
+    forgotten: what a drawn frame leaves (:meth:`draw`), and a frame fed in training (``train.feedback``)."""
+    previous_B, offset_BxD, *memory = state
+    return (previous_B, offset_BxD, residual_BxKxD, *memory[:-1])
 
   def draw_start(self, x_BxTxD, out_BxTxP=None):
     """The draw's state before the frame after the frames ``x`` (:meth:`draw`): no component, no offset

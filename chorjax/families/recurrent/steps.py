@@ -165,8 +165,8 @@ def _feedback_loss_fn(params, batch, key, step, spec: StepSpec):
     drawn = _own_frame(model, fb, prev_BxP, k, state)
     x_in = jnp.where(own_B[:, None], jax.lax.stop_gradient(drawn), x_BxD)
     if model.remembers:  # the residual of the frame fed, none before the window's first
-      r = jnp.where(first, 0.0, model.head.residual(prev_BxP, model.head.to_basis(x_in)))
-      state = (*state[:2], r, *state[2:-1])
+      head = model.head
+      state = head.remember(state, jnp.where(first, 0.0, head.residual(prev_BxP, head.to_basis(x_in))))
     carry, out_BxP = model.step(carry, x_in, masks)
     return (carry, out_BxP, state), out_BxP
 
