@@ -79,7 +79,7 @@ from chorjax.sampling.calibrate import (  # noqa: F401
   calibrate_run,
 )
 from chorjax.sampling.controls import Controls  # noqa: F401
-from chorjax.sampling.table import CALIBRATED, FLAGGED, PLAIN, RECORDS, Given, check_sample_control  # noqa: F401
+from chorjax.sampling.table import CALIBRATED, FLAGGED, PLAIN, RECORDS, Given  # noqa: F401
 from chorjax.sampling.table import SWITCHES as CONTROL_SWITCHES  # noqa: F401
 from chorjax.sweeps import SWEEP_DESCRIPTION, SWEEP_FORMAT, run_sweep, train_command  # noqa: F401
 from chorjax.training.driver import default_workdir, train_and_evaluate

@@ -136,10 +136,10 @@ def test_the_plain_draw_of_a_correlated_run_is_smoother_than_a_white_runs(tmp_pa
   assert correlated < 0.5 * white, (correlated, white)
 
 
-def _files_the_value_enters(value: float, argv: list) -> dict:
+def _files_the_value_enters(value: float, argv: list) -> tuple[dict, collections.Counter]:
   """``{file: functions}`` of the package's functions called with ``value`` among their arguments (itself, in a
   dict, or as a record's or a namespace's ``pace``, or a given flag's ``value``) while ``chorjax ARGV`` runs:
-  where a control travels; ``{function: calls}`` under ``"calls"``."""
+  where a control travels; and ``{function: calls}``."""
   import argparse
   import dataclasses
   import sys
@@ -152,21 +152,22 @@ def _files_the_value_enters(value: float, argv: list) -> dict:
     record = isinstance(v, argparse.Namespace) or (dataclasses.is_dataclass(v) and not isinstance(v, type))
     return record and value in (getattr(v, "pace", None), getattr(v, "value", None))
 
-  files: dict = {"calls": collections.Counter()}
+  files: dict = {}
+  calls: collections.Counter = collections.Counter()
   package = str(Path(cli.__file__).parent)
 
   def profile(frame, event, _):
     name = frame.f_code.co_filename
     if event == "call" and name.startswith(package) and any(holds(v) for v in list(frame.f_locals.values())):
       files.setdefault("chorjax" + Path(name).as_posix()[len(package) :], set()).add(frame.f_code.co_name)
-      files["calls"][frame.f_code.co_name] += 1
+      calls[frame.f_code.co_name] += 1
 
   sys.setprofile(profile)
   try:
     assert cli.main(argv) == 0
   finally:
     sys.setprofile(None)
-  return files
+  return files, calls
 
 
 def test_a_control_goes_from_its_flag_to_where_it_acts_through_six_files(tmp_path):
@@ -178,13 +179,13 @@ def test_a_control_goes_from_its_flag_to_where_it_acts_through_six_files(tmp_pat
   common += ["data.representation=canonical", "train.calibrate=false", "log.tensorboard=false"]
   train_and_evaluate(tiny_config(*common, "model.mdn_memory=2"), tmp_path / "run")
   gain = 1.2345
-  files = _files_the_value_enters(
+  files, calls = _files_the_value_enters(
     gain, ["sample", str(tmp_path / "run"), "-o", str(tmp_path / "s.csv"), "--frames", "20", "--pace", str(gain)]
   )
   assert "_governed" in files["chorjax/families/recurrent/generation.py"]  # where it acts
   checks = {"chorjax/sampling/table.py", "chorjax/fields.py"}  # validated as the config key is
   assert all(n.startswith("check_") for f in checks & files.keys() for n in files[f])
-  assert files.pop("calls")["check_sample_control"] == 1  # validated once
+  assert calls["check_sample_control"] == 1  # validated once
   route = sorted(set(files) - checks - {"chorjax/io/output.py"})  # the sample's settings written beside it
   assert route == [
     "chorjax/cli.py",
