@@ -107,6 +107,7 @@ def key_docs(prefix: str = "", registered: bool = True) -> list[dict]:
             "choices": field_choices(meta, registered),
             "minimum": meta.get("minimum"),
             "below": meta.get("below"),
+            "maximum": meta.get("maximum"),
           }
         )
   if not rows:
@@ -142,6 +143,8 @@ def key_help(key: str | dict) -> str:
     bounds.append(f">= {row['minimum']:g}")
   if row["below"] is not None:
     bounds.append(f"< {row['below']:g}")
+  if row["maximum"] is not None:
+    bounds.append(f"<= {row['maximum']:g}")
   return row["help"] + (f" [{', '.join(bounds)}]" if bounds else "")
 
 

@@ -22,19 +22,21 @@ def config_field(
   resumable: bool = False,
   below: float | None = None,
   more: str | None = None,
+  maximum: float | None = None,
   **extra,
 ) -> Any:
   """A config field: its default, help text (one or two lines: ``chorjax config keys`` and the flags that set
   it show it) and checks; ``more``: what the docs' reference says besides (the reasoning, the measurements).
   ``choices`` of a list field apply to each of its elements; ``resumable`` keys may change when a run is
-  continued without --force (e.g. to train longer); ``below``: an exclusive upper bound; ``extra``: more
-  metadata (a sampling control's record)."""
+  continued without --force (e.g. to train longer); ``below``: an exclusive upper bound, ``maximum`` an
+  inclusive one; ``extra``: more metadata (a sampling control's record)."""
   meta = {
     "help": help,
     "more": more,
     "choices": choices if callable(choices) else tuple(choices) if choices else None,
     "minimum": minimum,
     "below": below,
+    "maximum": maximum,
     "resumable": resumable,
     **extra,
   }
@@ -99,4 +101,6 @@ def check_value(where: str, key: str, field: dataclasses.Field, hint: type, valu
     raise UserError(f"{where}: key {key!r}: {value!r} is below the minimum {meta['minimum']}")
   if meta.get("below") is not None and not value < meta["below"]:
     raise UserError(f"{where}: key {key!r}: {value!r} must be below {meta['below']}")
+  if meta.get("maximum") is not None and value > meta["maximum"]:
+    raise UserError(f"{where}: key {key!r}: {value!r} is above the maximum {meta['maximum']}")
   return value

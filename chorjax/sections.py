@@ -166,6 +166,19 @@ class ModelConfig:
     ),
     choices=("free", "smooth"),
   )
+  mdn_radius: float = _field(
+    1.0,
+    "the carried residuals' autoregression keeps its roots within this radius: a deviation fades within about "
+    "1 / (1 - radius) frames (1 = any stationary one)",
+    more=(
+      "Each lag's coefficient is scaled by radius^lag, which scales every root of the autoregression by the "
+      "radius: what the residuals keep doing fades, and the means have to carry the motion over longer times. "
+      "With `model.mdn_carry = 'smooth'` and 3 lags the polynomial at -1 may then fall a little under 1 (to "
+      "0.94 at radius 0.5)."
+    ),
+    minimum=0.0,
+    maximum=1.0,
+  )
   min_scale: float = _field(1e-3, "floor of MDN scales (normalized units)", minimum=0.0)
   dropout: float = _field(0.0, "dropout rate between layers (same mask at every time step)", minimum=0.0, below=1.0)
   forget_bias: float = _field(1.0, "initial forget-gate bias of (LN-)LSTM cells (notebook: 5.0)")

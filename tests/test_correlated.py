@@ -96,6 +96,32 @@ def test_a_drawn_frame_is_the_carried_mean_plus_its_scale_and_its_residual_is_re
     np.testing.assert_allclose(held, carried[:, 3], atol=1e-6)
 
 
+def _carried_roots(head, out):
+  """The moduli of the roots of the autoregression ``head.carried`` applies to the residuals, per coordinate
+  of the first component: each lag's coefficient read off by carrying a unit residual at that lag alone."""
+  zeros = [jnp.zeros((1, head.num_mixtures, head.dim))] * head.memory
+  base = head.carried(out, zeros)[1][0, 0]
+  phi = [head.carried(out, [z + (k == lag) for k, z in enumerate(zeros)])[1][0, 0] - base for lag in range(head.memory)]
+  coeffs = np.stack([np.ones(head.dim), *[-np.asarray(p) for p in phi]], axis=1)  # z^M - phi_1 z^(M-1) - ...
+  return np.array([np.abs(np.roots(c)).max() for c in coeffs])
+
+
+def test_a_carry_within_a_radius_keeps_every_root_of_its_autoregression_within_it():
+  """``model.mdn_radius``: whatever the network outputs, what the residuals keep doing fades at least as fast
+  as radius^t (every root of the carried autoregression within the radius), where the same outputs with no
+  radius carry a deviation for longer."""
+  model, window = _model_and_window(4, memory=3)
+  out = model(window[:, :-1], jnp.zeros((1,), jnp.int32))[:, 2] * 4.0  # outputs far from zero: partials near +-1
+  head = model.head
+  unbounded = _carried_roots(head, out)
+  head.radius = 0.8
+  bounded = _carried_roots(head, out)
+  assert unbounded.max() > 0.9 and bounded.max() <= 0.8 + 1e-4
+  np.testing.assert_allclose(bounded, 0.8 * unbounded, rtol=1e-3)  # every root scaled by the radius
+  cfg = tiny_config("model.mdn_memory=3", "model.mdn_radius=0.8")
+  assert create_model(cfg.model, head.dim, 2, seed=0).head.radius == 0.8
+
+
 @pytest.mark.parametrize("memory", [1, 2, 3])
 def test_a_smooth_carry_never_gains_power_at_the_highest_frequency(memory):
   """``model.mdn_carry = "smooth"``: whatever the network outputs, each lag's partial autocorrelation is in

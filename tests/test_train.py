@@ -48,6 +48,7 @@ def write_config(path: Path, *overrides) -> Path:
     ("[train]\nbatch_size = 2.5\n", "key 'train.batch_size': expected int"),
     ("[modle]\ncell = 'gru'\n", "unknown section 'modle'; did you mean 'model'?"),
     ("[train]\nnum_steps = -3\n", "below the minimum"),
+    ("[model]\nmdn_radius = 1.5\n", "key 'model.mdn_radius': 1.5 is above the maximum 1.0"),
     ("[model\n", "invalid TOML"),
   ],
 )

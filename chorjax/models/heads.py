@@ -200,10 +200,11 @@ class MDNHead(nnx.Module):
     memory: int = 0,
     white: int = 0,
     smooth: bool = False,
+    radius: float = 1.0,
     rngs: nnx.Rngs,
   ):
     self.dim, self.num_mixtures, self.isotropic, self.min_scale = dim, num_mixtures, isotropic, min_scale
-    self.memory, self.white, self.smooth = memory, white, smooth
+    self.memory, self.white, self.smooth, self.radius = memory, white, smooth, radius
     self.out = nnx.Linear(hidden, self.num_outputs, rngs=rngs)
     self.basis = nnx.Param(jnp.eye(dim)) if basis else None  # a Param so checkpoints carry it; never trained
 
@@ -251,8 +252,8 @@ class MDNHead(nnx.Module):
     if self.white:  # the last axes carry nothing: drawn white about the means
       partial = partial * (jnp.arange(self.num_scales) < self.num_scales - self.white)
     carried = mu
-    for phi, r in zip(ar_coefficients(list(partial)), residuals):
-      carried = carried + phi * r
+    for lag, (phi, r) in enumerate(zip(ar_coefficients(list(partial)), residuals), 1):
+      carried = carried + phi * self.radius**lag * r
     return logpi, carried, scale
 
   def residual(self, out_xP, u_xD):

@@ -46,6 +46,7 @@ class ChorModel(nnx.Module):
         memory=cfg.memory,
         white=white,
         smooth=cfg.mdn_carry == "smooth",
+        radius=cfg.mdn_radius,
         rngs=rngs,
       )
     else:
