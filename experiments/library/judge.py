@@ -77,11 +77,13 @@ def judge(workdir: Path, frames: int, seed: int, controls: dict | None = None, p
   size = float(np.mean([metrics.body_size(takes[n], sk) for n in run.train_takes]))
   feats = {n: window_features(p, sk, size, fps) for n, p in takes.items()}
   train = {n: feats[n] for n in run.train_takes}
-  held = {n: feats[n] for n in run.val_takes}
+  # the held-out takes at least one judged window long (a run with a short data.seq_length holds out shorter ones)
+  val_takes = [n for n in run.val_takes if len(feats[n])]
+  held = {n: feats[n] for n in val_takes}
   fields = list(ds.labels.fields)
   classifiers = {f: fit(train, labels_of, f) for f in fields}
 
-  pairs = [labels_of[n] for n in run.val_takes]
+  pairs = [labels_of[n] for n in val_takes]
   sampling = run.sampling(**(controls or {}))
   served = run.serving("sample").ranged(sampling)
   motion = np.stack([served.motion_weights(",".join(f"{f}={p[f]}" for f in fields)) for p in pairs])
@@ -119,7 +121,7 @@ def judge(workdir: Path, frames: int, seed: int, controls: dict | None = None, p
     }
   lag = max(round(0.5 * fps), 1)
   per_pair = []
-  for p, name, s, x in zip(pairs, run.val_takes, samples, sample_feats):
+  for p, name, s, x in zip(pairs, val_takes, samples, sample_feats):
     disp, rough = metrics.reference_rates([takes[name]], sk.root, lag)
     per_pair.append(
       {
@@ -138,7 +140,7 @@ def judge(workdir: Path, frames: int, seed: int, controls: dict | None = None, p
   if "action" in fields:  # the walks' turning: every walk take's, the samples' per pair above
     walks = [n for n in takes if labels_of[n]["action"] == "walk"]
     out["walk_take_turn_rates"] = [turn_rate(takes[n], sk, fps) for n in walks]
-  pooled = scoring.score(samples, [takes[n] for n in run.val_takes], sk, fps, seed=seed)
+  pooled = scoring.score(samples, [takes[n] for n in val_takes], sk, fps, seed=seed)
   out["pooled"] = {k: pooled[k] for k in POOLED}
   return out
 
