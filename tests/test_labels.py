@@ -314,3 +314,27 @@ def test_a_pattern_reading_a_label_motion_cannot_name_is_refused():
   with pytest.raises(UserError, match=r"take 'a=b_1': x 'a=b'"):
     read_labels(r"^(?P<x>[^_]+)_\d$", ["a=b_1"])
   assert read_labels(r"^(?P<x>[^_]+)_\d$", ["ab_1"]).fields == {"x": ("ab",)}
+
+
+def test_a_short_take_loops_up_to_data_loop_and_a_held_out_one_too_short_is_left_out(takes):
+  """A library's short action, looped: a take shorter than a window is kept, played back to back, so the
+  dancer learns to do it again; a held-out take shorter than a window is not validated on."""
+  from chorjax.config import load_config
+
+  library = ROOT / "configs" / "library.toml"
+  plain = load_dataset(load_config(library, [f"data.dataset={takes}", "data.loop=0"]).data)
+  length = {m.name: m.num_frames for m in plain.motions}
+  window = sorted(length.values())[len(length) // 2]  # half the takes are shorter than a window
+  cfg = load_config(library, [f"data.dataset={takes}", f"data.seq_length={window}", f"data.loop={2 * window / 30}"])
+  ds = load_dataset(cfg.data)
+  assert min(length[n] for n in plain.train_names) <= window  # without the loop, shorter than one window
+  assert ds.fps == 30 and ds.train_names == plain.train_names  # none left out for being short
+  units = lambda x, f: x * f.std + f.mean  # the looped takes' statistics differ: compared in the features' units
+  for (_, x), (_, raw), name in zip(ds.train, plain.train, ds.train_names):
+    n, raw = length[name], units(raw, plain.features)
+    assert len(x) == -(-2 * window // n) * n >= 2 * window  # whole plays of the take, at least the loop
+    np.testing.assert_allclose(units(x[:n], ds.features), raw, atol=1e-4)
+    np.testing.assert_allclose(units(x[n : 2 * n], ds.features), raw, atol=1e-4)
+  short = [n for n in plain.val_names if length[n] <= window]
+  assert short and ds.val_names == tuple(n for n in plain.val_names if n not in short)
+  assert f"note: {len(short)} held-out takes are shorter than one window" in " ".join(dataset_notes(ds))

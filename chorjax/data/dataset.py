@@ -284,13 +284,14 @@ def _load_dataset(data_cfg) -> Dataset:
   cache = Cache(cache_root(data_cfg.cache))
   motions = conform(read_takes([data_cfg.dataset], data_cfg, cache), data_cfg, mappings, rest_notes)
   motions, fps, notes = one_rate(motions, data_cfg.seq_length)
-  motions, usable_notes = _usable(motions, data_cfg)
+  motions, usable_notes = _usable(motions, data_cfg, fps)
   notes = rest_notes + notes + usable_notes
   names = [m.name for m in motions]
   labels = read_labels(data_cfg.labels, names) if data_cfg.labels else None
   id_map = {n: i for i, n in enumerate(labels.names if labels else names)}
   val_names = _val_names(names, data_cfg.val_takes, data_cfg.val_pattern)
   train_names = [n for n in names if n not in val_names]
+  val_names, notes = _long_enough(val_names, motions, data_cfg, notes)
   motions, tails = with_tails(motions, train_names, data_cfg)
   by_name = {m.name: m for m in [*motions, *tails]}
   val_names = [*val_names, *(t.name for t in tails)]
@@ -315,7 +316,8 @@ def _load_dataset(data_cfg) -> Dataset:
   floor = floor_height(canon, skeleton) if data_cfg.representation == "canonical" else None
   proto = dataclasses.replace(proto, lengths=lengths, floor=floor)
   versions = {n: [v for k, v in sorted(encoded.pop(n).items()) if k.startswith("version")] for n in names}
-  train_raw = [(condition(n), x) for n in train_names for x in versions[n]]
+  loop = round(data_cfg.loop * fps)
+  train_raw = [(condition(n), looped(x, loop)) for n in train_names for x in versions[n]]
   val_raw = [(condition(n), versions[n][0]) for n in val_names]
   del versions, canon  # the raw versions live on in train_raw / val_raw alone, each let go once normalized
   stats = transforms.merged_stats([x for _, x in train_raw])
@@ -379,14 +381,35 @@ def with_tails(motions: Sequence, train_names: Sequence[str], data_cfg) -> tuple
   return heads, tails
 
 
-def _usable(motions, data_cfg) -> tuple[list, list[str]]:
+def looped(x: np.ndarray, frames: int) -> np.ndarray:
+  """A take's encoded frames ``x`` played back to back until at least ``frames`` long (``data.loop``); a take
+  that long already, as it is. In root-motion features (canonical) the seam's frame takes no step: the root
+  does not jump back, only the pose goes from the take's last frame to its first (a short take's both stand)."""
+  return np.concatenate([x] * -(-frames // len(x))) if len(x) < frames else x
+
+
+def _long_enough(val_names: list[str], motions, data_cfg, notes: list[str]) -> tuple[list[str], list[str]]:
+  """The held-out takes at least one window long: with ``data.loop``, shorter takes are kept to train on, and
+  those held out are left out of validation, with a note."""
+  need, frames = data_cfg.seq_length + 1, {m.name: m.num_frames for m in motions}
+  short = [n for n in val_names if frames[n] < need]
+  if not short:
+    return val_names, notes
+  line = f"note: {len(short)} held-out takes are shorter than one window ({need} frames) and are not validated on"
+  return [n for n in val_names if n not in short], [*notes, line]
+
+
+def _usable(motions, data_cfg, fps: float) -> tuple[list, list[str]]:
   """The takes training can use and what to say about the others: a UserError for two takes of one name, for
   no take as long as a window, or none that moves; takes shorter than a window are left out, with a warning
-  naming them (a library's short takes); a warning per take that does not move."""
+  naming them (a library's short takes), unless ``data.loop`` makes them a window long; a warning per take that
+  does not move."""
   names = [m.name for m in motions]
   if len(set(names)) != len(names):
     raise UserError(f"{data_cfg.dataset}: two takes share a name; ids come from file names")
   need = data_cfg.seq_length + 1
+  if round(data_cfg.loop * fps) >= need:  # looped up to a window: a take needs a step to loop
+    need = 2
   short = [m for m in motions if m.num_frames < need]
   if len(short) == len(motions):
     m = short[0]
