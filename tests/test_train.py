@@ -78,11 +78,14 @@ def test_shipped_configs_load_and_overrides_apply(capsys):
 
 def test_a_config_stands_on_a_base_and_states_only_what_differs(tmp_path, capsys):
   """``base = "FILE"`` (relative to the config): the base's keys, then the config's own; its name is its own.
-  configs/library.toml is configs/white.toml and its library keys; ``config show`` prints the resolved whole; a
-  missing base, a base that leads back to itself, or a bad key in the base is one line naming the file."""
-  quick, library = (load_config(ROOT / "configs" / f"{n}.toml") for n in ("white", "library"))
-  assert library.name == "library" and library.model == dataclasses.replace(quick.model, condition_every_frame=True)
-  assert (library.data.dataset, library.train.epochs, library.optim) == ("bandai-motion", 80.0, quick.optim)
+  configs/library.toml is configs/quickstart.toml and its library keys; ``config show`` prints the resolved whole;
+  a missing base, a base that leads back to itself, or a bad key in the base is one line naming the file."""
+  quick, library = (load_config(ROOT / "configs" / f"{n}.toml") for n in ("quickstart", "library"))
+  library_keys = {"condition_every_frame": True, "mdn_basis": "pca", "mdn_radius": 0.4}
+  assert library.name == "library" and library.model == dataclasses.replace(quick.model, **library_keys)
+  assert library.sample == quick.sample and library.train.feedback == "auto"
+  assert (library.data.dataset, library.data.loop, library.train.epochs) == ("bandai-motion", 4.0, 56.0)
+  assert library.optim == quick.optim
   assert cli.main(["config", "show", str(ROOT / "configs" / "library.toml")]) == 0
   shown = capsys.readouterr().out
   assert "base" not in shown and 'name = "library"' in shown and "hidden_size = 192" in shown

@@ -1,6 +1,7 @@
 #!/bin/bash
-# configs/library.toml on one GPU: read cold (the cache empty, one process per core), read warm (the cache
-# filled), the training's steps/s and time to the kept checkpoint, and three seeds as one vectorized program.
+# configs/library.toml on one GPU (BENCHMARKS.md measured the recipe of then, sweep.toml's white): read cold
+# (the cache empty, one process per core), read warm (the cache filled), the training's steps/s and time to the
+# kept checkpoint, and three seeds as one vectorized program.
 # A device call carries at most 64 MiB, so the library travels as a subset made here, e.g.
 #   cd DIR_WITH_UNPACKED && ls bandai-motion/dataset-1_*.bvh bandai-motion/dataset-2_*_00[1-8].bvh \
 #     bandai-motion/*.md bandai-motion/*.txt | tar cf - -T - | xz -6 > REPO/.gpu/bandai-subset.tar.xz
