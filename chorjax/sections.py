@@ -112,7 +112,7 @@ class DataConfig:
     0.0,
     "training takes shorter than this many seconds play back to back up to it: a short action is done again (0: off)",
     more=(
-      "A library's short takes (a raised hand, a turn) start and end standing: trained as they are, the dancer "
+      "A library's short takes (a raised hand, a run) start and end standing: trained as they are, the dancer "
       "learns to stand once the action is done; looped, it learns to do it again. Takes shorter than one window "
       "are then kept for training; held-out ones that short are left out of validation."
     ),
