@@ -84,7 +84,7 @@ def test_a_config_stands_on_a_base_and_states_only_what_differs(tmp_path, capsys
   library_keys = {"condition_every_frame": True, "mdn_basis": "pca", "mdn_radius": 0.4}
   assert library.name == "library" and library.model == dataclasses.replace(quick.model, **library_keys)
   assert library.sample == quick.sample and library.train.feedback == "auto"
-  assert (library.data.dataset, library.data.loop, library.train.epochs) == ("bandai-motion", 4.0, 56.0)
+  assert (library.data.dataset, library.data.loop, library.train.epochs) == ("bandai-motion", 3.0, 64.0)
   assert library.optim == quick.optim
   assert cli.main(["config", "show", str(ROOT / "configs" / "library.toml")]) == 0
   shown = capsys.readouterr().out
