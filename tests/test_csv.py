@@ -81,3 +81,9 @@ def test_a_take_shorter_than_a_window_is_left_out_and_named_and_all_of_them_are_
   cfg = load_config(None, [f"data.dataset={str(tmp_path)!r}", "data.seq_length=40"])
   with pytest.raises(UserError, match=r"a\.csv: 30 frames, shorter than one window"):
     load_dataset(cfg.data)
+  # looped up to a window (data.loop), a take needs only a step: one frame is refused as that, not as a window
+  (tmp_path / "a.csv").write_text(moving(0))
+  (tmp_path / "b.csv").write_text(moving(0))
+  cfg = load_config(None, [f"data.dataset={str(tmp_path)!r}", "data.seq_length=10", "data.loop=1.0"])
+  with pytest.raises(UserError, match=r"a\.csv: 1 frames, shorter than two frames \(data\.loop"):
+    load_dataset(cfg.data)

@@ -358,11 +358,16 @@ def _normalized(raw: list, features: Features) -> tuple:
 TAIL = " (tail)"  # a take's last frames held out (data.val_tail): the take's name and this
 
 
+def window(data_cfg) -> int:
+  """Frames in one training window: ``data.seq_length`` inputs and the frame after the last."""
+  return data_cfg.seq_length + 1
+
+
 def with_tails(motions: Sequence, train_names: Sequence[str], data_cfg) -> tuple[list, list]:
   """``(motions, tails)``: with ``data.val_tail``, each training take's last share of frames (at least one
   window: ``data.seq_length + 1``) cut off as a take of its own named ``NAME (tail)``, the take keeping the
   rest; without it, the motions as they are and no tails. A take too short to give both a window is refused."""
-  share, need = data_cfg.val_tail, data_cfg.seq_length + 1
+  share, need = data_cfg.val_tail, window(data_cfg)
   if not share:
     return list(motions), []
   heads, tails, trained = [], [], set(train_names)
@@ -391,7 +396,7 @@ def looped(x: np.ndarray, frames: int) -> np.ndarray:
 def _long_enough(val_names: list[str], motions, data_cfg, notes: list[str]) -> tuple[list[str], list[str]]:
   """The held-out takes at least one window long: with ``data.loop``, shorter takes are kept to train on, and
   those held out are left out of validation, with a note."""
-  need, frames = data_cfg.seq_length + 1, {m.name: m.num_frames for m in motions}
+  need, frames = window(data_cfg), {m.name: m.num_frames for m in motions}
   short = [n for n in val_names if frames[n] < need]
   if not short:
     return val_names, notes
@@ -407,19 +412,19 @@ def _usable(motions, data_cfg, fps: float) -> tuple[list, list[str]]:
   names = [m.name for m in motions]
   if len(set(names)) != len(names):
     raise UserError(f"{data_cfg.dataset}: two takes share a name; ids come from file names")
-  need = data_cfg.seq_length + 1
+  need = window(data_cfg)
+  what, keep = f"one window (data.seq_length + 1 = {need} frames)", "; a shorter data.seq_length keeps them"
   if round(data_cfg.loop * fps) >= need:  # looped up to a window: a take needs a step to loop
-    need = 2
+    need, what, keep = 2, "two frames (data.loop plays a take back to back)", ""
   short = [m for m in motions if m.num_frames < need]
   if len(short) == len(motions):
     m = short[0]
-    raise UserError(f"{m.source}: {m.num_frames} frames, shorter than one window (data.seq_length + 1 = {need})")
+    raise UserError(f"{m.source}: {m.num_frames} frames, shorter than {what}")
   notes = []
   if short:
     which = ", ".join(f"{m.name} ({m.num_frames})" for m in short[:3]) + (" ..." if len(short) > 3 else "")
     notes.append(
-      f"warning: {len(short)} of {len(motions)} takes are shorter than one window (data.seq_length + 1 = {need} "
-      f"frames) and are left out: {which}; a shorter data.seq_length keeps them"
+      f"warning: {len(short)} of {len(motions)} takes are shorter than {what} and are left out: {which}{keep}"
     )
     motions = [m for m in motions if m.num_frames >= need]
   frozen = [m.name for m in motions if not np.ptp(m.positions, axis=0).max() > 0]
