@@ -382,7 +382,7 @@ def ground_feet(
   within ``width // 2`` needs, averaged over as many). With ``root`` and ``max_rise`` (the training takes'
   largest vertical root step per frame) the shift follows at the pace the dancer could: no frame moves the
   root up or down by more than ``max_rise`` (where the shift alone would, it catches up over the next frames
-  instead)."""
+  instead), the lift that ``sink`` asks for included: it starts as early as that pace needs."""
   return _ground_feet(pos_xTxJx3, contacts_xTxF, tuple(feet), floor, hold, width, root, max_rise, sink)
 
 
@@ -404,21 +404,41 @@ def _ground_feet(pos_xTxJx3, contacts_xTxF, feet, floor, hold, width, root, max_
   _, shift = jax.lax.scan(step, jnp.zeros(target.shape[:-1], target.dtype), (time_first(target), time_first(touching)))
   shift = jnp.moveaxis(shift, 0, -1)
   eased = ease(shift, width)
+  least = None if sink is None else floor - sink - jnp.min(y, -1)  # the shift below which a foot sinks too far
   if root is not None and max_rise is not None:
     own = pos_xTxJx3[..., root, 1]
+    low = jnp.full_like(own, -jnp.inf)  # the root's lowest height: where a foot would sink, lifted early enough
+    if least is not None:  # to be made at the dancer's pace, and as smoothly as the lift without it
+      low = _box(_box(_envelope(own + least, max_rise), width // 2, jnp.max), width // 2, jnp.mean)
+    low = time_first(low)
 
     def paced(last, frame):  # last: the shifted root's height one frame before
-      want, height = frame
-      moved = jnp.clip(want, last - max_rise - height, last + max_rise - height)
-      return height + moved, moved
+      want, lowest = frame
+      height = jnp.clip(jnp.maximum(want, lowest), last - max_rise, last + max_rise)
+      return height, height
 
-    first = own[..., 0] + eased[..., 0]
-    _, eased = jax.lax.scan(paced, first, (time_first(eased), time_first(own)))
-    eased = jnp.moveaxis(eased, 0, -1)
-  if sink is not None:  # and no foot further below the floor than that, wherever the shift left it
-    lift = jnp.maximum(floor - sink - (jnp.min(y, -1) + eased), 0.0)
+    want = time_first(own + eased)
+    first = jnp.maximum(want[0], low[0])
+    _, height = jax.lax.scan(paced, first, (want, low))
+    eased = jnp.moveaxis(height, 0, -1) - own
+  elif least is not None:  # and no foot further below the floor than that, wherever the shift left it
+    lift = jnp.maximum(least - eased, 0.0)
     eased = eased + _box(_box(lift, width // 2, jnp.max), width // 2, jnp.mean)  # >= every frame's own lift
   return pos_xTxJx3 + eased[..., None, None] * jnp.array([0.0, 1.0, 0.0])
+
+
+def _envelope(low_xT, rate):
+  """The least heights ``>= low`` (time the last axis) that change by at most ``rate`` a frame: ``low``'s
+  peaks widened into ramps either side, so that a body paced at ``rate`` reaches each in time."""
+
+  def ahead(last, a):
+    height = jnp.maximum(a, last - rate)
+    return height, height
+
+  low_Tx = jnp.moveaxis(low_xT, -1, 0)
+  _, forward = jax.lax.scan(ahead, low_Tx[0], low_Tx)
+  _, both = jax.lax.scan(ahead, forward[-1], forward, reverse=True)
+  return jnp.moveaxis(both, 0, -1)
 
 
 def _box(a_xT, width: int, reduce):

@@ -104,6 +104,7 @@ def figures(metrics: dict) -> dict:
   out["fid_k"] /= mean("fid_k_train")
   out["fid_g"] /= mean("fid_g_train")
   out["heldout_loss"] = metrics["heldout_loss"]
+  out["airborne"] = mean("airborne")  # a fraction of the frames (the held-out takes': airborne_real)
   return out
 
 
