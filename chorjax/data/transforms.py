@@ -405,25 +405,22 @@ def _ground_feet(pos_xTxJx3, contacts_xTxF, feet, floor, hold, width, root, max_
   shift = jnp.moveaxis(shift, 0, -1)
   eased = ease(shift, width)
   least = None if sink is None else floor - sink - jnp.min(y, -1)  # the shift below which a foot sinks too far
+  if least is not None:  # no foot further below the floor than that, wherever the shift left it
+    lift = jnp.maximum(least - eased, 0.0)
+    eased = eased + _box(_box(lift, width // 2, jnp.max), width // 2, jnp.mean)  # >= every frame's own lift
   if root is not None and max_rise is not None:
     own = pos_xTxJx3[..., root, 1]
-    low = jnp.full_like(own, -jnp.inf)  # the root's lowest height: where a foot would sink, lifted early enough
-    if least is not None:  # to be made at the dancer's pace, and as smoothly as the lift without it
-      low = _box(_box(_envelope(own + least, max_rise), width // 2, jnp.max), width // 2, jnp.mean)
-    low = time_first(low)
+    # the root's lowest height: where a foot would sink, lifted early enough to be made at the dancer's pace
+    low = jnp.full_like(own, -jnp.inf) if least is None else _envelope(own + least, max_rise)
 
     def paced(last, frame):  # last: the shifted root's height one frame before
       want, lowest = frame
       height = jnp.clip(jnp.maximum(want, lowest), last - max_rise, last + max_rise)
       return height, height
 
-    want = time_first(own + eased)
-    first = jnp.maximum(want[0], low[0])
-    _, height = jax.lax.scan(paced, first, (want, low))
+    want, low = time_first(own + eased), time_first(low)
+    _, height = jax.lax.scan(paced, jnp.maximum(want[0], low[0]), (want, low))
     eased = jnp.moveaxis(height, 0, -1) - own
-  elif least is not None:  # and no foot further below the floor than that, wherever the shift left it
-    lift = jnp.maximum(least - eased, 0.0)
-    eased = eased + _box(_box(lift, width // 2, jnp.max), width // 2, jnp.mean)  # >= every frame's own lift
   return pos_xTxJx3 + eased[..., None, None] * jnp.array([0.0, 1.0, 0.0])
 
 
