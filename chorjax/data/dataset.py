@@ -284,14 +284,16 @@ def _load_dataset(data_cfg) -> Dataset:
   cache = Cache(cache_root(data_cfg.cache))
   motions = conform(read_takes([data_cfg.dataset], data_cfg, cache), data_cfg, mappings, rest_notes)
   motions, fps, notes = one_rate(motions, data_cfg.seq_length)
-  motions, usable_notes = _usable(motions, data_cfg, fps)
+  loop = round(data_cfg.loop * fps)  # data.loop in frames
+  motions, usable_notes = _usable(motions, data_cfg, loop)
   notes = rest_notes + notes + usable_notes
   names = [m.name for m in motions]
   labels = read_labels(data_cfg.labels, names) if data_cfg.labels else None
   id_map = {n: i for i, n in enumerate(labels.names if labels else names)}
   val_names = _val_names(names, data_cfg.val_takes, data_cfg.val_pattern)
   train_names = [n for n in names if n not in val_names]
-  val_names, notes = _long_enough(val_names, motions, data_cfg, notes)
+  val_names, short_notes = _long_enough(val_names, motions, data_cfg)
+  notes += short_notes
   motions, tails = with_tails(motions, train_names, data_cfg)
   by_name = {m.name: m for m in [*motions, *tails]}
   val_names = [*val_names, *(t.name for t in tails)]
@@ -316,7 +318,6 @@ def _load_dataset(data_cfg) -> Dataset:
   floor = floor_height(canon, skeleton) if data_cfg.representation == "canonical" else None
   proto = dataclasses.replace(proto, lengths=lengths, floor=floor)
   versions = {n: [v for k, v in sorted(encoded.pop(n).items()) if k.startswith("version")] for n in names}
-  loop = round(data_cfg.loop * fps)
   train_raw = [(condition(n), looped(x, loop)) for n in train_names for x in versions[n]]
   val_raw = [(condition(n), versions[n][0]) for n in val_names]
   del versions, canon  # the raw versions live on in train_raw / val_raw alone, each let go once normalized
@@ -393,28 +394,28 @@ def looped(x: np.ndarray, frames: int) -> np.ndarray:
   return np.concatenate([x] * -(-frames // len(x))) if len(x) < frames else x
 
 
-def _long_enough(val_names: list[str], motions, data_cfg, notes: list[str]) -> tuple[list[str], list[str]]:
-  """The held-out takes at least one window long: with ``data.loop``, shorter takes are kept to train on, and
-  those held out are left out of validation, with a note."""
+def _long_enough(val_names: list[str], motions, data_cfg) -> tuple[list[str], list[str]]:
+  """``(the held-out takes at least one window long, a note naming how many are not)``: with ``data.loop``,
+  shorter takes are kept to train on, and those held out are left out of validation."""
   need, frames = window(data_cfg), {m.name: m.num_frames for m in motions}
   short = [n for n in val_names if frames[n] < need]
   if not short:
-    return val_names, notes
+    return val_names, []
   line = f"note: {len(short)} held-out takes are shorter than one window ({need} frames) and are not validated on"
-  return [n for n in val_names if n not in short], [*notes, line]
+  return [n for n in val_names if n not in short], [line]
 
 
-def _usable(motions, data_cfg, fps: float) -> tuple[list, list[str]]:
+def _usable(motions, data_cfg, loop: int) -> tuple[list, list[str]]:
   """The takes training can use and what to say about the others: a UserError for two takes of one name, for
   no take as long as a window, or none that moves; takes shorter than a window are left out, with a warning
   naming them (a library's short takes), unless ``data.loop`` makes them a window long; a warning per take that
-  does not move."""
+  does not move. ``loop``: ``data.loop`` in frames."""
   names = [m.name for m in motions]
   if len(set(names)) != len(names):
     raise UserError(f"{data_cfg.dataset}: two takes share a name; ids come from file names")
   need = window(data_cfg)
   what, keep = f"one window (data.seq_length + 1 = {need} frames)", "; a shorter data.seq_length keeps them"
-  if round(data_cfg.loop * fps) >= need:  # looped up to a window: a take needs a step to loop
+  if loop >= need:  # looped up to a window: a take needs a step to loop
     need, what, keep = 2, "two frames (data.loop plays a take back to back)", ""
   short = [m for m in motions if m.num_frames < need]
   if len(short) == len(motions):
