@@ -125,6 +125,15 @@ def load_toml(text: str) -> dict:
     raise tomllib.TOMLDecodeError("nested too deeply") from None
 
 
+def read_toml(path, kind: str) -> dict:
+  """A TOML file's tables (``kind``: e.g. "sweep"), or a one-line ``UserError`` naming the file: missing,
+  unreadable (:func:`read_text`) or not valid TOML."""
+  try:
+    return load_toml(read_text(path, kind))
+  except tomllib.TOMLDecodeError as e:
+    raise UserError(f"{path}: invalid TOML: {e}") from None
+
+
 RATES = (1.0, 1000.0)  # frames per second that motion capture uses (30-120 fps; high-speed 240-960)
 UP_AXES = ("y", "-y", "z", "-z", "x", "-x")
 

@@ -41,14 +41,13 @@ import contextlib
 import gc
 import itertools
 import json
-import tomllib
 from pathlib import Path
 
 import jax
 
 from chorjax import checkpoint as ckpt
 from chorjax.config import check_training_size, load_config, plain_name, valid_keys
-from chorjax.errors import UserError, load_toml, read_text
+from chorjax.errors import UserError, read_toml
 from chorjax.evaluation.evaluate import evaluate, metrics_path, write_metrics
 from chorjax.fields import suggest
 from chorjax.sampling.controls import Controls
@@ -95,12 +94,7 @@ def _fmt(v) -> str:
 
 def load_sweep(path) -> dict:
   path = Path(path)
-  try:
-    sweep = load_toml(read_text(path, "sweep"))
-  except FileNotFoundError:
-    raise UserError(f"{path}: no such sweep file") from None
-  except tomllib.TOMLDecodeError as e:
-    raise UserError(f"{path}: invalid TOML: {e}") from None
+  sweep = read_toml(path, "sweep")
   unknown = set(sweep) - SWEEP_KEYS
   if unknown:
     first = sorted(unknown)[0]

@@ -8,7 +8,7 @@ import pytest
 from chorjax.data.amc import read_amc
 from chorjax.data.bvh import read_bvh
 from chorjax.data.joint_names import split_name
-from chorjax.data.mapping import find_mapping, map_takes, to_mpii16
+from chorjax.data.mapping import find_mapping, map_takes, read_joint_map, to_mpii16
 from chorjax.data.skeletons import MPII16
 from chorjax.errors import UserError
 
@@ -291,3 +291,22 @@ def test_a_folder_of_mixamo_bvh_trains_with_only_the_dataset_set(shared_data, tm
   run = load_run(tmp_path / "run")
   assert run.joint_maps["131_02"]["method"] == "names"
   assert run.joint_maps["131_02"]["joints"]["left_shoulder"] == "mixamorig:LeftArm"
+
+
+@pytest.mark.parametrize(
+  "content, message",
+  [
+    (None, "no such joint-map file"),
+    (b"[joints\nhead = 'x'\n", "invalid TOML: Expected ']'"),
+    (b"\xff\xfe head", "cannot read as a joint-map text file"),
+    (b"right_foot = 3\n", "right_foot must name one source joint"),
+    (b'tail = "x"\n', "unknown target joint 'tail'"),
+  ],
+)
+def test_a_bad_joint_map_file_is_one_line_naming_it(tmp_path, content, message):
+  path = tmp_path / "map.toml"
+  if content is not None:
+    path.write_bytes(content)
+  with pytest.raises(UserError, match=rf"^{re.escape(str(path))}: .*{re.escape(message)}") as e:
+    read_joint_map(path)
+  assert "\n" not in str(e.value)

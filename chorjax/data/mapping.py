@@ -29,7 +29,6 @@ knee above ankle, thorax above shoulders and neck, the two sides apart). What wa
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +36,7 @@ import numpy as np
 from chorjax.data.joint_names import SYNONYMS, split_name
 from chorjax.data.motion import Motion
 from chorjax.data.skeletons import MPII16
-from chorjax.errors import UserError, load_toml, read_text
+from chorjax.errors import UserError, read_toml
 
 TARGETS = MPII16.joint_names
 
@@ -104,12 +103,7 @@ class Mapping:
 def read_joint_map(path) -> dict:
   """A mapping file: TOML, one ``target = "source joint"`` line per target joint (all 16)."""
   path = Path(path)
-  try:
-    data = load_toml(read_text(path, "joint-map"))
-  except FileNotFoundError:
-    raise UserError(f"{path}: no such joint-map file") from None
-  except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-    raise UserError(f"{path}: not a TOML joint map ({e})") from None
+  data = read_toml(path, "joint-map")
   data = data.get("joints", data)
   unknown = [k for k in data if k not in TARGETS]
   if unknown:
