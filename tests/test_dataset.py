@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from helpers import tiny_config
+from helpers import ROOT, tiny_config
 
 from chorjax.config import load_config
 from chorjax.data import transforms
@@ -189,3 +189,17 @@ def test_one_take_validates_on_its_own_last_frames(tmp_path):
   short = load_config(None, [f"data.dataset={take}", "data.seq_length=500", "data.val_tail=0.1"])
   with pytest.raises(UserError, match=r"94_03_skeleton_3d.csv: \d+ frames; data.val_tail = 0.1 needs at least 1002"):
     load_dataset(short.data)
+
+
+QUICKSTART = ROOT / "configs" / "quickstart.toml"
+
+
+def test_takes_that_favour_one_side_say_what_mirrored_copies_do(shared_data):
+  from chorjax.data.dataset import dataset_notes
+
+  side = lambda ds: [n for n in dataset_notes(ds) if "favour one side" in n]
+  assert not side(load_dataset(load_config(QUICKSTART).data))  # cmu94 moves both sides alike
+  cmu131 = [f"data.dataset={shared_data / 'asfamc' / 'cmu131'}", "data.resample_fps=30.0"]
+  (note,) = side(load_dataset(load_config(QUICKSTART, cmu131).data))
+  assert "right_foot moves 2.1x as fast as left_foot" in note  # CMU 131 dances on its right foot
+  assert not side(load_dataset(load_config(QUICKSTART, [*cmu131, "data.augment=[]"]).data))

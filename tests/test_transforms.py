@@ -36,6 +36,16 @@ def test_round_trips_on_every_take(take):
   assert rel_err(tf.reverse_time(tf.reverse_time(pos)), pos) == 0
 
 
+def test_a_mirrored_copy_favours_the_other_side():
+  pos = [np.asarray(t.positions) for t in TAKES]
+  joint, ratio = tf.favoured_side(pos, SK.twins)
+  assert SK.twins[joint] != joint and ratio >= 1.0
+  mirrored = [np.asarray(tf.mirror(p, SK.twins)) for p in pos]
+  assert tf.favoured_side(mirrored, SK.twins) == (SK.twins[joint], pytest.approx(ratio, rel=1e-5))
+  # the takes and their mirror images together move both sides alike
+  assert tf.favoured_side(pos + mirrored, SK.twins)[1] == pytest.approx(1.0, abs=1e-5)
+
+
 @pytest.mark.parametrize("take", TAKES, ids=lambda m: m.name)
 def test_mirror_is_an_involution_that_keeps_bone_lengths(take):
   pos = take.positions

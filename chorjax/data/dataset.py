@@ -316,6 +316,7 @@ def _load_dataset(data_cfg) -> Dataset:
   lengths = np.zeros(skeleton.num_joints, np.float32)
   lengths[[c for _, c in skeleton.bones]] = np.concatenate([bone_lengths(c, skeleton) for c in canon]).mean(0)
   floor = floor_height(canon, skeleton) if data_cfg.representation == "canonical" else None
+  notes += _side_note(canon, skeleton) if "mirror" in data_cfg.augment else []
   proto = dataclasses.replace(proto, lengths=lengths, floor=floor)
   versions = {n: [v for k, v in sorted(encoded.pop(n).items()) if k.startswith("version")] for n in names}
   train_raw = [(condition(n), looped(x, loop)) for n in train_names for x in versions[n]]
@@ -433,6 +434,22 @@ def _usable(motions, data_cfg, loop: int) -> tuple[list, list[str]]:
     raise UserError(f"{data_cfg.dataset}: no take moves (every frame of each is one pose): nothing to learn")
   notes += [f"warning: take {n} does not move (every frame is one pose): remove it unless you mean it" for n in frozen]
   return motions, notes
+
+
+ONE_SIDED = 1.5  # a twin joint this much faster than its twin: the dancer favours one side
+
+
+def _side_note(canon, skeleton) -> list[str]:
+  """A note when the training takes favour one side (``ONE_SIDED``): their mirrored copies make it two-sided."""
+  joint, ratio = transforms.favoured_side(canon, skeleton.twins)
+  if ratio < ONE_SIDED:
+    return []
+  name, twin = skeleton.joint_names[joint], skeleton.joint_names[skeleton.twins[joint]]
+  return [
+    f"note: the training takes favour one side ({name} moves {ratio:.1f}x as fast as {twin}): mirrored copies "
+    "(data.augment 'mirror') teach the model both sides, and it dances them alike; without them "
+    "(data.augment = []) it keeps more of its side (experiments/draw: CMU 131)"
+  ]
 
 
 SMALL_DATA_MINUTES = 3.0  # below this much training motion, training says what to expect (experiments/dancers)

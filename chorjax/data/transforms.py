@@ -185,6 +185,16 @@ def mirror(pos_TxJx3, twins: Sequence[int], lateral_axis: int = 0):
   return pos_TxJx3[..., np.asarray(twins), :] * sign
 
 
+def favoured_side(takes, twins: Sequence[int]) -> tuple[int, float]:
+  """``(joint, ratio)``: of the twin joints, the one whose mean speed per frame over ``takes`` (``[T, J, 3]``
+  each, every frame counted once) is furthest above its twin's, and that ratio (1 for a dancer whose sides move
+  alike; a mirrored copy of the takes turns it into the twin's)."""
+  speed = np.concatenate([np.linalg.norm(np.diff(np.asarray(t), axis=0), axis=-1) for t in takes]).mean(0)
+  ratios = speed / np.maximum(speed[np.asarray(twins)], 1e-12)
+  joint = int(np.argmax(np.where(np.arange(len(twins)) != np.asarray(twins), ratios, 0.0)))
+  return joint, float(ratios[joint])
+
+
 # ---------------------------------------------------------------- canonical and bone-direction features
 # Both take y-up, scaled positions [T, J, 3] of a whole sequence and return per-frame features [T, F];
 # the inverses integrate the root's motion along time, so they need the whole sequence too.
