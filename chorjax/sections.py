@@ -108,6 +108,14 @@ class DataConfig:
   augment: tuple = _field(
     (), "training augmentations: 'reverse' (time) and/or 'mirror' (left/right)", choices=("reverse", "mirror")
   )
+  keep_side: bool = _field(
+    False,
+    "no mirrored copies of training takes that favour one side (a twin joint 1.5x as fast as its twin)",
+    more=(
+      "Mirrored, a dancer who leads with one foot is taught both sides and dances them alike; kept to its side, "
+      "CMU 131 travels as its held-out take does (experiments/draw). Training says which joint and how much."
+    ),
+  )
   loop: float = _field(
     0.0,
     "training takes shorter than this many seconds play back to back up to it: a short action is done again (0: off)",

@@ -194,12 +194,21 @@ def test_one_take_validates_on_its_own_last_frames(tmp_path):
 QUICKSTART = ROOT / "configs" / "quickstart.toml"
 
 
-def test_takes_that_favour_one_side_say_what_mirrored_copies_do(shared_data):
+def test_takes_that_favour_one_side_are_not_mirrored_under_keep_side(shared_data):
   from chorjax.data.dataset import dataset_notes
 
   side = lambda ds: [n for n in dataset_notes(ds) if "favour one side" in n]
-  assert not side(load_dataset(load_config(QUICKSTART).data))  # cmu94 moves both sides alike
+  cmu94 = load_dataset(load_config(QUICKSTART).data)  # moves both sides alike: mirrored under keep_side
+  assert not side(cmu94) and cmu94.augment == ("mirror",)
+  assert len(cmu94.train) == 2 * len(load_dataset(load_config(QUICKSTART, ["data.augment=[]"]).data).train)
   cmu131 = [f"data.dataset={shared_data / 'asfamc' / 'cmu131'}", "data.resample_fps=30.0"]
-  (note,) = side(load_dataset(load_config(QUICKSTART, cmu131).data))
-  assert "right_foot moves 2.1x as fast as left_foot" in note  # CMU 131 dances on its right foot
-  assert not side(load_dataset(load_config(QUICKSTART, [*cmu131, "data.augment=[]"]).data))
+  kept = load_dataset(load_config(QUICKSTART, cmu131).data)  # the quickstart keeps the side
+  (note,) = side(kept)
+  assert "right_foot moves 2.1x as fast as left_foot" in note and "not mirrored" in note  # CMU 131's right foot
+  assert kept.augment == ()
+  plain = load_dataset(load_config(QUICKSTART, [*cmu131, "data.augment=[]"]).data)
+  assert not side(plain)
+  assert all(np.array_equal(a[1], b[1]) for a, b in zip(kept.train, plain.train, strict=True))
+  mirrored = load_dataset(load_config(QUICKSTART, [*cmu131, "data.keep_side=false"]).data)
+  (note,) = side(mirrored)
+  assert "dances them alike" in note and len(mirrored.train) == 2 * len(kept.train)

@@ -157,6 +157,7 @@ class Dataset:
     fps: the frame rate every take was brought to (``one_rate``).
     notes: what the user should know about the takes (resampling, short windows).
     labels: the named labels that condition the run (``data.labels``), or None (one id per take).
+    augment: what the training takes went through: ``data.augment``, less the mirror under ``data.keep_side``.
   """
 
   id_map: dict
@@ -170,6 +171,7 @@ class Dataset:
   fps: float = 30.0
   notes: tuple = ()
   labels: Labels | None = None
+  augment: tuple = ()
 
   @property
   def num_motions(self) -> int:
@@ -240,16 +242,16 @@ def _encode_into(motion: Motion, proto: Features, augment, root: Path) -> None:
   _encoded(motion, proto, augment, Cache(root))
 
 
-def _encode_missing(motions, proto: Features, data_cfg, cache: Cache) -> None:
+def _encode_missing(motions, proto: Features, augment, workers: int, cache: Cache) -> None:
   """A library's takes not yet encoded in the cache, encoded in processes (``data.workers``): encoding compiles
   once per take length, and a library has hundreds of lengths."""
   if cache.root is None:
     return
-  settings = _encoding(proto, data_cfg.augment)
+  settings = _encoding(proto, augment)
   # by length: a worker gets takes of neighbouring lengths and compiles each length once, not every worker
   missing = sorted((m for m in motions if not cache.has_encoded(m, settings)), key=lambda m: m.num_frames)
-  if (workers := workers_for(data_cfg.workers, len(missing))) > 1:
-    encode = functools.partial(_encode_into, proto=proto, augment=data_cfg.augment, root=cache.root)
+  if (workers := workers_for(workers, len(missing))) > 1:
+    encode = functools.partial(_encode_into, proto=proto, augment=augment, root=cache.root)
     in_processes(encode, missing, workers)
 
 
@@ -299,6 +301,8 @@ def _load_dataset(data_cfg) -> Dataset:
   val_names = [*val_names, *(t.name for t in tails)]
   names = [*names, *(t.name for t in tails)]
   condition = lambda n: take_condition(labels, id_map, n.removesuffix(TAIL))
+  augment, side_notes = _sides([by_name[n].positions for n in train_names], motions[0].skeleton, data_cfg)
+  notes += side_notes
 
   skeleton = motions[0].skeleton
   proto = Features(
@@ -309,14 +313,13 @@ def _load_dataset(data_cfg) -> Dataset:
     np.zeros(feature_dim(skeleton, data_cfg.representation), np.float32),
     np.ones(feature_dim(skeleton, data_cfg.representation), np.float32),
   )
-  _encode_missing(list(by_name.values()), proto, data_cfg, cache)
-  encoded = {n: _encoded(by_name[n], proto, data_cfg.augment, cache) for n in names}
+  _encode_missing(list(by_name.values()), proto, augment, data_cfg.workers, cache)
+  encoded = {n: _encoded(by_name[n], proto, augment, cache) for n in names}
   # the training takes' mean bone lengths: `directions` builds every frame with them, rigid decoding too
   canon = [encoded[n]["canon"] for n in train_names]
   lengths = np.zeros(skeleton.num_joints, np.float32)
   lengths[[c for _, c in skeleton.bones]] = np.concatenate([bone_lengths(c, skeleton) for c in canon]).mean(0)
   floor = floor_height(canon, skeleton) if data_cfg.representation == "canonical" else None
-  notes += _side_note(canon, skeleton) if "mirror" in data_cfg.augment else []
   proto = dataclasses.replace(proto, lengths=lengths, floor=floor)
   versions = {n: [v for k, v in sorted(encoded.pop(n).items()) if k.startswith("version")] for n in names}
   train_raw = [(condition(n), looped(x, loop)) for n in train_names for x in versions[n]]
@@ -342,6 +345,7 @@ def _load_dataset(data_cfg) -> Dataset:
     fps,
     tuple(notes),
     labels,
+    augment,
   )
 
 
@@ -439,17 +443,22 @@ def _usable(motions, data_cfg, loop: int) -> tuple[list, list[str]]:
 ONE_SIDED = 1.5  # a twin joint this much faster than its twin: the dancer favours one side
 
 
-def _side_note(canon, skeleton) -> list[str]:
-  """A note when the training takes favour one side (``ONE_SIDED``): their mirrored copies make it two-sided."""
-  joint, ratio = transforms.favoured_side(canon, skeleton.twins)
+def _sides(train, skeleton, data_cfg) -> tuple[tuple, list[str]]:
+  """``data.augment`` as the training takes (``[T, J, 3]`` each, in any frame) go through it, less the mirror
+  under ``data.keep_side`` when they favour one side (``ONE_SIDED``), and a note saying so."""
+  augment = tuple(data_cfg.augment)
+  if "mirror" not in augment:
+    return augment, []
+  joint, ratio = transforms.favoured_side(train, skeleton.twins)
   if ratio < ONE_SIDED:
-    return []
+    return augment, []
   name, twin = skeleton.joint_names[joint], skeleton.joint_names[skeleton.twins[joint]]
-  return [
-    f"note: the training takes favour one side ({name} moves {ratio:.1f}x as fast as {twin}): mirrored copies "
-    "(data.augment 'mirror') teach the model both sides, and it dances them alike; without them "
-    "(data.augment = []) it keeps more of its side (experiments/draw: CMU 131)"
-  ]
+  said = f"note: the training takes favour one side ({name} moves {ratio:.1f}x as fast as {twin})"
+  if data_cfg.keep_side:
+    kept = "not mirrored (data.keep_side), so the model keeps the dancer's side; data.keep_side = false mirrors them"
+    return tuple(a for a in augment if a != "mirror"), [f"{said}: {kept} (experiments/draw: CMU 131)"]
+  both = "mirrored copies teach the model both sides, and it dances them alike; data.keep_side = true keeps its side"
+  return augment, [f"{said}: {both} (experiments/draw: CMU 131)"]
 
 
 SMALL_DATA_MINUTES = 3.0  # below this much training motion, training says what to expect (experiments/dancers)
@@ -479,7 +488,7 @@ def dataset_notes(ds: Dataset) -> list[str]:
       f"note: {minutes:.1f} minutes of training motion: on the dancers benchmark, sets under "
       f"{SMALL_DATA_MINUTES:g} minutes keep dancing with the quickstart, martial arts (1.3) at its held-out takes' "
       "movement (every 1,000 frames 0.72-1.19) a little faster than them (speed 1.01-1.16), CMU 5 and 131 (0.5) "
-      "calmer (their calmest 1,000 frames at 0.67-0.76) and travelling less (root travel 0.71-0.88); more takes "
+      "calmer (their calmest 1,000 frames at 0.64-0.76, root travel 0.76-0.95 of the held-out take's); more takes "
       "help most (README: How well it dances)"
     )
   if not ds.val_names:

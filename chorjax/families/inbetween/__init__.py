@@ -47,9 +47,7 @@ class Inbetween(Family):
 
   def parts(self, cfg, ds):
     space, icfg = ib.Space.of(ds.features), cfg.inbetween
-    sampler = ib.TransitionSampler(
-      ib.training_takes(ds, cfg.data.augment), space, icfg, cfg.train.batch_size, cfg.train.seed
-    )
+    sampler = ib.TransitionSampler(ib.training_takes(ds, ds.augment), space, icfg, cfg.train.batch_size, cfg.train.seed)
     val = ib.validation_batch(ib.held_out_takes(ds), space, icfg, cfg.train.val_windows)
     return ib.inbetween_train_step, sampler, val, ib.validation_loss
 
