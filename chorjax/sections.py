@@ -113,7 +113,7 @@ class DataConfig:
     "no mirrored copies of training takes that favour one side (a twin joint 1.5x as fast as its twin)",
     more=(
       "Mirrored, a dancer who leads with one foot is taught both sides and dances them alike; kept to its side, "
-      "CMU 131 travels as its held-out take does (experiments/draw). Training says which joint and how much."
+      "CMU 131 travels further, its poses nearer its held-out take (experiments/draw). Training names the joint."
     ),
   )
   loop: float = _field(
