@@ -301,10 +301,10 @@ def _load_dataset(data_cfg) -> Dataset:
   val_names = [*val_names, *(t.name for t in tails)]
   names = [*names, *(t.name for t in tails)]
   condition = lambda n: take_condition(labels, id_map, n.removesuffix(TAIL))
-  augment, side_notes = _sides([by_name[n].positions for n in train_names], motions[0].skeleton, data_cfg)
-  notes += side_notes
 
   skeleton = motions[0].skeleton
+  augment, side_notes = _sides([by_name[n].positions for n in train_names], skeleton, data_cfg)
+  notes += side_notes
   proto = Features(
     skeleton,
     data_cfg.representation,
